@@ -1,0 +1,40 @@
+"""bayesprog: Bayesian programs written as YAML, compiled once and asked questions in batches.
+
+>>> import bayesprog
+>>> program = bayesprog.loads('''
+... bayesprog: 1
+... variables:
+...   M: {states: [wood, silicone]}
+...   E: {continuous: [-.inf, .inf]}
+... decomposition:
+...   - {term: P(M), form: uniform}
+...   - {term: P(E | M), form: normal, mean: {wood: 0.5, silicone: 0.1}, sigma: 0.1}
+... ''')
+>>> program.ask("P(M | E)", {"E": [0.45, 0.15]}).probabilities.round(3).tolist()
+[[0.998, 0.002], [0.002, 0.998]]
+"""
+
+from bayesprog.engine import MapResult, Posterior
+from bayesprog.errors import BayesprogError, Diagnostic, QuestionError, SpecError, ZeroEvidenceError
+from bayesprog.forms import Form, Param, available_forms, register_form
+from bayesprog.program import Program, Question, load, loads
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BayesprogError",
+    "Diagnostic",
+    "Form",
+    "MapResult",
+    "Param",
+    "Posterior",
+    "Program",
+    "Question",
+    "QuestionError",
+    "SpecError",
+    "ZeroEvidenceError",
+    "available_forms",
+    "load",
+    "loads",
+    "register_form",
+]

@@ -1,0 +1,222 @@
+"""The ``bayesprog`` command line: validate, show, graph, query, schema.
+
+User errors print ``bayesprog: ...`` (or ``FILE:LINE:COL: ...`` lines) on stderr and exit with
+status 2, never with a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from bayesprog.errors import BayesprogError, SpecError
+
+EXIT_USER_ERROR = 2
+
+
+class _UserError(Exception):
+    pass
+
+
+def _load(path: str):
+    from bayesprog.program import load
+
+    try:
+        return load(path)
+    except FileNotFoundError:
+        raise _UserError(f"cannot read {path}: no such file") from None
+    except IsADirectoryError:
+        raise _UserError(f"cannot read {path}: it is a directory") from None
+    except UnicodeDecodeError:
+        raise _UserError(f"cannot read {path}: expected UTF-8 text") from None
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    problems = 0
+    for file in args.files:
+        try:
+            _load(file)
+        except SpecError as exc:
+            problems += len(exc.diagnostics)
+            for d in exc.diagnostics:
+                print(d, file=sys.stderr)
+            continue
+        if not args.quiet:
+            print(f"{file}: ok")
+    return EXIT_USER_ERROR if problems else 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from bayesprog.show import render
+
+    program = _load(args.file)
+    for term in args.ablate:
+        program = program.ablate(term)
+    print(render(program))
+    return 0
+
+
+def cmd_graph(args: argparse.Namespace) -> int:
+    from bayesprog.draw import write_graph
+
+    program = _load(args.file)
+    out = Path(args.output)
+    if out.suffix.lower() not in (".dot", ".png", ".pdf", ".svg"):
+        raise _UserError(f"-o {args.output}: expected a .dot, .png, .pdf or .svg file")
+    question = program.question(args.question) if args.question else None
+    write_graph(program, out, question=question)
+    print(f"wrote {out}")
+    return 0
+
+
+def _pairs(items: Sequence[str], option: str) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name or not value:
+            raise _UserError(f"{option} {item!r}: expected NAME=VALUE")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _npy(path: str, option: str) -> np.ndarray:
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise _UserError(f"{option}: cannot read {path}: no such file") from None
+    except (ValueError, OSError) as exc:
+        raise _UserError(f"{option}: cannot read {path} as a .npy array: {exc}") from None
+
+
+def _evidence_value(text: str) -> object:
+    """A ``.npy`` file (arrays: fields, batches), else a state name or a number."""
+    if text.endswith(".npy"):
+        return _npy(text, "--evidence")
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def cmd_query(args: argparse.Namespace) -> int:
+    program = _load(args.file)
+    for term in args.ablate:
+        program = program.ablate(term)
+    inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
+    evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
+    soft = {}
+    for name, text in _pairs(args.soft, "--soft").items():
+        try:
+            soft[name] = np.array([float(x) for x in text.split(",")])
+        except ValueError:
+            raise _UserError(f"--soft {name}={text}: expected numbers separated by commas") from None
+    result = program.ask(
+        args.question,
+        evidence,
+        inputs=inputs,
+        soft=soft,
+        kind="map" if args.map else None,
+        rng=args.seed,
+    )
+    from bayesprog.show import format_result
+
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(format_result(result, limit=args.limit))
+    return 0
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from bayesprog.spec.schema import json_schema
+
+    text = json.dumps(json_schema(), indent=2) + "\n"
+    if args.output:
+        Path(args.output).write_text(text, encoding="utf-8")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="bayesprog",
+        description="Bayesian programs as YAML files: check, show, draw and ask them questions.",
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("validate", help="check program files; list every problem")
+    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing for valid files")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("show", help="print a program in Bayesian-programming notation")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.set_defaults(func=cmd_show)
+
+    p = sub.add_parser("graph", help="draw the graphical model (.dot, .png, .pdf, .svg)")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("-o", "--output", required=True, metavar="OUT")
+    p.add_argument("--question", help="shade the known variables of this question")
+    p.set_defaults(func=cmd_graph)
+
+    p = sub.add_parser("query", help='ask a question, e.g. "P(A B | C=c1, D=0.3)"')
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("question", help="a named question of the file, or P(searched | known)")
+    p.add_argument("--map", action="store_true", help="joint argmax instead of the posterior")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help='replace a term by a uniform, e.g. --ablate "P(S | O, T)"')
+    p.add_argument("--input", action="append", default=[], metavar="NAME=FILE.npy",
+                   help="bind a runtime input")
+    p.add_argument("--evidence", action="append", default=[], metavar="VAR=VALUE",
+                   help="evidence for a known variable: a state, a number, or FILE.npy "
+                   "(an array: a field, or a batch of values)")
+    p.add_argument("--soft", action="append", default=[], metavar="VAR=p1,p2,...",
+                   help="soft evidence: one likelihood per state of VAR")
+    p.add_argument("--seed", type=int, default=0, help="seed for breaking MAP ties (default 0)")
+    p.add_argument("--limit", type=int, default=20, help="rows shown for large tables")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=cmd_query)
+
+    p = sub.add_parser("schema", help="print the JSON Schema of program files")
+    p.add_argument("-o", "--output", metavar="FILE")
+    p.set_defaults(func=cmd_schema)
+    return parser
+
+
+def _version() -> str:
+    from bayesprog import __version__
+
+    return f"bayesprog {__version__}"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 ok, 2 user error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse has printed the usage and the problem
+        return int(exc.code or 0)
+    try:
+        return int(args.func(args))
+    except SpecError as exc:
+        for d in exc.diagnostics:
+            print(d, file=sys.stderr)
+        return EXIT_USER_ERROR
+    except (BayesprogError, _UserError) as exc:
+        print(f"bayesprog: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("bayesprog: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""Errors raised for user mistakes: each names where, what was expected and what was found."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """One problem in a program file, located by line and column (both 1-based)."""
+
+    file: str
+    line: int
+    column: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}: {self.message}"
+
+
+class BayesprogError(Exception):
+    """Base class of every error caused by user input (files, questions, evidence)."""
+
+
+class SpecError(BayesprogError):
+    """A program file has one or more problems; all of them are listed."""
+
+    def __init__(self, diagnostics: list[Diagnostic]):
+        self.diagnostics = sorted(diagnostics, key=lambda d: (d.file, d.line, d.column))
+        super().__init__("\n".join(str(d) for d in self.diagnostics))
+
+
+class QuestionError(BayesprogError):
+    """A question or its evidence does not fit the program (unknown variable, state, shape...)."""
+
+
+class ZeroEvidenceError(QuestionError):
+    """The evidence has probability zero under the program, so no posterior exists."""

@@ -1,0 +1,35 @@
+"""Parametric forms: a registry of small classes, each declaring its parameters as data."""
+
+from bayesprog.forms import program as _program  # noqa: F401  (registers the program form)
+from bayesprog.forms import standard as _standard  # noqa: F401  (registers the standard forms)
+from bayesprog.forms.base import (
+    Constraint,
+    Form,
+    Param,
+    ParamValue,
+    TermContext,
+    available_forms,
+    get_form,
+    nonnegative,
+    positive,
+    real,
+    register_form,
+    simplex,
+    unit_interval,
+)
+
+__all__ = [
+    "Constraint",
+    "Form",
+    "Param",
+    "ParamValue",
+    "TermContext",
+    "available_forms",
+    "get_form",
+    "nonnegative",
+    "positive",
+    "real",
+    "register_form",
+    "simplex",
+    "unit_interval",
+]

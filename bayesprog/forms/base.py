@@ -1,0 +1,174 @@
+"""What every parametric form shares: declared parameters, their constraints, and evaluation.
+
+A form turns one term ``P(X | parents)`` into a log-factor over the term's discrete variables.
+Its parameters are declared as data (:class:`Param`), each with a :class:`Constraint`; the file
+checker and the Python API check values against the same declarations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from bayesprog.variables import Discrete, Variable
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A constraint on parameter values; ``ok`` tests an array (events on the trailing axis)."""
+
+    text: str
+    ok: Callable[[np.ndarray], bool]
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def _finite(a: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(a)))
+
+
+real = Constraint("a finite real", _finite)
+positive = Constraint("> 0", lambda a: _finite(a) and bool(np.all(a > 0)))
+nonnegative = Constraint(">= 0", lambda a: _finite(a) and bool(np.all(a >= 0)))
+unit_interval = Constraint("in [0, 1]", lambda a: _finite(a) and bool(np.all((a >= 0) & (a <= 1))))
+simplex = Constraint(
+    "non-negative and summing to 1",
+    lambda a: _finite(a)
+    and bool(np.all(a >= 0))
+    and bool(np.allclose(a.sum(axis=-1), 1.0, rtol=0, atol=1e-6)),
+)
+
+
+@dataclass(frozen=True)
+class Param:
+    """A declared parameter. ``event_ndim`` trailing dimensions belong to one distribution."""
+
+    name: str
+    constraint: Constraint
+    event_ndim: int = 0
+    default: Any = None
+    doc: str = ""
+    keyed_by_child_states: bool = False
+
+    @property
+    def required(self) -> bool:
+        return self.default is None
+
+
+@dataclass(frozen=True)
+class ParamValue:
+    """A parameter as an array: ``[batch] + [card(v) for v in axes] + event`` (batch if batched)."""
+
+    axes: tuple[str, ...]
+    array: np.ndarray
+    batched: bool = False
+
+    def aligned(self, axes: tuple[str, ...], event_ndim: int) -> np.ndarray:
+        """The array with a leading batch axis (size 1 if unbatched) and one axis per ``axes``.
+
+        Axes of ``axes`` that the parameter does not vary over get size 1, for broadcasting.
+        """
+        arr = self.array if self.batched else self.array[np.newaxis]
+        own = list(self.axes)
+        order = [own.index(a) + 1 for a in axes if a in own]
+        event = list(range(1 + len(own), arr.ndim))
+        arr = arr.transpose([0] + order + event)
+        shape = [arr.shape[0]]
+        it = iter(arr.shape[1 : 1 + len(order)])
+        for a in axes:
+            shape.append(next(it) if a in own else 1)
+        return arr.reshape(shape + list(arr.shape[1 + len(order) :]))
+
+
+@dataclass
+class TermContext:
+    """Everything a form needs to evaluate one term for one question."""
+
+    child: Variable
+    parents: tuple[Variable, ...]
+    axes: tuple[str, ...]
+    cards: tuple[int, ...]
+    params: dict[str, ParamValue]
+    value: ParamValue | None
+    variables: Mapping[str, Variable]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def param(self, name: str, event_ndim: int = 0) -> np.ndarray:
+        return self.params[name].aligned(self.axes, event_ndim)
+
+    def child_value(self) -> np.ndarray:
+        assert self.value is not None
+        return self.value.aligned(self.axes, 0)
+
+
+class Form:
+    """Base class of parametric forms. Subclasses declare ``name``, ``params`` and ``log_factor``.
+
+    ``normalized`` says whether the term sums (or integrates) to one over the child for every
+    parent configuration; unnormalized terms (potentials) are never pruned as barren.
+    """
+
+    name: ClassVar[str] = ""
+    params: ClassVar[tuple[Param, ...]] = ()
+    child_kinds: ClassVar[tuple[str, ...]] = ("discrete", "continuous")
+    normalized: ClassVar[bool] = True
+    doc: ClassVar[str] = ""
+
+    def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
+        """Problems with the variables this term joins (messages without location)."""
+        kind = "discrete" if child.is_discrete else "continuous"
+        if kind not in self.child_kinds:
+            wanted = " or ".join(self.child_kinds)
+            return [f"form {self.name!r} needs a {wanted} child, found {kind} {child.name!r}"]
+        return []
+
+    def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
+        """Discrete variables a parameter table may be keyed by (the parents by default)."""
+        return [p for p in parents if p.is_discrete]  # type: ignore[misc]
+
+    def event_ndim(self, param: Param, child: Variable) -> int:
+        """The number of trailing event dimensions of ``param`` for this child."""
+        return param.event_ndim
+
+    def event_shape(self, param: Param, child: Variable) -> tuple[int, ...] | None:
+        """The expected event shape of ``param`` when it is fixed by the variables, else None."""
+        return None
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        """Log values with shape ``[batch or 1] + [card or 1 for each of ctx.axes]``."""
+        raise NotImplementedError
+
+
+_REGISTRY: dict[str, Form] = {}
+
+
+def register_form(form: type[Form] | Form) -> type[Form] | Form:
+    """Register a parametric form under its ``name`` (usable as a class decorator).
+
+    >>> class Flat(Form):
+    ...     name = "flat_example"
+    ...     child_kinds = ("discrete",)
+    ...     def log_factor(self, ctx):
+    ...         return np.zeros((1,) + ctx.cards)
+    >>> _ = register_form(Flat)
+    >>> "flat_example" in available_forms()
+    True
+    """
+    instance = form() if isinstance(form, type) else form
+    if not instance.name:
+        raise ValueError("a form needs a non-empty 'name'")
+    _REGISTRY[instance.name] = instance
+    return form
+
+
+def get_form(name: str) -> Form | None:
+    return _REGISTRY.get(name)
+
+
+def available_forms() -> list[str]:
+    return sorted(_REGISTRY)

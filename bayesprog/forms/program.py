@@ -1,0 +1,138 @@
+"""The ``program`` form: another program's answer used as a term (a sub-program).
+
+``P(X | Y) = P_sub(X | Y, bound...)``: the sub-program is asked its question for every state of
+the term's parents at once (the parents become batch axes of the sub-question), in the same call
+as the outer question. Used under ``soft_evidence:``, the answer ``P_sub(X | ...)`` multiplies
+the outer program as a likelihood over ``X``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bayesprog.errors import SpecError
+from bayesprog.forms.base import Form, ParamValue, TermContext, register_form
+from bayesprog.spec.terms import ExpressionError, parse_expression
+
+if TYPE_CHECKING:
+    from bayesprog.program import Program
+
+
+@register_form
+class ProgramForm(Form):
+    """A term whose distribution is a question of another program file.
+
+    Parameters: ``program`` (a path relative to this file), ``question`` (a question name of
+    that program, or ``P(X | ...)``), ``bind`` (values or ``{input: NAME}`` for the
+    sub-question's known variables that are not parents of the term, and for its inputs).
+    """
+
+    name = "program"
+    child_kinds = ("discrete",)
+
+    def resolve(self, term: Any, raw: dict[str, Any], checker: Any, path: tuple) -> int:
+        before = len(checker.problems)
+        what = f"term {term.label}: program"
+        for key in raw:
+            if key not in ("program", "question", "bind"):
+                checker.error(path + (key,), f"{what}: unknown parameter {key!r}: expected "
+                              "program, question, bind")
+        if not isinstance(raw.get("program"), str) or not isinstance(raw.get("question"), str):
+            checker.error(path, f"{what}: expected 'program: FILE' and 'question: NAME or "
+                          "P(X | ...)'")
+            return len(checker.problems) - before
+        from bayesprog.program import load
+
+        file = Path(raw["program"])
+        file = file if file.is_absolute() else checker.base_dir / file
+        try:
+            sub = load(file)
+        except SpecError as exc:
+            checker.error(path + ("program",), f"{what} {raw['program']!r} has "
+                          f"{len(exc.diagnostics)} problem(s), listed with its own file")
+            checker.problems.extend(exc.diagnostics)
+            return len(checker.problems) - before
+        except OSError as exc:
+            checker.error(path + ("program",), f"{what}: cannot read {raw['program']!r}: "
+                          f"{exc.strerror or exc}")
+            return len(checker.problems) - before
+        question = raw["question"]
+        if question in sub.questions:
+            expr = sub.questions[question].expression
+        else:
+            try:
+                expr = parse_expression(question)
+            except ExpressionError as exc:
+                checker.error(path + ("question",), f"{what}: {raw['question']!r} is neither a "
+                              f"question of {raw['program']!r} ({', '.join(sub.questions)}) "
+                              f"nor an expression: {exc}")
+                return len(checker.problems) - before
+        problems = []
+        if expr.left != (term.child.name,):
+            problems.append(f"the sub-question {expr} must search exactly "
+                            f"{term.child.name!r}")
+        for var in (term.child,) + tuple(term.parents):
+            other = sub.variables.get(var.name)
+            if other is None or not other.is_discrete or other.states != var.states:
+                problems.append(f"variable {var.name!r} must have the same states in "
+                                f"{raw['program']!r}")
+            elif var is not term.child and var.name not in expr.right:
+                problems.append(f"parent {var.name!r} must be known in the sub-question {expr}")
+        bind = raw.get("bind") or {}
+        if not isinstance(bind, dict):
+            problems.append("bind: expected a mapping NAME: value or NAME: {input: INPUT}")
+            bind = {}
+        parents = {p.name for p in term.parents}
+        needed = [n for n in expr.right if n not in parents and n not in expr.values]
+        for name in needed:
+            if name not in bind:
+                problems.append(f"the sub-question's known variable {name!r} needs a value in "
+                                "bind")
+        for name, value in bind.items():
+            if name not in expr.right and name not in sub.inputs:
+                problems.append(f"bind: {name!r} is neither a known variable of {expr} nor an "
+                                f"input of {raw['program']!r}")
+            elif isinstance(value, dict) and set(value) == {"input"}:
+                decl = checker.inputs.get(value["input"])
+                if decl is None:
+                    problems.append(f"bind: unknown input {value['input']!r}")
+                elif decl.axes:
+                    problems.append(f"bind: input {value['input']!r} must not vary over "
+                                    "variables")
+                else:
+                    from bayesprog.spec.check import InputRef
+
+                    term.params[f"bind:{name}"] = InputRef(value["input"])
+            else:
+                term.params[f"bind:{name}"] = ParamValue((), np.asarray(value))
+        for message in problems:
+            checker.error(path, f"{what}: {message}")
+        term.extra.update(program=sub, question=expr, source=raw["program"])
+        return len(checker.problems) - before
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        sub: Program = ctx.extra["program"]
+        expr = ctx.extra["question"]
+        parents = ctx.axes[1:]
+        lead = 1 + len(parents)
+        evidence: dict[str, Any] = {}
+        inputs: dict[str, Any] = {}
+        for i, name in enumerate(parents):
+            shape = [1] * lead
+            shape[1 + i] = ctx.variables[name].card  # type: ignore[union-attr]
+            evidence[name] = np.arange(shape[1 + i]).reshape(shape)
+        for key, value in ctx.params.items():
+            name = key.removeprefix("bind:")
+            arr = value.array if value.batched else value.array[np.newaxis]
+            trailing = arr.shape[1:]
+            arr = arr.reshape(arr.shape[:1] + (1,) * len(parents) + trailing)
+            if arr.dtype.kind in "US" or arr.dtype == object:
+                arr = arr.astype(str)
+            (inputs if name in sub.inputs else evidence)[name] = arr
+        answer = sub.ask(expr, evidence=evidence, inputs=inputs)
+        probs = answer.probabilities.reshape((-1,) + answer.probabilities.shape[-1 - len(parents):])
+        with np.errstate(divide="ignore"):
+            return np.moveaxis(np.log(probs), -1, 1)

@@ -1,0 +1,208 @@
+"""The standard parametric forms: table, categorical, uniform, normal, beta, gmm."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import betaln, logsumexp, xlog1py, xlogy
+
+from bayesprog.forms.base import (
+    Form,
+    Param,
+    TermContext,
+    positive,
+    real,
+    register_form,
+    simplex,
+    unit_interval,
+)
+from bayesprog.variables import Discrete, Variable
+
+_LOG_2PI = float(np.log(2 * np.pi))
+
+
+@register_form
+class Categorical(Form):
+    """``P(X = x | parents) = p[parents][x]``; ``probabilities`` may be a runtime input."""
+
+    name = "categorical"
+    child_kinds = ("discrete",)
+    params = (
+        Param(
+            "probabilities",
+            simplex,
+            event_ndim=1,
+            doc="one probability per child state (a list, or a mapping by child state), "
+            "per parent configuration",
+            keyed_by_child_states=True,
+        ),
+    )
+
+    def event_shape(self, param: Param, child: Variable) -> tuple[int, ...] | None:
+        return (child.card,) if isinstance(child, Discrete) else None
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        p = ctx.param(self.params[0].name, 1)[:, 0]
+        with np.errstate(divide="ignore"):
+            return np.moveaxis(np.log(p), -1, 1)
+
+
+@register_form
+class Table(Categorical):
+    """A conditional probability table: one row over the child's states per parent configuration."""
+
+    name = "table"
+    params = (
+        Param(
+            "table",
+            simplex,
+            event_ndim=1,
+            doc="nested by parent states (mapping or list, in parent order), then one "
+            "probability per child state",
+            keyed_by_child_states=True,
+        ),
+    )
+
+
+@register_form
+class Uniform(Form):
+    """The same value for every child value: ``1/card`` (discrete) or ``1/(high-low)``.
+
+    On an unbounded support the uniform is improper; it is then the constant 1, which leaves
+    every posterior unchanged.
+    """
+
+    name = "uniform"
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        child = ctx.child
+        if isinstance(child, Discrete):
+            value = -np.log(child.card)
+        else:
+            value = -np.log(child.width) if np.isfinite(child.width) else 0.0
+        return np.full((1,) + (1,) * len(ctx.axes), value)
+
+
+@register_form
+class Normal(Form):
+    """``N(x; mean[parents], sigma[parents])`` (not truncated to the variable's support)."""
+
+    name = "normal"
+    child_kinds = ("continuous",)
+    params = (
+        Param("mean", real, doc="mean, a literal or a table keyed by parent states"),
+        Param("sigma", positive, doc="standard deviation, > 0"),
+    )
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        x, mu, sigma = ctx.child_value(), ctx.param("mean"), ctx.param("sigma")
+        z = (x - mu) / sigma
+        return -0.5 * z * z - np.log(sigma) - 0.5 * _LOG_2PI
+
+
+@register_form
+class Beta(Form):
+    """``Beta(x; a[parents], b[parents])`` on [0, 1]."""
+
+    name = "beta"
+    child_kinds = ("continuous",)
+    params = (
+        Param("a", positive, doc="first shape parameter (alpha), > 0"),
+        Param("b", positive, doc="second shape parameter (beta), > 0"),
+    )
+
+    def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
+        problems = super().check(child, parents)
+        if not problems and (child.low < 0 or child.high > 1):  # type: ignore[union-attr]
+            problems.append(
+                f"form 'beta' needs a support inside [0, 1], found "
+                f"[{child.low}, {child.high}] for {child.name!r}"  # type: ignore[union-attr]
+            )
+        return problems
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        x, a, b = ctx.child_value(), ctx.param("a"), ctx.param("b")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = xlogy(a - 1, x) + xlog1py(b - 1, -x) - betaln(a, b)
+        return np.where((x < 0) | (x > 1), -np.inf, out)
+
+
+@register_form
+class GaussianMixture(Form):
+    """A Gaussian mixture with isotropic components (means may be runtime inputs).
+
+    Two uses:
+
+    * continuous child ``X``: ``P(x | parents) = sum_k w_k N(x; mean_k, sigma)``;
+    * discrete child ``R`` and a grid parent ``O``: a potential
+      ``P(R = r | O = o) = (1 - floor) sum_k w_k N2(c(o); mean_{r,k}, sigma^2 I) + floor / area``,
+      where ``c(o)`` are the cell's coordinates and ``area`` the grid's area. The ``floor``
+      (a uniform component) makes the mixture modulate the other terms instead of vetoing every
+      cell away from the means. This term is not normalised over ``R``.
+    """
+
+    name = "gmm"
+    normalized = False
+    params = (
+        Param("means", real, event_ndim=1, doc="component means: [K] or, over a grid, [K, D]"),
+        Param("sigma", positive, doc="isotropic standard deviation of every component"),
+        Param("weights", simplex, event_ndim=1, default="equal", doc="component weights [K]"),
+        Param("floor", unit_interval, default=0.0, doc="weight of a uniform component"),
+    )
+
+    def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
+        if child.is_discrete and not any(getattr(p, "coords", None) is not None for p in parents):
+            return [
+                f"form 'gmm' with a discrete child {child.name!r} needs a grid parent "
+                f"(a variable whose states carry coordinates)"
+            ]
+        return []
+
+    def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
+        keys = [p for p in parents if isinstance(p, Discrete)]
+        return ([child] if isinstance(child, Discrete) else []) + keys  # type: ignore[list-item]
+
+    def event_ndim(self, param: Param, child: Variable) -> int:
+        return 2 if param.name == "means" and child.is_discrete else param.event_ndim
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        child = ctx.child
+        sigma = ctx.param("sigma")
+        floor = ctx.param("floor")
+        if isinstance(child, Discrete):
+            grid = next(p for p in ctx.parents if getattr(p, "coords", None) is not None)
+            means = ctx.param("means", 2)  # [b, ..axes.., K, D]
+            dim = means.shape[-1]
+            coords = grid.coords  # type: ignore[union-attr]
+            if coords.shape[1] != dim:
+                raise ValueError(
+                    f"gmm means have {dim} coordinates, grid {grid.name!r} has {coords.shape[1]}"
+                )
+            pos = [1] * (len(ctx.axes) + 1)
+            pos[1 + ctx.axes.index(grid.name)] = coords.shape[0]
+            point = coords.reshape(pos + [1, dim])
+            sq = ((point - means) ** 2).sum(-1)  # [b, ..., K]
+            s = sigma[..., None]
+            log_comp = -0.5 * sq / s**2 - dim * np.log(s) - 0.5 * dim * _LOG_2PI
+            cell = grid.cell or 1.0  # type: ignore[union-attr]
+            area = coords.shape[0] * cell**dim
+        else:
+            means = ctx.param("means", 1)
+            x = ctx.child_value()[..., None]
+            s = sigma[..., None]
+            log_comp = -0.5 * ((x - means) / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
+            area = child.width  # type: ignore[union-attr]
+        k = log_comp.shape[-1]
+        if "weights" in ctx.params:
+            weights = ctx.param("weights", 1)
+            if weights.shape[-1] != k:
+                raise ValueError(f"gmm has {k} means but {weights.shape[-1]} weights")
+        else:
+            weights = np.full((1,) * (log_comp.ndim - 1) + (k,), 1.0 / k)
+        with np.errstate(divide="ignore"):
+            mix = logsumexp(log_comp + np.log(weights), axis=-1)
+            if not np.any(floor > 0):
+                return mix
+            if not np.isfinite(area):
+                raise ValueError("gmm floor needs a bounded support or a grid")
+            return np.logaddexp(np.log1p(-floor) + mix, np.log(floor) - np.log(area))
+

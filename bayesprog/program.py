@@ -1,0 +1,307 @@
+"""Programs: load a YAML file, check it whole, ask it questions, ablate its terms."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import networkx as nx
+from pydantic import ValidationError
+
+from bayesprog.engine import (
+    MapResult,
+    Posterior,
+    _Plans,
+    bind,
+    check_zero,
+    choose_map,
+    compute_posterior,
+)
+from bayesprog.errors import Diagnostic, QuestionError, SpecError
+from bayesprog.forms import get_form
+from bayesprog.spec.check import InputDecl, InputRef, Term, check_document, question_problem
+from bayesprog.spec.model import Document
+from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
+from bayesprog.spec.yamlload import Located, load_yaml
+from bayesprog.variables import Variable
+
+
+@dataclass(frozen=True)
+class Question:
+    """A question ``P(searched | known)`` of kind ``posterior`` or ``map``."""
+
+    expression: Expression
+    kind: str = "posterior"
+    name: str | None = None
+    description: str = ""
+
+    def __str__(self) -> str:
+        return str(self.expression)
+
+
+class Program:
+    """A checked Bayesian program: variables, decomposition, questions; asked through the engine.
+
+    >>> import bayesprog
+    >>> p = bayesprog.loads('''
+    ... bayesprog: 1
+    ... variables:
+    ...   Rain: {states: [rain, dry]}
+    ...   Grass: {states: [wet, dry]}
+    ... decomposition:
+    ...   - {term: P(Rain), form: table, table: [0.2, 0.8]}
+    ...   - term: P(Grass | Rain)
+    ...     form: table
+    ...     table: {rain: [0.9, 0.1], dry: [0.2, 0.8]}
+    ... ''')
+    >>> p.ask("P(Rain | Grass=wet)").probabilities.round(4).tolist()
+    [0.5294, 0.4706]
+    """
+
+    def __init__(
+        self,
+        variables: dict[str, Variable],
+        terms: list[Term],
+        questions: dict[str, Question],
+        inputs: dict[str, InputDecl],
+        *,
+        name: str | None = None,
+        description: str = "",
+        path: Path | None = None,
+        ablated: tuple[str, ...] = (),
+    ):
+        self.variables = variables
+        self.terms = terms
+        self.questions = questions
+        self.inputs = inputs
+        self.name = name or (path.stem if path else "program")
+        self.description = description
+        self.path = path
+        self.ablated = ablated
+        self._plans = _Plans()
+
+    # structure -------------------------------------------------------------------------------------
+    @cached_property
+    def graph(self) -> nx.DiGraph:
+        """The decomposition as a DAG: one node per variable, an edge from each parent."""
+        g = nx.DiGraph()
+        for name, var in self.variables.items():
+            g.add_node(name, variable=var)
+        for t in self.terms:
+            if not t.soft:
+                for p in t.parents:
+                    g.add_edge(p.name, t.child.name)
+        return g
+
+    def ancestors(self, name: str) -> set[str]:
+        cache = self.__dict__.setdefault("_ancestors", {})
+        if name not in cache:
+            cache[name] = nx.ancestors(self.graph, name)
+        return cache[name]
+
+    @cached_property
+    def active_terms(self) -> list[Term]:
+        """The terms with every ablated term replaced by a uniform."""
+        uniform = get_form("uniform")
+        out = []
+        for t in self.terms:
+            if not t.soft and str(t.expression) in self.ablated:
+                t = Term(t.expression, t.child, t.parents, uniform, {}, t.position,  # type: ignore[arg-type]
+                         description="ablated: uniform")
+            out.append(t)
+        return out
+
+    @cached_property
+    def used_inputs(self) -> set[str]:
+        return {v.name for t in self.active_terms for v in t.params.values()
+                if isinstance(v, InputRef)}
+
+    @property
+    def is_discrete(self) -> bool:
+        return all(v.is_discrete for v in self.variables.values())
+
+    def term(self, text: str) -> Term:
+        """The term written ``text`` (parents in any order)."""
+        expr = parse_expression(text)
+        for t in self.terms:
+            if not t.soft and t.expression.key == expr.key:
+                return t
+        known = ", ".join(str(t.expression) for t in self.terms if not t.soft)
+        raise QuestionError(f"no term {expr} in {self.name} (terms: {known})")
+
+    # questions -------------------------------------------------------------------------------------
+    def question(self, question: str | Question, kind: str | None = None) -> Question:
+        """A question by name, by ``P(A | B)`` text, or as given."""
+        if isinstance(question, Question):
+            q = question
+        elif question in self.questions:
+            q = self.questions[question]
+        else:
+            try:
+                expr = parse_expression(question)
+            except ExpressionError as exc:
+                names = ", ".join(self.questions) or "none"
+                raise QuestionError(f"{exc} (named questions of {self.name}: {names})") from None
+            problem = question_problem(expr, self.variables)
+            if problem:
+                raise QuestionError(problem)
+            q = Question(expr)
+        if kind is not None and kind != q.kind:
+            if kind not in ("posterior", "map"):
+                raise QuestionError(f"kind must be 'posterior' or 'map', got {kind!r}")
+            q = Question(q.expression, kind, q.name, q.description)
+        return q
+
+    def ask(
+        self,
+        question: str | Question,
+        evidence: Mapping[str, Any] | None = None,
+        *,
+        inputs: Mapping[str, Any] | None = None,
+        soft: Mapping[str, Any] | None = None,
+        kind: str | None = None,
+        rng: Any = None,
+    ) -> Posterior | MapResult:
+        """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
+
+        Parameters
+        ----------
+        question : a question name, ``"P(A B | C=c, D)"`` text, or a :class:`Question`.
+        evidence : values of the known variables: state names or indices (discrete), numbers
+            (continuous), arrays ``batch + (card,)`` for fields. Leading dimensions broadcast
+            together into the batch shape; N evidence sets are one call.
+        inputs : runtime inputs (arrays with the declared trailing shape, batch dims in front).
+        soft : likelihood vectors over a discrete variable's states (virtual evidence).
+        kind : ``"posterior"`` or ``"map"``, overriding the question's kind.
+        rng : for MAP ties: a seed, a ``numpy.random.Generator``, or one generator per batch row
+            (then each row's choice is independent of the batching). ``None`` means seed 0.
+
+        Returns
+        -------
+        Posterior with ``probabilities[batch..., states...]``, or MapResult for MAP questions.
+        """
+        q = self.question(question, kind)
+        bound = bind(self, q, evidence, inputs, soft)
+        posterior = compute_posterior(self, q, bound)
+        if q.kind == "map":
+            return choose_map(posterior, str(q.expression), 0 if rng is None else rng, self.ablated)
+        check_zero(posterior)
+        return posterior
+
+    def posterior(self, question: str | Question, evidence=None, **kw: Any) -> Posterior:
+        result = self.ask(question, evidence, kind="posterior", **kw)
+        assert isinstance(result, Posterior)
+        return result
+
+    def map(self, question: str | Question, evidence=None, **kw: Any) -> MapResult:
+        result = self.ask(question, evidence, kind="map", **kw)
+        assert isinstance(result, MapResult)
+        return result
+
+    # ablation --------------------------------------------------------------------------------------
+    def ablate(self, *terms: str | Iterable[str]) -> Program:
+        """A new program in which each named term is replaced by a uniform.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {A: {states: [a0, a1]}, B: {states: [b0, b1]}}
+        ... decomposition:
+        ...   - {term: P(A), form: table, table: [0.3, 0.7]}
+        ...   - {term: P(B | A), form: table, table: [[0.9, 0.1], [0.2, 0.8]]}
+        ... ''')
+        >>> p.ablate("P(B | A)").ask("P(A | B=b0)").probabilities.tolist()
+        [0.3, 0.7]
+        """
+        names: list[str] = []
+        for item in terms:
+            names.extend([item] if isinstance(item, str) else item)
+        resolved = [str(self.term(n).expression) for n in names]
+        new = copy.copy(self)
+        new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
+        new._plans = _Plans()
+        for attr in ("active_terms", "used_inputs"):
+            new.__dict__.pop(attr, None)
+        return new
+
+    def __repr__(self) -> str:
+        extra = f", ablated={list(self.ablated)}" if self.ablated else ""
+        return (f"Program({self.name!r}, variables={list(self.variables)}, "
+                f"terms={[str(t.expression) for t in self.terms if not t.soft]}{extra})")
+
+
+def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
+    if not isinstance(located.data, dict):
+        return None, [located.diagnostic((), "expected a program: a mapping with bayesprog, "
+                                         f"variables, decomposition; found {type(located.data).__name__}")]
+    try:
+        return Document.model_validate(located.data), []
+    except ValidationError as exc:
+        out = []
+        for err in exc.errors():
+            loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p in _UNION_TAGS))
+            msg = err["msg"].removeprefix("Value error, ")
+            if err["type"] == "missing":
+                msg = f"missing required key {loc[-1]!r}"
+                loc = loc[:-1]
+            elif err["type"] == "extra_forbidden":
+                msg = f"unknown key {loc[-1]!r}"
+            elif err["type"] == "literal_error" and loc == ("bayesprog",):
+                msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
+            else:
+                msg = f"{'.'.join(map(str, loc))}: {msg}, found {err.get('input')!r}"
+            out.append(located.diagnostic(loc, msg))
+        return None, _dedupe(out)
+
+
+_UNION_TAGS = {"QuestionSpec", "str"}
+
+
+def _dedupe(diags: list[Diagnostic]) -> list[Diagnostic]:
+    seen, out = set(), []
+    for d in diags:
+        if (d.line, d.column) not in seen:
+            seen.add((d.line, d.column))
+            out.append(d)
+    return out
+
+
+def loads(text: str, file: str = "<string>", base_dir: Path | None = None) -> Program:
+    """Load a program from YAML text. Raises :class:`SpecError` listing every problem."""
+    located, problems = load_yaml(text, file)
+    if problems and located.data is None:
+        raise SpecError(problems)
+    doc, schema_problems = _document(located)
+    problems += schema_problems
+    if doc is None:
+        raise SpecError(problems)
+    checked = check_document(located, doc, base_dir or Path.cwd())
+    problems += checked.problems
+    if problems:
+        raise SpecError(problems)
+    questions = {
+        name: Question(expr, kind, name, desc) for name, (expr, kind, desc) in checked.questions.items()
+    }
+    program = Program(
+        checked.variables,
+        checked.terms,
+        questions,
+        checked.inputs,
+        name=doc.name,
+        description=doc.description,
+        path=Path(file) if file != "<string>" else None,
+    )
+    if checked.ablate:
+        program = program.ablate([str(e) for e in checked.ablate])
+    return program
+
+
+def load(path: str | Path) -> Program:
+    """Load and check the program file at ``path``."""
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    return loads(text, str(path), path.parent)

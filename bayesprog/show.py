@@ -1,0 +1,147 @@
+"""Text rendering: a program in Bayesian-programming notation, and answers as tables."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bayesprog.engine import MapResult, Posterior
+from bayesprog.forms import ParamValue
+from bayesprog.program import Program
+from bayesprog.spec.check import InputRef, Term
+from bayesprog.variables import Continuous, Discrete, Variable
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def _domain(var: Variable) -> str:
+    if isinstance(var, Discrete):
+        if var.kind == "grid":
+            shape = " x ".join(map(str, var.grid_shape or ()))
+            return f"grid {shape} cells of {_fmt(var.cell or 1)} ({var.card} states)"
+        if var.kind == "range":
+            return f"{{{var.states[0]}, ..., {var.states[-1]}}} ({var.card} states)"
+        return "{" + ", ".join(var.states) + "}"
+    assert isinstance(var, Continuous)
+    support = f"[{_fmt(var.low)}, {_fmt(var.high)}]" if np.isfinite(var.width) else "R"
+    if var.index is None:
+        return f"real in {support}"
+    return f"field over {var.index}: one real in {support} per state"
+
+
+def _param(program: Program, value: ParamValue | InputRef) -> str:
+    if isinstance(value, InputRef):
+        decl = program.inputs[value.name]
+        return f"input {value.name} {list(decl.axes) + list(decl.event)}"
+    arr = np.asarray(value.array)
+    if not value.axes:
+        return _fmt(float(arr)) if arr.ndim == 0 else _array(arr)
+    if len(value.axes) == 1 and arr.ndim <= 2 and arr.shape[0] <= 12:
+        states = program.variables[value.axes[0]].states  # type: ignore[union-attr]
+        body = ", ".join(f"{s}: {_array(v) if np.ndim(v) else _fmt(float(v))}"
+                         for s, v in zip(states, arr, strict=False))
+        return "{" + body + "}"
+    return f"table over {' x '.join(value.axes)} of shape {list(arr.shape)}"
+
+
+def _array(arr: np.ndarray) -> str:
+    flat = np.asarray(arr).ravel()
+    if flat.size > 8:
+        return f"[{', '.join(_fmt(x) for x in flat[:6])}, ... ({flat.size} values)]"
+    text = np.array2string(np.asarray(arr), separator=", ", formatter={"float_kind": _fmt})
+    return text.replace("\n", "")
+
+
+def _form(program: Program, term: Term) -> str:
+    if str(term.expression) in program.ablated:
+        return "Uniform  (ablated)"
+    if term.form.name == "program":
+        return f"Program {term.extra['source']}: {term.extra['question']}"
+    params = ", ".join(f"{k} = {_param(program, v)}" for k, v in term.params.items())
+    name = term.form.name.capitalize() if term.form.name != "gmm" else "GMM"
+    return f"{name}({params})" if params else name
+
+
+def render(program: Program) -> str:
+    """The program as ProBT-style text: variables, decomposition, forms, questions."""
+    lines = [f"Program {program.name}" + (f"  ({program.path})" if program.path else "")]
+    if program.description:
+        lines += ["  " + program.description.strip().replace("\n", "\n  ")]
+    lines += ["  Specification", "    Variables"]
+    width = max(len(n) for n in program.variables)
+    for name, var in program.variables.items():
+        note = f"  -- {var.description}" if var.description else ""
+        lines.append(f"      {name:<{width}} : {_domain(var)}{note}")
+    if program.inputs:
+        lines.append("    Runtime inputs")
+        for name, decl in program.inputs.items():
+            note = f"  -- {decl.description}" if decl.description else ""
+            lines.append(f"      {name} : shape {list(decl.axes) + list(decl.event)}{note}")
+    terms = [t for t in program.terms if not t.soft]
+    joint = " ".join(program.variables)
+    lines += ["    Decomposition",
+              f"      P({joint}) = " + " ".join(str(t.expression) for t in terms)]
+    lines.append("    Parametric forms")
+    for t in terms:
+        lines.append(f"      {t.expression} = {_form(program, t)}")
+    soft = [t for t in program.terms if t.soft]
+    if soft:
+        lines.append("    Soft evidence (likelihoods multiplied in)")
+        for t in soft:
+            lines.append(f"      on {t.child.name}: {_form(program, t)}")
+    lines.append("  Questions")
+    if not program.questions:
+        lines.append("      (none named; any P(searched | known) can be asked)")
+    for name, q in program.questions.items():
+        note = f"  -- {q.description}" if q.description else ""
+        lines.append(f"      {name}: {q.expression}  [{q.kind}]{note}")
+    if program.ablated:
+        lines.append("  Ablated: " + ", ".join(program.ablated))
+    return "\n".join(lines)
+
+
+def format_result(result: Posterior | MapResult, limit: int = 20) -> str:
+    """A readable table (one block per batch row when batched)."""
+    if isinstance(result, MapResult):
+        rows = np.ndindex(*result.indices.shape[:-1])
+        out = [f"MAP of {result.question}" + _ablated(result.ablated)]
+        for pos in rows:
+            names = [result.states[v][int(i)] for v, i in zip(result.variables, result.indices[pos], strict=False)]
+            label = f"[{', '.join(map(str, pos))}] " if pos else ""
+            assignment = ", ".join(f"{v}={s}" for v, s in zip(result.variables, names, strict=False))
+            out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
+                       + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
+        return "\n".join(out)
+    out = [f"{result.question}" + _ablated(result.ablated)]
+    for pos in np.ndindex(*result.batch_shape):
+        if pos:
+            out.append(f"  batch row [{', '.join(map(str, pos))}]")
+        out += _table(result, result.probabilities[pos], limit)
+    return "\n".join(out)
+
+
+def _ablated(ablated: tuple[str, ...]) -> str:
+    return f"   (ablated: {', '.join(ablated)})" if ablated else ""
+
+
+def _table(result: Posterior, probs: np.ndarray, limit: int) -> list[str]:
+    flat = probs.ravel()
+    order = np.arange(flat.size)
+    note = ""
+    if flat.size > limit:
+        order = np.argsort(-flat, kind="stable")[:limit]
+        note = f"  ... {flat.size - limit} more (the {limit} most probable are shown; --limit N)"
+    names = [result.states[v] for v in result.variables]
+    cells = []
+    for k in order:
+        idx = np.unravel_index(k, probs.shape)
+        cells.append(([names[i][j] for i, j in enumerate(idx)], flat[k]))
+    widths = [max(len(v), *(len(c[0][i]) for c in cells)) for i, v in enumerate(result.variables)]
+    header = "  " + "  ".join(f"{v:<{w}}" for v, w in zip(result.variables, widths, strict=False)) + "  probability"
+    lines = [header]
+    for states, p in cells:
+        lines.append("  " + "  ".join(f"{s:<{w}}" for s, w in zip(states, widths, strict=False)) + f"  {p:.6g}")
+    if note:
+        lines.append(note)
+    return lines

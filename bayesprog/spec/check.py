@@ -1,0 +1,512 @@
+"""Whole-program checking: from a located, schema-valid document to checked program parts.
+
+Every problem of a file is collected (with its line and column) before anything is raised, so a
+user sees all of them at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from bayesprog.errors import Diagnostic
+from bayesprog.forms import Form, Param, ParamValue, available_forms, get_form
+from bayesprog.spec.model import Document, InputSpec
+from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
+from bayesprog.spec.yamlload import Located
+from bayesprog.spec.yamlload import Path as YPath
+from bayesprog.variables import Continuous, Discrete, Variable, grid_variable
+
+
+@dataclass(frozen=True)
+class InputRef:
+    """A parameter given at question time by the runtime input ``name``."""
+
+    name: str
+
+
+@dataclass(frozen=True)
+class InputDecl:
+    """A declared runtime input: ``axes`` over discrete variables, then fixed or free dims."""
+
+    name: str
+    axes: tuple[str, ...]
+    event: tuple[int | str, ...]
+    description: str = ""
+
+    @property
+    def ndim(self) -> int:
+        return len(self.axes) + len(self.event)
+
+
+@dataclass
+class Term:
+    """A checked term of the decomposition (or a soft-evidence likelihood when ``soft``)."""
+
+    expression: Expression
+    child: Variable
+    parents: tuple[Variable, ...]
+    form: Form
+    params: dict[str, ParamValue | InputRef]
+    position: tuple[str, int, int] = ("<python>", 0, 0)
+    soft: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """The term's discrete variables, child first when it is discrete."""
+        own = (self.child.name,) if self.child.is_discrete else ()
+        return own + tuple(p.name for p in self.parents if p.is_discrete)
+
+    @property
+    def label(self) -> str:
+        return f"soft evidence on {self.child.name}" if self.soft else str(self.expression)
+
+
+@dataclass
+class Checked:
+    variables: dict[str, Variable]
+    inputs: dict[str, InputDecl]
+    terms: list[Term]
+    questions: dict[str, tuple[Expression, str, str]]
+    ablate: list[Expression]
+    problems: list[Diagnostic]
+
+
+def build_variable(name: str, spec: Any) -> Variable:
+    if spec.states is not None:
+        return Discrete(name, tuple(spec.states), description=spec.description)
+    if spec.range is not None:
+        low, high = spec.range
+        values = np.arange(low, high + 1)
+        return Discrete(
+            name, tuple(str(v) for v in values), values=values, description=spec.description,
+            kind="range",
+        )
+    if spec.grid is not None:
+        g = spec.grid
+        return grid_variable(name, tuple(g.shape), g.cell, g.origin, spec.description)
+    low, high = spec.continuous
+    return Continuous(name, float(low), float(high), spec.indexed_by, spec.description)
+
+
+class _Checker:
+    def __init__(self, located: Located, doc: Document, base_dir: Path):
+        self.located = located
+        self.doc = doc
+        self.base_dir = base_dir
+        self.problems: list[Diagnostic] = []
+        self.variables: dict[str, Variable] = {}
+        self.inputs: dict[str, InputDecl] = {}
+
+    def error(self, path: YPath, message: str) -> None:
+        self.problems.append(self.located.diagnostic(path, message))
+
+    # variables and inputs -------------------------------------------------------------------
+    def check_variables(self) -> None:
+        for name, spec in self.doc.variables.items():
+            self.variables[name] = build_variable(name, spec)
+        for name, var in self.variables.items():
+            if isinstance(var, Continuous) and var.index is not None:
+                index = self.variables.get(var.index)
+                if index is None or not index.is_discrete:
+                    self.error(
+                        ("variables", name, "indexed_by"),
+                        f"variable {name!r} is indexed_by {var.index!r}: expected a declared "
+                        f"discrete variable, found {'nothing' if index is None else 'a continuous one'}",
+                    )
+
+    def check_inputs(self) -> None:
+        for name, spec in self.doc.inputs.items():
+            self.inputs[name] = self.input_decl(name, spec)
+
+    def input_decl(self, name: str, spec: InputSpec) -> InputDecl:
+        axes: list[str] = []
+        event: list[int | str] = []
+        for i, dim in enumerate(spec.shape):
+            if isinstance(dim, str) and dim in self.variables:
+                if not self.variables[dim].is_discrete:
+                    self.error(
+                        ("inputs", name, "shape", i),
+                        f"input {name!r}: dimension {dim!r} names a continuous variable; "
+                        "expected a discrete variable, an integer or a free symbol",
+                    )
+                elif event:
+                    self.error(
+                        ("inputs", name, "shape", i),
+                        f"input {name!r}: variable dimensions must come first, "
+                        f"found {dim!r} after {event}",
+                    )
+                else:
+                    axes.append(dim)
+            elif isinstance(dim, int) and dim < 1:
+                self.error(("inputs", name, "shape", i), f"expected a size >= 1, found {dim}")
+            else:
+                event.append(dim)
+        return InputDecl(name, tuple(axes), tuple(event), spec.description)
+
+    # terms ------------------------------------------------------------------------------------
+    def check_terms(self) -> list[Term]:
+        terms: list[Term] = []
+        defined: dict[str, int] = {}
+        for i, spec in enumerate(self.doc.decomposition):
+            path: YPath = ("decomposition", i)
+            term = self.check_term(path + ("term",), spec.term, spec.form, spec.parameters, path)
+            if term is None:
+                continue
+            term.description = spec.description
+            name = term.child.name
+            if name in defined:
+                self.error(
+                    path + ("term",),
+                    f"variable {name!r} has a second term {term.expression}: expected one term "
+                    f"per variable, found one already at decomposition[{defined[name]}]",
+                )
+                continue
+            defined[name] = i
+            terms.append(term)
+        missing = [n for n in self.variables if n not in defined]
+        failed_children = self._failed_children()
+        for name in missing:
+            if name not in failed_children:
+                self.error(
+                    ("variables", name),
+                    f"variable {name!r} has no term in the decomposition: expected one "
+                    f"P({name} | ...)",
+                )
+        for i, spec in enumerate(self.doc.soft_evidence):
+            path = ("soft_evidence", i)
+            term = self.check_term(path + ("on",), f"P({spec.on})", spec.form, spec.parameters, path)
+            if term is not None:
+                if not term.child.is_discrete:
+                    self.error(path + ("on",), f"soft evidence needs a discrete variable, "
+                               f"found continuous {spec.on!r}")
+                    continue
+                if term.form.name not in ("categorical", "program"):
+                    self.error(path + ("form",), "soft evidence takes form 'categorical' or "
+                               f"'program', found {term.form.name!r}")
+                    continue
+                term.soft = True
+                term.description = spec.description
+                terms.append(term)
+        self.check_cycles(terms)
+        return terms
+
+    def _failed_children(self) -> set[str]:
+        names = set()
+        for spec in self.doc.decomposition:
+            try:
+                names.update(parse_expression(spec.term).left)
+            except ExpressionError:
+                pass
+        return names
+
+    def check_term(
+        self, tpath: YPath, text: str, form_name: str, raw: dict[str, Any], path: YPath
+    ) -> Term | None:
+        try:
+            expr = parse_expression(text)
+        except ExpressionError as exc:
+            self.error(tpath, f"term: {exc}")
+            return None
+        ok = True
+        if len(expr.left) != 1:
+            self.error(tpath, f"term {expr}: expected one variable before '|', "
+                       f"found {len(expr.left)} ({' '.join(expr.left)})")
+            ok = False
+        if expr.values:
+            self.error(tpath, f"term {expr}: expected parents without values, found "
+                       + ", ".join(f"{k}={v}" for k, v in expr.values.items()))
+            ok = False
+        for name in expr.left + expr.right:
+            if name not in self.variables:
+                self.error(tpath, f"term {expr}: undeclared variable {name!r} "
+                           f"(declared: {', '.join(self.variables)})")
+                ok = False
+        form = get_form(form_name)
+        if form is None:
+            self.error(path + ("form",), f"unknown form {form_name!r}: expected one of "
+                       f"{', '.join(available_forms())}")
+            ok = False
+        if not ok or form is None:
+            return None
+        child = self.variables[expr.left[0]]
+        parents = tuple(self.variables[n] for n in expr.right)
+        for message in form.check(child, parents):
+            self.error(path + ("form",), f"term {expr}: {message}")
+            ok = False
+        for parent in parents:
+            if not parent.is_discrete:
+                self.error(tpath, f"term {expr}: parent {parent.name!r} is continuous; "
+                           "expected discrete parents (continuous variables are leaves)")
+                ok = False
+        if isinstance(child, Continuous) and child.index is not None and child.index not in expr.right:
+            self.error(tpath, f"term {expr}: {child.name!r} is a field indexed by "
+                       f"{child.index!r}, so its term must condition on {child.index!r}")
+            ok = False
+        if not ok:
+            return None
+        term = Term(expr, child, parents, form, {}, (self.located.file, *self.located.where(tpath)))
+        resolve = getattr(form, "resolve", None)
+        if resolve is not None:
+            problems = resolve(term, raw, self, path)
+        else:
+            problems = self.resolve_params(term, raw, path)
+        return None if problems else term
+
+    def resolve_params(self, term: Term, raw: dict[str, Any], path: YPath) -> int:
+        form = term.form
+        declared = {p.name: p for p in form.params}
+        before = len(self.problems)
+        for key in raw:
+            if key not in declared:
+                expected = ", ".join(declared) or "no parameters"
+                self.error(path + (key,), f"term {term.label}: unknown parameter {key!r} for "
+                           f"form {form.name!r}: expected {expected}")
+        for param in form.params:
+            if param.name not in raw:
+                if param.required:
+                    self.error(path, f"term {term.label}: form {form.name!r} needs parameter "
+                               f"{param.name!r} ({param.doc or param.constraint})")
+                elif not isinstance(param.default, str):
+                    term.params[param.name] = ParamValue((), np.asarray(param.default, float))
+                continue
+            value = self.param_value(term, param, raw[param.name], path + (param.name,))
+            if value is not None:
+                term.params[param.name] = value
+        return len(self.problems) - before
+
+    # parameter values ---------------------------------------------------------------------------
+    def param_value(
+        self, term: Term, param: Param, raw: Any, path: YPath
+    ) -> ParamValue | InputRef | None:
+        form, child = term.form, term.child
+        event_ndim = form.event_ndim(param, child)
+        keyable = form.keyable(child, term.parents)
+        what = f"term {term.label}: {form.name} parameter {param.name!r}"
+        if isinstance(raw, dict) and set(raw) == {"input"}:
+            return self.input_ref(term, param, raw["input"], path, event_ndim, keyable, what)
+        try:
+            axes, array = self._literal(raw, param, child, keyable, event_ndim, path, what)
+        except _LiteralError as exc:
+            self.error(exc.path, exc.message)
+            return None
+        expected = form.event_shape(param, child)
+        if expected is not None and array.shape[array.ndim - event_ndim :] != expected:
+            found = array.shape[array.ndim - event_ndim :]
+            states = child.describe_states() if isinstance(child, Discrete) else ""
+            self.error(path, f"{what}: expected {expected[-1]} values per row "
+                       f"(one per state of {child.name}: {states}), found {found[-1] if found else 0}")
+            return None
+        if not param.constraint.ok(array):
+            self.error(path, f"{what} must be {param.constraint}, got "
+                       f"{_offender(array, param, event_ndim)}")
+            return None
+        return ParamValue(axes, array)
+
+    def input_ref(self, term, param, name, path, event_ndim, keyable, what) -> InputRef | None:
+        decl = self.inputs.get(name) if isinstance(name, str) else None
+        if decl is None:
+            self.error(path, f"{what}: unknown input {name!r} (declared inputs: "
+                       f"{', '.join(self.inputs) or 'none'})")
+            return None
+        allowed = {v.name for v in keyable}
+        bad = [a for a in decl.axes if a not in allowed]
+        if bad:
+            self.error(path, f"{what}: input {name!r} varies over {bad[0]!r}, expected only "
+                       f"variables of the term ({', '.join(sorted(allowed)) or 'none'})")
+            return None
+        if len(decl.event) != event_ndim:
+            self.error(path, f"{what}: expected an input with {event_ndim} dimension(s) after "
+                       f"its variable axes, input {name!r} declares {len(decl.event)}")
+            return None
+        return InputRef(name)
+
+    def _literal(self, raw, param, child, keyable, event_ndim, path, what):
+        if isinstance(raw, dict):
+            if (
+                param.keyed_by_child_states
+                and isinstance(child, Discrete)
+                and set(map(str, raw)) == set(child.states)
+                and event_ndim == 1
+            ):
+                raw = [raw[s] if s in raw else raw[_maybe_int(s)] for s in child.states]
+                return self._literal(raw, param, child, keyable, event_ndim, path, what)
+            keys = {str(k) for k in raw}
+            matches = [v for v in keyable if keys <= set(v.states)]
+            if not matches:
+                names = ", ".join(v.name for v in keyable) or "none"
+                raise _LiteralError(path, f"{what}: expected a table keyed by the states of "
+                                    f"one of ({names}), found keys {sorted(keys)}")
+            var = max(matches, key=lambda v: len(keys & set(v.states)))
+            if len(matches) > 1 and sum(keys == set(v.states) for v in matches) != 1:
+                raise _LiteralError(path, f"{what}: keys {sorted(keys)} match the states of "
+                                    f"several variables ({', '.join(v.name for v in matches)})")
+            missing = [s for s in var.states if s not in keys]
+            if missing:
+                raise _LiteralError(path, f"{what}: table keyed by {var.name} misses state(s) "
+                                    f"{', '.join(missing[:5])}")
+            rest = [v for v in keyable if v.name != var.name]
+            parts = []
+            sub_axes = None
+            by_str = {str(k): v for k, v in raw.items()}
+            for state in var.states:
+                axes, arr = self._literal(by_str[state], param, child, rest, event_ndim,
+                                          path + (state,), what)
+                if sub_axes is not None and axes != sub_axes:
+                    raise _LiteralError(path + (state,), f"{what}: rows keyed by {var.name} "
+                                        "must all be keyed the same way")
+                sub_axes = axes
+                parts.append(arr)
+            try:
+                stacked = np.stack(parts)
+            except ValueError:
+                raise _LiteralError(path, f"{what}: rows keyed by {var.name} have different "
+                                    "shapes") from None
+            return (var.name,) + tuple(sub_axes or ()), stacked
+        try:
+            array = np.asarray(raw, dtype=float)
+        except (TypeError, ValueError):
+            raise _LiteralError(path, f"{what}: expected a number, a list of numbers, a table "
+                                f"keyed by states or {{input: NAME}}, found {raw!r}") from None
+        lead = array.ndim - event_ndim
+        if lead < 0:
+            raise _LiteralError(path, f"{what}: expected {event_ndim} nested list level(s), "
+                                f"found {array.ndim}")
+        if lead > len(keyable):
+            raise _LiteralError(path, f"{what}: expected at most {len(keyable) + event_ndim} "
+                                f"nested list levels, found {array.ndim}")
+        axes = tuple(v.name for v in keyable[:lead])
+        want = tuple(v.card for v in keyable[:lead])
+        if array.shape[:lead] != want:
+            raise _LiteralError(path, f"{what}: expected shape {want + array.shape[lead:]} "
+                                f"(one level per state of {', '.join(axes)}), found "
+                                f"{array.shape}")
+        return axes, array
+
+    # questions and ablations --------------------------------------------------------------------
+    def check_questions(self) -> dict[str, tuple[Expression, str, str]]:
+        out = {}
+        for name in self.doc.questions:
+            spec = self.doc.question(name)
+            raw = self.doc.questions[name]
+            path: YPath = ("questions", name) + (() if isinstance(raw, str) else ("ask",))
+            try:
+                expr = parse_expression(spec.ask)
+            except ExpressionError as exc:
+                self.error(path, f"question {name!r}: {exc}")
+                continue
+            problem = question_problem(expr, self.variables)
+            if problem:
+                self.error(path, f"question {name!r}: {problem}")
+                continue
+            out[name] = (expr, spec.kind, spec.description)
+        return out
+
+    def check_ablate(self, terms: list[Term]) -> list[Expression]:
+        out = []
+        for i, text in enumerate(self.doc.ablate):
+            try:
+                expr = parse_expression(text)
+            except ExpressionError as exc:
+                self.error(("ablate", i), f"ablate: {exc}")
+                continue
+            if not any(t.expression.key == expr.key for t in terms if not t.soft):
+                known = ", ".join(str(t.expression) for t in terms if not t.soft)
+                self.error(("ablate", i), f"ablate: no term {expr} in the decomposition "
+                           f"(terms: {known})")
+                continue
+            out.append(expr)
+        return out
+
+    def check_cycles(self, terms: list[Term]) -> None:
+        graph = nx.DiGraph()
+        for t in terms:
+            if not t.soft:
+                graph.add_edges_from((p.name, t.child.name) for p in t.parents)
+        try:
+            cycle = nx.find_cycle(graph)
+        except nx.NetworkXNoCycle:
+            return
+        loop = [u for u, _ in cycle] + [cycle[0][0]]
+        first = next(i for i, s in enumerate(self.doc.decomposition)
+                     if _child_of(s.term) in loop)
+        self.error(("decomposition", first, "term"), "the decomposition has a cycle: "
+                   f"{' -> '.join(loop)}; expected a directed acyclic graph")
+
+
+def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | None:
+    """Why ``expr`` cannot be asked of these variables (None if it can)."""
+    for name in expr.left + expr.right:
+        if name not in variables:
+            return (f"undeclared variable {name!r} in {expr} "
+                    f"(declared: {', '.join(variables)})")
+    for name in expr.left:
+        if not variables[name].is_discrete:
+            return (f"cannot search continuous variable {name!r}: questions search discrete "
+                    "variables (continuous ones are known or summed out)")
+    for name, text in expr.values.items():
+        var = variables[name]
+        if isinstance(var, Discrete):
+            try:
+                var.index_of(text)
+            except KeyError:
+                return (f"unknown state {text!r} of {name} (expected one of "
+                        f"{var.describe_states()})")
+        elif var.index is None:
+            try:
+                value = float(text)
+            except ValueError:
+                return f"expected a number for {name}, found {text!r}"
+            if not var.low <= value <= var.high:
+                return (f"{name}={value} is outside its support [{var.low}, {var.high}]")
+    return None
+
+
+class _LiteralError(Exception):
+    def __init__(self, path: YPath, message: str):
+        self.path, self.message = path, message
+
+
+def _maybe_int(s: str) -> Any:
+    try:
+        return int(s)
+    except ValueError:
+        return s
+
+
+def _child_of(text: str) -> str | None:
+    try:
+        return parse_expression(text).left[0]
+    except ExpressionError:
+        return None
+
+
+def _offender(array: np.ndarray, param: Param, event_ndim: int) -> str:
+    if event_ndim and array.ndim:
+        sums = array.sum(axis=-1).ravel()
+        bad = [s for s in sums if not np.isclose(s, 1.0, atol=1e-6)]
+        if np.any(array < 0):
+            return f"a negative value {array[array < 0].ravel()[0]:g}"
+        if bad:
+            return f"a row summing to {bad[0]:.6g}"
+    flat = array.ravel()
+    for v in flat:
+        if not param.constraint.ok(np.asarray([v])):
+            return f"{v:g}"
+    return str(array.tolist())
+
+
+def check_document(located: Located, doc: Document, base_dir: Path) -> Checked:
+    c = _Checker(located, doc, base_dir)
+    c.check_variables()
+    c.check_inputs()
+    terms = c.check_terms()
+    questions = c.check_questions()
+    ablate = c.check_ablate(terms)
+    return Checked(c.variables, c.inputs, terms, questions, ablate, c.problems)

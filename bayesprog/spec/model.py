@@ -1,0 +1,134 @@
+"""The structure of a program file (format version 1), as pydantic models.
+
+Only the shape of the document is checked here; what refers to what (variables in terms,
+states in tables, parameter constraints) is checked by :mod:`bayesprog.spec.check`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+FORMAT_VERSION = 1
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=False)
+
+
+class GridSpec(_Strict):
+    shape: list[int] = Field(min_length=1, description="number of cells along each axis")
+    cell: float = Field(1.0, gt=0, description="side of a cell, in the unit of the coordinates")
+    origin: list[float] | None = Field(None, description="corner of the grid (default zeros)")
+
+    @model_validator(mode="after")
+    def _positive(self) -> GridSpec:
+        if any(n < 1 for n in self.shape):
+            raise ValueError(f"grid shape must have sizes >= 1, got {self.shape}")
+        if self.origin is not None and len(self.origin) != len(self.shape):
+            raise ValueError(
+                f"origin must have {len(self.shape)} coordinates (one per axis), "
+                f"got {len(self.origin)}"
+            )
+        return self
+
+
+class VariableSpec(_Strict):
+    """Exactly one of ``states``, ``range``, ``grid`` or ``continuous``."""
+
+    states: list[str] | None = Field(None, description="named states of a discrete variable")
+    range: list[int] | None = Field(
+        None, min_length=2, max_length=2, description="inclusive integer range [low, high]"
+    )
+    grid: GridSpec | None = Field(None, description="a grid of cells whose states carry coordinates")
+    continuous: list[float] | None = Field(
+        None, min_length=2, max_length=2, description="support [low, high] of a real variable"
+    )
+    indexed_by: str | None = Field(
+        None, description="a continuous field: one value per state of this discrete variable"
+    )
+    description: str = ""
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> VariableSpec:
+        kinds = [k for k in ("states", "range", "grid", "continuous") if getattr(self, k) is not None]
+        if len(kinds) != 1:
+            found = ", ".join(kinds) if kinds else "none"
+            raise ValueError(
+                f"expected exactly one of states, range, grid, continuous; found {found}"
+            )
+        if self.indexed_by is not None and self.continuous is None:
+            raise ValueError("indexed_by is only for continuous variables")
+        if self.states is not None:
+            if not self.states:
+                raise ValueError("expected at least one state, found none")
+            dups = sorted({s for s in self.states if self.states.count(s) > 1})
+            if dups:
+                raise ValueError(f"expected distinct state names, found {dups} twice")
+        if self.range is not None and self.range[0] > self.range[1]:
+            raise ValueError(f"expected range [low, high] with low <= high, got {self.range}")
+        if self.continuous is not None and not self.continuous[0] < self.continuous[1]:
+            raise ValueError(f"expected support [low, high] with low < high, got {self.continuous}")
+        return self
+
+
+class InputSpec(_Strict):
+    """A named runtime array bound when a question is asked."""
+
+    shape: list[int | str] = Field(
+        default_factory=list,
+        description="trailing shape: a discrete variable's name (one axis over its states), "
+        "an integer, or a free symbol; leading extra dimensions are batch dimensions",
+    )
+    description: str = ""
+
+
+class TermSpec(BaseModel):
+    """``P(X | parents)`` with a form; the form's parameters sit beside ``form``."""
+
+    model_config = ConfigDict(extra="allow")
+
+    term: str = Field(description="P(X | parents)")
+    form: str = Field(description="name of a registered parametric form")
+    description: str = ""
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class SoftEvidenceSpec(BaseModel):
+    """A likelihood over the states of ``on`` (virtual evidence), given by a form."""
+
+    model_config = ConfigDict(extra="allow")
+
+    on: str = Field(description="the discrete variable the likelihood is over")
+    form: str = Field(description="categorical (a vector or an input) or program")
+    description: str = ""
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class QuestionSpec(_Strict):
+    ask: str = Field(description="P(searched | known)")
+    kind: Literal["posterior", "map"] = "posterior"
+    description: str = ""
+
+
+class Document(_Strict):
+    bayesprog: Literal[1] = Field(description="format version")
+    name: str | None = None
+    description: str = ""
+    variables: dict[str, VariableSpec] = Field(min_length=1)
+    inputs: dict[str, InputSpec] = Field(default_factory=dict)
+    decomposition: list[TermSpec] = Field(min_length=1)
+    soft_evidence: list[SoftEvidenceSpec] = Field(default_factory=list)
+    questions: dict[str, QuestionSpec | str] = Field(default_factory=dict)
+    ablate: list[str] = Field(default_factory=list)
+
+    def question(self, name: str) -> QuestionSpec:
+        q = self.questions[name]
+        return QuestionSpec(ask=q) if isinstance(q, str) else q

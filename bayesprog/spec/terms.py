@@ -1,0 +1,84 @@
+"""Parsing of the ``P(left | right)`` notation shared by terms, questions and ablations.
+
+>>> parse_expression("P(A B | C=c1, D=0.3)")
+Expression(left=('A', 'B'), right=('C', 'D'), values={'C': 'c1', 'D': '0.3'})
+>>> str(parse_expression("P(S|O,T)"))
+'P(S | O, T)'
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.]*$")
+_SHAPE = re.compile(r"^\s*P\s*\((?P<body>.*)\)\s*$", re.DOTALL)
+
+
+class ExpressionError(ValueError):
+    """The text is not of the form ``P(A B | C, D=d)``; the message says what was found."""
+
+
+@dataclass(frozen=True)
+class Expression:
+    """``P(left | right)``; ``values`` holds the ``Name=value`` bindings written on the right."""
+
+    left: tuple[str, ...]
+    right: tuple[str, ...] = ()
+    values: dict[str, str] = field(default_factory=dict, compare=False)
+
+    def __str__(self) -> str:
+        left = " ".join(self.left)
+        if not self.right:
+            return f"P({left})"
+        right = ", ".join(f"{n}={self.values[n]}" if n in self.values else n for n in self.right)
+        return f"P({left} | {right})"
+
+    @property
+    def key(self) -> tuple[tuple[str, ...], frozenset[str]]:
+        """What identifies a term: its variables, the order of the conditioning set aside."""
+        return self.left, frozenset(self.right)
+
+
+def _names(text: str, what: str, original: str) -> list[str]:
+    names = [n for n in re.split(r"[\s,]+", text.strip()) if n]
+    for name in names:
+        if not _NAME.match(name):
+            raise ExpressionError(
+                f"{what} of {original!r}: expected variable names, found {name!r}"
+            )
+    return names
+
+
+def parse_expression(text: str) -> Expression:
+    """Parse ``P(A B | C, D=d)``. Names on the left are separated by spaces or commas."""
+    if not isinstance(text, str):
+        raise ExpressionError(f"expected a string like 'P(A | B)', found {text!r}")
+    match = _SHAPE.match(text)
+    if not match:
+        raise ExpressionError(f"expected the form 'P(A B | C, D=d)', found {text!r}")
+    body = match.group("body")
+    if body.count("|") > 1:
+        raise ExpressionError(f"expected at most one '|' in {text!r}")
+    left_text, _, right_text = body.partition("|")
+    left = _names(left_text, "the searched part", text)
+    if not left:
+        raise ExpressionError(f"expected at least one variable before '|' in {text!r}")
+    right: list[str] = []
+    values: dict[str, str] = {}
+    for item in (i.strip() for i in right_text.split(",")):
+        if not item:
+            if right_text.strip():
+                raise ExpressionError(f"empty item between commas in {text!r}")
+            continue
+        name, eq, value = (s.strip() for s in item.partition("="))
+        if not _NAME.match(name):
+            raise ExpressionError(f"the known part of {text!r}: expected a name, found {name!r}")
+        if eq:
+            if not value:
+                raise ExpressionError(f"expected a value after '{name}=' in {text!r}")
+            values[name] = value
+        right.append(name)
+    for dup in {n for n in left + right if (left + right).count(n) > 1}:
+        raise ExpressionError(f"variable {dup!r} appears twice in {text!r}")
+    return Expression(tuple(left), tuple(right), values)

@@ -1,0 +1,122 @@
+"""Variables of a Bayesian program: discrete (named states, integer ranges, grids) and continuous."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Discrete:
+    """A discrete variable. ``coords`` (one row per state) is set for grids, ``values`` for ranges."""
+
+    name: str
+    states: tuple[str, ...]
+    values: np.ndarray | None = None
+    coords: np.ndarray | None = None
+    grid_shape: tuple[int, ...] | None = None
+    cell: float | None = None
+    description: str = ""
+    kind: str = "states"
+
+    @property
+    def card(self) -> int:
+        return len(self.states)
+
+    @property
+    def is_discrete(self) -> bool:
+        return True
+
+    def index_of(self, value: object) -> int:
+        """The index of a state given by name, by integer value (ranges) or by index (grids)."""
+        if isinstance(value, (str, np.str_)):
+            text = str(value).strip()
+            if text in self._lookup:
+                return self._lookup[text]
+            if self.values is not None and _is_int(text):
+                return self.index_of(int(text))
+            raise KeyError(text)
+        if isinstance(value, (bool, np.bool_)):
+            raise KeyError(value)
+        if isinstance(value, (int, np.integer)):
+            if self.values is not None:
+                hits = np.flatnonzero(self.values == int(value))
+                if hits.size:
+                    return int(hits[0])
+                raise KeyError(value)
+            if 0 <= int(value) < self.card:
+                return int(value)
+            raise KeyError(value)
+        raise KeyError(value)
+
+    def describe_states(self, limit: int = 6) -> str:
+        shown = ", ".join(self.states[:limit])
+        return shown + (f", ... ({self.card} states)" if self.card > limit else "")
+
+    @property
+    def _lookup(self) -> dict[str, int]:
+        cache = self.__dict__.get("_lookup_cache")
+        if cache is None:
+            cache = {s: i for i, s in enumerate(self.states)}
+            object.__setattr__(self, "_lookup_cache", cache)
+        return cache
+
+
+@dataclass(frozen=True, eq=False)
+class Continuous:
+    """A real variable on ``[low, high]``; with ``index`` it is a field: one value per index state."""
+
+    name: str
+    low: float = -np.inf
+    high: float = np.inf
+    index: str | None = None
+    description: str = ""
+    kind: str = field(default="continuous")
+
+    @property
+    def is_discrete(self) -> bool:
+        return False
+
+    @property
+    def width(self) -> float:
+        return float(self.high - self.low)
+
+
+Variable = Discrete | Continuous
+
+
+def _is_int(text: str) -> bool:
+    try:
+        int(text)
+    except ValueError:
+        return False
+    return True
+
+
+def grid_variable(
+    name: str,
+    shape: tuple[int, ...],
+    cell: float = 1.0,
+    origin: tuple[float, ...] | None = None,
+    description: str = "",
+) -> Discrete:
+    """A grid of cells in row-major order; state ``"i_j"`` has centre ``origin + (i+.5, j+.5)*cell``.
+
+    >>> g = grid_variable("O", (2, 3), cell=0.5)
+    >>> g.states[:4], g.coords[4].tolist()
+    (('0_0', '0_1', '0_2', '1_0'), [0.75, 0.75])
+    """
+    origin_arr = np.zeros(len(shape)) if origin is None else np.asarray(origin, float)
+    index = np.indices(shape).reshape(len(shape), -1).T
+    coords = origin_arr + (index + 0.5) * cell
+    states = tuple("_".join(str(i) for i in row) for row in index)
+    return Discrete(
+        name,
+        states,
+        coords=coords,
+        grid_shape=tuple(shape),
+        cell=cell,
+        description=description,
+        kind="grid",
+    )

@@ -1,0 +1,1 @@
+"""The haptic-exploration application of bayesprog (touch attention on a surface grid)."""
