@@ -134,10 +134,12 @@ class Program:
         raise QuestionError(f"no term {expr} in {self.name} (terms: {known})")
 
     # questions -------------------------------------------------------------------------------------
-    def question(self, question: str | Question, kind: str | None = None) -> Question:
+    def question(self, question: str | Question | Expression, kind: str | None = None) -> Question:
         """A question by name, by ``P(A | B)`` text, or as given."""
         if isinstance(question, Question):
             q = question
+        elif isinstance(question, Expression):
+            q = Question(question)
         elif question in self.questions:
             q = self.questions[question]
         else:

@@ -181,11 +181,11 @@ class _Checker:
                 )
         for i, spec in enumerate(self.doc.soft_evidence):
             path = ("soft_evidence", i)
-            term = self.check_term(path + ("on",), f"P({spec.on})", spec.form, spec.parameters, path)
+            term = self.check_term(path + ("variable",), f"P({spec.variable})", spec.form, spec.parameters, path)
             if term is not None:
                 if not term.child.is_discrete:
-                    self.error(path + ("on",), f"soft evidence needs a discrete variable, "
-                               f"found continuous {spec.on!r}")
+                    self.error(path + ("variable",), f"soft evidence needs a discrete "
+                               f"variable, found continuous {spec.variable!r}")
                     continue
                 if term.form.name not in ("categorical", "program"):
                     self.error(path + ("form",), "soft evidence takes form 'categorical' or "

@@ -99,11 +99,11 @@ class TermSpec(BaseModel):
 
 
 class SoftEvidenceSpec(BaseModel):
-    """A likelihood over the states of ``on`` (virtual evidence), given by a form."""
+    """A likelihood over the states of ``variable`` (virtual evidence), given by a form."""
 
     model_config = ConfigDict(extra="allow")
 
-    on: str = Field(description="the discrete variable the likelihood is over")
+    variable: str = Field(description="the discrete variable the likelihood is over")
     form: str = Field(description="categorical (a vector or an input) or program")
     description: str = ""
 
