@@ -1,4 +1,5 @@
-"""The ``bayesprog`` command line: validate, show, graph, query, schema.
+"""The ``bayesprog`` command line: validate, show, graph, query, schema; run and explore are
+served by runner plugins found through the ``bayesprog.runners`` entry point group.
 
 User errors print ``bayesprog: ...`` (or ``FILE:LINE:COL: ...`` lines) on stderr and exit with
 status 2, never with a traceback.
@@ -132,6 +133,44 @@ def cmd_query(args: argparse.Namespace) -> int:
     return 0
 
 
+def _runner(name: str | None):
+    """The runner plugin ``name`` (entry point group ``bayesprog.runners``)."""
+    from importlib.metadata import entry_points
+
+    found = {ep.name: ep for ep in entry_points(group="bayesprog.runners")}
+    if not found:
+        raise _UserError("no runner is installed (entry point group 'bayesprog.runners')")
+    if name is None:
+        name = "haptic" if "haptic" in found else sorted(found)[0]
+    if name not in found:
+        raise _UserError(f"unknown runner {name!r}: expected one of {', '.join(sorted(found))}")
+    return found[name].load()
+
+
+def _experiment_runner(path: str) -> str | None:
+    from bayesprog.spec.yamlload import load_yaml
+
+    try:
+        located, _ = load_yaml(Path(path).read_text(encoding="utf-8"), path)
+    except FileNotFoundError:
+        raise _UserError(f"cannot read {path}: no such file") from None
+    data = located.data
+    return data.get("runner") if isinstance(data, dict) else None
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    runner = _runner(_experiment_runner(args.experiment))
+    return int(runner.run(Path(args.experiment), Path(args.out), {"quiet": args.quiet}))
+
+
+def cmd_explore(args: argparse.Namespace) -> int:
+    if not args.stdio:
+        raise _UserError("explore needs --stdio (JSON lines on standard input and output)")
+    runner = _runner(args.runner)
+    options = {"task": args.task, "seed": args.seed, "ablate": args.ablate}
+    return int(runner.explore(Path(args.target), options))
+
+
 def cmd_schema(args: argparse.Namespace) -> int:
     from bayesprog.spec.schema import json_schema
 
@@ -184,6 +223,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=20, help="rows shown for large tables")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_query)
+
+    p = sub.add_parser("run", help="run an experiment file (a runner plugin does the work)")
+    p.add_argument("experiment", metavar="EXPERIMENT.yaml")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for results and figures")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")
+    p.add_argument("target", metavar="SCENARIO_OR_MODELS")
+    p.add_argument("--stdio", action="store_true", help="JSON lines on stdin/stdout")
+    p.add_argument("--task", help="task of the scenario (default: its first)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.add_argument("--runner", help="runner plugin (default: haptic)")
+    p.set_defaults(func=cmd_explore)
 
     p = sub.add_parser("schema", help="print the JSON Schema of program files")
     p.add_argument("-o", "--output", metavar="FILE")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import betaln, logsumexp, xlog1py, xlogy
+from scipy.special import betaln, xlog1py, xlogy
 
 from bayesprog.forms.base import (
     Form,
@@ -170,27 +170,22 @@ class GaussianMixture(Form):
         floor = ctx.param("floor")
         if isinstance(child, Discrete):
             grid = next(p for p in ctx.parents if getattr(p, "coords", None) is not None)
-            means = ctx.param("means", 2)  # [b, ..axes.., K, D]
-            dim = means.shape[-1]
+            gi = 1 + ctx.axes.index(grid.name)
             coords = grid.coords  # type: ignore[union-attr]
+            means = np.take(ctx.param("means", 2), 0, axis=gi)  # [b, ..other axes.., K, D]
+            dim = means.shape[-1]
             if coords.shape[1] != dim:
                 raise ValueError(
                     f"gmm means have {dim} coordinates, grid {grid.name!r} has {coords.shape[1]}"
                 )
-            pos = [1] * (len(ctx.axes) + 1)
-            pos[1 + ctx.axes.index(grid.name)] = coords.shape[0]
-            point = coords.reshape(pos + [1, dim])
-            sq = ((point - means) ** 2).sum(-1)  # [b, ..., K]
-            s = sigma[..., None]
-            log_comp = -0.5 * sq / s**2 - dim * np.log(s) - 0.5 * dim * _LOG_2PI
+            # |c - m|^2 = |c|^2 + |m|^2 - 2 c.m, as one matrix product: [b, .., K, cells]
+            sq = (means**2).sum(-1)[..., None] + (coords**2).sum(-1) - 2 * (means @ coords.T)
+            s = np.take(sigma, 0, axis=gi)[..., None, None]
+            log_comp = -0.5 * np.maximum(sq, 0.0) / s**2 - dim * np.log(s) - 0.5 * dim * _LOG_2PI
+            log_comp = np.moveaxis(np.expand_dims(log_comp, gi), -1, gi)[..., 0, :]
+            # now [b, ..axes.. (grid axis = cells), K]
             cell = grid.cell or 1.0  # type: ignore[union-attr]
             area = coords.shape[0] * cell**dim
-        else:
-            means = ctx.param("means", 1)
-            x = ctx.child_value()[..., None]
-            s = sigma[..., None]
-            log_comp = -0.5 * ((x - means) / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
-            area = child.width  # type: ignore[union-attr]
         k = log_comp.shape[-1]
         if "weights" in ctx.params:
             weights = ctx.param("weights", 1)
@@ -199,7 +194,9 @@ class GaussianMixture(Form):
         else:
             weights = np.full((1,) * (log_comp.ndim - 1) + (k,), 1.0 / k)
         with np.errstate(divide="ignore"):
-            mix = logsumexp(log_comp + np.log(weights), axis=-1)
+            top = log_comp.max(axis=-1, keepdims=True)
+            top = np.where(np.isfinite(top), top, 0.0)
+            mix = np.log((np.exp(log_comp - top) * weights).sum(-1)) + top[..., 0]
             if not np.any(floor > 0):
                 return mix
             if not np.isfinite(area):

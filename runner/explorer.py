@@ -1,0 +1,177 @@
+"""The action-perception loop: perceive the probed cell, compute the cues, ask where to go next.
+
+Every decision is asked of the YAML programs through the engine: the material posterior of the
+probed cell is ``pi_per``'s answer (its previous posterior enters as soft evidence on M, which
+makes the per-cell map a recursive Bayes filter); the next cell is ``pi_tar``'s MAP answer, with
+``pi_obj``'s shape posterior entering ``pi_tar`` as soft evidence on R. R runs advance in
+lockstep as arrays with a leading run axis: one engine call per program per step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+import bayesprog
+from bayesprog import Program
+from runner.cues import inhibition, saliency, uncertainty
+from runner.scenario import Scenario
+from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
+
+#: The five configurations of the paper's ablation study (Fig. 9, 10): the term made uniform.
+CONFIGURATIONS: dict[str, tuple[str, ...]] = {
+    "full": (),
+    "without_R": ("P(R | O)",),
+    "without_S": ("P(S | O, T)",),
+    "without_I": ("P(I | O)",),
+    "without_U": ("P(U | O)",),
+}
+
+
+@dataclass
+class Decision:
+    """What stood behind one step's choice, per run (arrays with a leading run axis)."""
+
+    k: int
+    inhibition: np.ndarray
+    saliency: np.ndarray
+    uncertainty: np.ndarray
+    shape_error: np.ndarray | None
+    templates: np.ndarray | None
+    next_cell: np.ndarray
+
+
+class Explorer:
+    """Touch-attention exploration of a grid, for ``runs`` runs in lockstep.
+
+    >>> from runner.scenario import load_scenario
+    >>> scenario = load_scenario("models/scenarios/paper.yaml")
+    >>> explorer = Explorer(scenario, task="T2")
+    >>> explorer.reset(start=(5, 7), seed=1)
+    >>> nxt = explorer.observe((5, 7), texture=0.52, compliance=0.08)
+    >>> len(nxt), all(0 <= i < n for i, n in zip(nxt, scenario.shape))
+    (2, True)
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        task: str,
+        ablate: Sequence[str] = (),
+        runs: int = 1,
+        programs: dict[str, Program] | None = None,
+    ):
+        if task not in scenario.spec.tasks:
+            raise bayesprog.QuestionError(f"unknown task {task!r}: expected one of "
+                                          f"{', '.join(scenario.spec.tasks)}")
+        self.scenario = scenario
+        self.task = task
+        self.runs = runs
+        programs = programs or {}
+        self.perception = programs.get("perception") or bayesprog.load(scenario.program_path("perception"))
+        target = programs.get("target") or bayesprog.load(scenario.program_path("target"))
+        self.target = target.ablate(*ablate) if ablate else target
+        self.ablated = tuple(ablate)
+        self.target_no_shape = self.target.ablate("P(R | O)")
+        names = self.target.variables["R"].states  # type: ignore[union-attr]
+        self.shape_names = names
+        self.outlines = pad_outlines([scenario.templates[n][0] for n in names])
+        self.template_points = np.stack([scenario.templates[n][1] for n in names])
+        self.materials = self.perception.variables["M"].card  # type: ignore[union-attr]
+        self.target_material = scenario.task_material(task)
+        self.centres = scenario.centres
+        self.diagonal = float(np.hypot(*(np.asarray(scenario.shape) * scenario.cell)))
+        self.tracker = ShapeTracker(self.outlines, self.template_points)
+        self.last: Decision | None = None
+        self.registration: Registration | None = None
+
+    # state --------------------------------------------------------------------------------------
+    def reset(self, start: Sequence[int] | np.ndarray, seed: int | Sequence[int] = 0) -> None:
+        """Start new runs: ``start`` is a cell (ix, iy) or one per run [runs, 2]; ``seed`` one
+        integer (run r then uses seed ``(seed, r)``) or one seed per run."""
+        start = np.asarray(start, dtype=int).reshape(-1, 2)
+        if start.shape[0] == 1 and self.runs > 1:
+            start = np.repeat(start, self.runs, axis=0)
+        if start.shape[0] != self.runs:
+            raise bayesprog.QuestionError(f"expected {self.runs} start cells, got {start.shape[0]}")
+        seeds = [(int(seed), r) for r in range(self.runs)] if np.ndim(seed) == 0 else list(seed)  # type: ignore[arg-type]
+        if len(seeds) != self.runs:
+            raise bayesprog.QuestionError(f"expected {self.runs} seeds, got {len(seeds)}")
+        self.rngs = [np.random.default_rng(s) for s in seeds]
+        self.posterior = np.full((self.runs, len(self.centres), self.materials), 1.0 / self.materials)
+        self.path: list[np.ndarray] = []
+        self.expected = self.flat(start)
+        self.visits = np.zeros((self.runs, len(self.centres)), dtype=int)
+        self.tracker.reset()
+        self.last = None
+
+    def flat(self, cells: np.ndarray) -> np.ndarray:
+        """Flat cell indices of ``cells`` [..., 2] (ix, iy), checked against the grid."""
+        cells = np.asarray(cells, dtype=int)
+        nx, ny = self.scenario.shape
+        if np.any(cells[..., 0] < 0) or np.any(cells[..., 0] >= nx) or np.any(cells[..., 1] < 0) \
+                or np.any(cells[..., 1] >= ny):
+            raise bayesprog.QuestionError(f"cell outside the {nx} x {ny} grid: {cells.tolist()}")
+        return cells[..., 0] * ny + cells[..., 1]
+
+    def cell(self, flat: np.ndarray) -> np.ndarray:
+        ny = self.scenario.shape[1]
+        return np.stack([flat // ny, flat % ny], axis=-1)
+
+    # the loop -----------------------------------------------------------------------------------
+    def perceive(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> None:
+        """Update the perceptual map at the probed cells (one per run): recursive Bayes by pi_per."""
+        rows = np.arange(self.runs)
+        prior = self.posterior[rows, cells]
+        answer = self.perception.ask("P(M | E, C)", {"E": texture, "C": compliance},
+                                     soft={"M": prior})
+        self.posterior[rows, cells] = answer.probabilities
+        self.path.append(cells)
+        self.visits[rows, cells] += 1
+
+    def decide(self) -> np.ndarray:
+        """Ask pi_tar for the next cell of every run (flat indices)."""
+        nx, ny = self.scenario.shape
+        last = self.path[-1]
+        u = uncertainty(self.posterior)
+        d = self.posterior[..., self.target_material].reshape(self.runs, nx, ny)
+        s = saliency(d).reshape(self.runs, -1)
+        i = inhibition(self.centres, self.centres[last], self.diagonal)
+        evidence = {"T": self.task, "I": i, "S": s, "U": u}
+        k = len(self.path)
+        if k >= MIN_POINTS and "P(R | O)" not in self.target.ablated:
+            path = self.centres[np.stack(self.path, axis=1)]
+            reg = self.tracker.update(path)
+            self.registration = reg
+            inputs = {"templates": reg.points, "l_rectangle": reg.error[:, 0],
+                      "l_triangle": reg.error[:, 1]}
+            program = self.target
+        else:
+            reg = None
+            # no shape evidence yet: P(R | O) is uniform, and so the soft evidence on R is moot
+            inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
+            program = self.target_no_shape
+        answer = program.ask("next_target", evidence, inputs=inputs, rng=self.rngs)
+        nxt = answer.indices[:, 0]
+        self.last = Decision(k, i, s, u, None if reg is None else reg.error,
+                             None if reg is None else reg.points, nxt)
+        self.target_answer = answer
+        return nxt
+
+    def step(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> np.ndarray:
+        """Perceive then decide, batched: flat cells [runs] -> next flat cells [runs]."""
+        self.perceive(np.asarray(cells), np.asarray(texture, float), np.asarray(compliance, float))
+        nxt = self.decide()
+        self.expected = nxt
+        return nxt
+
+    def observe(self, cell: Sequence[int], texture: float, compliance: float) -> tuple[int, int]:
+        """One run, one probe: the cell (ix, iy) just probed and its readings -> next cell."""
+        if self.runs != 1:
+            raise bayesprog.QuestionError("observe() drives one run; use step() for batches")
+        flat = self.flat(np.asarray(cell).reshape(1, 2))
+        nxt = self.step(flat, np.array([texture]), np.array([compliance]))
+        ix, iy = self.cell(nxt)[0]
+        return int(ix), int(iy)

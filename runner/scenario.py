@@ -1,0 +1,203 @@
+"""Scenarios: a grid of materials made of polygons, the tasks, the templates and the sensor knobs.
+
+A scenario is a YAML file (see ``models/scenarios/paper.yaml``): users describe other workspaces
+(polygons of any material, placed templates) without code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+import bayesprog
+from bayesprog.errors import SpecError
+from bayesprog.spec.yamlload import load_yaml
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class GridSpec(_Strict):
+    shape: list[int] = Field(min_length=2, max_length=2)
+    cell: float = Field(gt=0)
+
+
+class ObjectSpec(_Strict):
+    material: str
+    template: str | None = None
+    at: list[float] | None = Field(None, min_length=2, max_length=2)
+    rotation: float = Field(0.0, description="degrees, counter-clockwise")
+    polygon: list[list[float]] | None = None
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> ObjectSpec:
+        if (self.template is None) == (self.polygon is None):
+            raise ValueError("expected exactly one of 'template' (with 'at') or 'polygon'")
+        if self.template is not None and self.at is None:
+            raise ValueError("an object placed from a template needs 'at: [x, y]'")
+        return self
+
+
+class ProgramsSpec(_Strict):
+    perception: str
+    shape: str
+    target: str
+
+
+class SensorSpec(_Strict):
+    extra_noise: float = Field(0.0, ge=0)
+
+
+class ScenarioSpec(_Strict):
+    scenario: int = Field(1, ge=1, le=1)
+    name: str
+    description: str = ""
+    programs: ProgramsSpec
+    grid: GridSpec
+    background: str
+    templates: dict[str, list[list[float]]] = Field(min_length=1)
+    template_points: int = Field(50, ge=3)
+    objects: list[ObjectSpec] = Field(default_factory=list)
+    tasks: dict[str, str] = Field(min_length=1)
+    sensor: SensorSpec = Field(default_factory=SensorSpec)
+
+
+def _rotation(degrees: float) -> np.ndarray:
+    t = np.deg2rad(degrees)
+    return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+
+
+def outline_points(polygon: np.ndarray, n: int) -> np.ndarray:
+    """``n`` points evenly spaced along the closed outline of ``polygon`` (arc length)."""
+    closed = np.vstack([polygon, polygon[:1]])
+    seg = np.diff(closed, axis=0)
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    s = np.arange(n) * cum[-1] / n
+    i = np.searchsorted(cum, s, side="right") - 1
+    frac = (s - cum[i]) / length[i]
+    return closed[i] + frac[:, None] * seg[i]
+
+
+def inside(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd rule: which of ``points`` [N, 2] lie inside ``polygon`` [V, 2]."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    x1, y1 = polygon[:, 0], polygon[:, 1]
+    x2, y2 = np.roll(x1, -1), np.roll(y1, -1)
+    crosses = (y1 > y) != (y2 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+    return np.logical_xor.reduce(crosses & (x < xint), axis=1)
+
+
+@dataclass
+class Scenario:
+    """A loaded scenario: the material of every cell, tasks, templates and programs."""
+
+    spec: ScenarioSpec
+    path: Path
+    materials: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.spec.grid.shape)  # type: ignore[return-value]
+
+    @property
+    def cell(self) -> float:
+        return self.spec.grid.cell
+
+    @cached_property
+    def centres(self) -> np.ndarray:
+        """Cell centres [nx*ny, 2] in row-major order (the state order of a grid variable)."""
+        nx, ny = self.shape
+        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+        return (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * self.cell
+
+    def polygons(self) -> list[tuple[str, np.ndarray]]:
+        out = []
+        for obj in self.spec.objects:
+            if obj.polygon is not None:
+                out.append((obj.material, np.asarray(obj.polygon, float)))
+            else:
+                base = np.asarray(self.spec.templates[obj.template], float)  # type: ignore[index]
+                out.append((obj.material, base @ _rotation(obj.rotation).T + np.asarray(obj.at)))
+        return out
+
+    @cached_property
+    def material_map(self) -> np.ndarray:
+        """Index of each cell's true material, shape ``grid shape`` (later objects on top)."""
+        flat = np.full(len(self.centres), self.materials.index(self.spec.background))
+        for material, poly in self.polygons():
+            flat[inside(self.centres, poly)] = self.materials.index(material)
+        return flat.reshape(self.shape)
+
+    def task_material(self, task: str) -> int:
+        return self.materials.index(self.spec.tasks[task])
+
+    def border(self, task: str) -> np.ndarray:
+        """Ground-truth border of a task: cells of its material 4-adjacent to another material."""
+        m = self.material_map
+        target = m == self.task_material(task)
+        padded = np.pad(m, 1, mode="edge")
+        other = np.zeros_like(target)
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            other |= padded[1 + dx : 1 + dx + m.shape[0], 1 + dy : 1 + dy + m.shape[1]] != m
+        return target & other
+
+    @cached_property
+    def templates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per template: its polygon and ``template_points`` points evenly spaced along its
+        outline, both centred on the centroid of those points (the template frame)."""
+        out = {}
+        for name, poly in self.spec.templates.items():
+            poly_arr = np.asarray(poly, float)
+            pts = outline_points(poly_arr, self.spec.template_points)
+            centre = pts.mean(axis=0)
+            out[name] = (poly_arr - centre, pts - centre)
+        return out
+
+    def program_path(self, which: str) -> Path:
+        return (self.path.parent / getattr(self.spec.programs, which)).resolve()
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
+    path = Path(path)
+    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    if problems:
+        raise SpecError(problems)
+    try:
+        spec = ScenarioSpec.model_validate(located.data)
+    except ValidationError as exc:
+        raise SpecError([
+            located.diagnostic(tuple(e["loc"]), f"{'.'.join(map(str, e['loc']))}: "
+                               f"{e['msg'].removeprefix('Value error, ')}")
+            for e in exc.errors()
+        ]) from None
+    perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
+    materials = perception.variables["M"].states  # type: ignore[union-attr]
+    diags = []
+    named = [("background",), *[("objects", i, "material") for i in range(len(spec.objects))],
+             *[("tasks", t) for t in spec.tasks]]
+    values = [spec.background, *[o.material for o in spec.objects], *spec.tasks.values()]
+    for where, value in zip(named, values, strict=True):
+        if value not in materials:
+            diags.append(located.diagnostic(where, f"unknown material {value!r}: expected one of "
+                                            f"{', '.join(materials)}"))
+    for i, obj in enumerate(spec.objects):
+        if obj.template is not None and obj.template not in spec.templates:
+            diags.append(located.diagnostic(("objects", i, "template"), f"unknown template "
+                                            f"{obj.template!r}: expected one of "
+                                            f"{', '.join(spec.templates)}"))
+    if diags:
+        raise SpecError(diags)
+    return Scenario(spec, path, materials)
