@@ -1068,3 +1068,25 @@ decomposition:
     second = matching(diags, ("second term",))
     assert len(second) == 1, dump(diags)
     assert (second[0].line, second[0].column) == loc(text, "form: uniform", "P(A)")
+
+
+@pytest.mark.xfail(
+    reason="BUG: NaN evidence for an unbounded continuous variable is reported as "
+           "'E=nan is outside its support [-inf, inf]', a self-contradictory message "
+           "(engine._continuous_values checks finiteness only for bounded supports)",
+    strict=True,
+)
+def test_nan_evidence_on_unbounded_support_message():
+    program = bayesprog.loads("""\
+bayesprog: 1
+variables:
+  M: {states: [m0, m1]}
+  E: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(M), form: uniform}
+  - {term: P(E | M), form: normal, mean: {m0: 0.2, m1: 0.8}, sigma: 0.1}
+""", FILE)
+    with pytest.raises(bayesprog.QuestionError) as info:
+        program.ask("P(M | E)", {"E": float("nan")})
+    message = str(info.value)
+    assert "E" in message and "[-inf, inf]" not in message, message
