@@ -90,8 +90,11 @@ def _npy(path: str, option: str) -> np.ndarray:
         return np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise _UserError(f"{option}: cannot read {path}: no such file") from None
-    except (ValueError, OSError) as exc:
-        raise _UserError(f"{option}: cannot read {path} as a .npy array: {exc}") from None
+    except IsADirectoryError:
+        raise _UserError(f"{option}: cannot read {path}: it is a directory") from None
+    except (ValueError, OSError, EOFError):
+        raise _UserError(f"{option}: cannot read {path} as an array: expected a .npy file "
+                         "of numbers written by numpy.save") from None
 
 
 def _evidence_value(text: str) -> object:
@@ -104,7 +107,14 @@ def _evidence_value(text: str) -> object:
         return text
 
 
+def _check_seed(seed: int) -> int:
+    if seed < 0:
+        raise _UserError(f"--seed: expected a non-negative integer, found {seed}")
+    return seed
+
+
 def cmd_query(args: argparse.Namespace) -> int:
+    _check_seed(args.seed)
     program = _load(args.file)
     for term in args.ablate:
         program = program.ablate(term)
@@ -167,7 +177,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
     if not args.stdio:
         raise _UserError("explore needs --stdio (JSON lines on standard input and output)")
     runner = _runner(args.runner)
-    options = {"task": args.task, "seed": args.seed, "ablate": args.ablate}
+    options = {"task": args.task, "seed": _check_seed(args.seed), "ablate": args.ablate}
     return int(runner.explore(Path(args.target), options))
 
 

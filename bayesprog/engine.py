@@ -235,9 +235,11 @@ def _continuous_values(var: Continuous, value: Any, variables: Mapping) -> np.nd
             raise QuestionError(f"evidence for field {var.name}: expected a last dimension of "
                                 f"{card} (one value per state of {var.index}), found shape "
                                 f"{arr.shape}")
+    if np.any(np.isnan(arr)):
+        raise QuestionError(f"evidence for {var.name}: expected numbers, found NaN")
     if not np.all(np.isfinite(arr)) and np.isfinite(var.width):
         raise QuestionError(f"evidence for {var.name}: expected finite values")
-    outside = (arr < var.low) | (arr > var.high) | np.isnan(arr)
+    outside = (arr < var.low) | (arr > var.high)
     if np.any(outside):
         raise QuestionError(f"evidence {var.name}={arr[outside].ravel()[0]:g} is outside its "
                             f"support [{var.low:g}, {var.high:g}]")
@@ -396,7 +398,9 @@ def compute_posterior(program: Program, question: Question, bound: _Bound) -> Po
     z = table.sum(axis=axes)
     with np.errstate(divide="ignore"):
         log_z = np.log(z) + offset
-    bad = ~(z > 0) | ~np.isfinite(z)
+    # a row is bad when its scaled contraction underflowed, or an observed value's own
+    # probability (folded into the offset) is zero: both are redone exactly in log space
+    bad = ~(z > 0) | ~np.isfinite(z) | ~np.isfinite(offset)
     probs = np.empty_like(table)
     good = ~bad
     probs[good] = table[good] / z[good].reshape((-1,) + (1,) * len(axes))

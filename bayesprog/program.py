@@ -245,19 +245,31 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
     except ValidationError as exc:
         out = []
         for err in exc.errors():
-            loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p in _UNION_TAGS))
+            raw_loc = tuple(err["loc"])
+            if "str" in raw_loc and not isinstance(err.get("input"), str):
+                continue  # the string shorthand of a union did not apply: the other branch speaks
+            loc = tuple(p for p in raw_loc if not (isinstance(p, str) and p in _UNION_TAGS))
             msg = err["msg"].removeprefix("Value error, ")
+            at_key = False
             if err["type"] == "missing":
                 msg = f"missing required key {loc[-1]!r}"
                 loc = loc[:-1]
             elif err["type"] == "extra_forbidden":
                 msg = f"unknown key {loc[-1]!r}"
+                at_key = True
             elif err["type"] == "literal_error" and loc == ("bayesprog",):
                 msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
+            elif err["type"] == "value_error":
+                msg = f"{'.'.join(map(str, loc))}: {msg}"
             else:
-                msg = f"{'.'.join(map(str, loc))}: {msg}, found {err.get('input')!r}"
-            out.append(located.diagnostic(loc, msg))
+                msg = f"{'.'.join(map(str, loc))}: {msg}, found {_short(err.get('input'))}"
+            out.append(located.diagnostic(loc, msg, at_key=at_key))
         return None, _dedupe(out)
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 _UNION_TAGS = {"QuestionSpec", "str"}

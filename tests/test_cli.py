@@ -591,12 +591,6 @@ def test_query_unreadable_npy(capsys, tmp_path):
     assert "obj.npy" in line and ".npy" in line
 
 
-@pytest.mark.xfail(
-    reason="BUG: a text file given as FILE.npy is reported with numpy's 'This file contains "
-           "pickled (object) data ... allow_pickle=' message, which is wrong and suggests an "
-           "unsafe workaround (cli._npy passes np.load's ValueError through)",
-    strict=True,
-)
 def test_query_text_file_as_npy(capsys, tmp_path):
     text = tmp_path / "grass.npy"
     text.write_text("wet\n", encoding="utf-8")
@@ -605,11 +599,6 @@ def test_query_text_file_as_npy(capsys, tmp_path):
     assert "pickle" not in line, line
 
 
-@pytest.mark.xfail(
-    reason="BUG: an empty .npy file escapes as an EOFError traceback: cli._npy catches only "
-           "FileNotFoundError, ValueError and OSError, and np.load raises EOFError",
-    strict=True,
-)
 def test_query_empty_npy(capsys, tmp_path):
     empty = tmp_path / "empty.npy"
     empty.write_bytes(b"")
@@ -618,24 +607,11 @@ def test_query_empty_npy(capsys, tmp_path):
     assert "empty.npy" in line
 
 
-@pytest.mark.xfail(
-    reason="BUG: `--map --seed -1` escapes as a ValueError traceback ('expected non-negative "
-           "integer' from np.random.default_rng): cli.build_parser accepts any int and "
-           "engine.choose_map does not turn the error into a user error",
-    strict=True,
-)
 def test_query_negative_seed(capsys):
     line = user_error(capsys, "query", SPRINKLER, "P(Rain | Grass=wet)", "--map", "--seed", "-1")
     assert "seed" in line
 
 
-@pytest.mark.xfail(
-    reason="BUG: a malformed question typed on the command line gets the hint 'inside a flow "
-           "mapping {...}, quote a term that contains a comma', which is about YAML files and "
-           "misleads here (spec/terms.parse_expression adds it whenever parentheses are "
-           "unbalanced)",
-    strict=True,
-)
 def test_query_malformed_question_hint_is_not_about_yaml(capsys):
     line = user_error(capsys, "query", SPRINKLER, "P(Rain | Grass")
     assert "flow mapping" not in line

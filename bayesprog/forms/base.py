@@ -127,6 +127,11 @@ class Form:
             return [f"form {self.name!r} needs a {wanted} child, found {kind} {child.name!r}"]
         return []
 
+    def check_params(self, params: Mapping[str, Any], child: Variable) -> list[tuple[str, str]]:
+        """Problems between resolved parameters (literal ones are ``ParamValue``), as
+        (parameter to point at, message) pairs."""
+        return []
+
     def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
         """Discrete variables a parameter table may be keyed by (the parents by default)."""
         return [p for p in parents if p.is_discrete]  # type: ignore[misc]

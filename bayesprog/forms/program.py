@@ -39,7 +39,7 @@ class ProgramForm(Form):
         for key in raw:
             if key not in ("program", "question", "bind"):
                 checker.error(path + (key,), f"{what}: unknown parameter {key!r}: expected "
-                              "program, question, bind")
+                              "program, question, bind", at_key=True)
         if not isinstance(raw.get("program"), str) or not isinstance(raw.get("question"), str):
             checker.error(path, f"{what}: expected 'program: FILE' and 'question: NAME or "
                           "P(X | ...)'")

@@ -8,6 +8,7 @@ from scipy.special import betaln, xlog1py, xlogy
 from bayesprog.forms.base import (
     Form,
     Param,
+    ParamValue,
     TermContext,
     positive,
     real,
@@ -157,6 +158,16 @@ class GaussianMixture(Form):
             ]
         return []
 
+    def check_params(self, params, child: Variable) -> list[tuple[str, str]]:
+        means, weights = params.get("means"), params.get("weights")
+        if not isinstance(means, ParamValue) or not isinstance(weights, ParamValue):
+            return []
+        k = means.array.shape[means.array.ndim - self.event_ndim(self.params[0], child)]
+        if weights.array.shape[-1] != k:
+            return [("weights", f"gmm parameter 'weights': expected {k} weights (one per "
+                     f"mean), found {weights.array.shape[-1]}")]
+        return []
+
     def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
         keys = [p for p in parents if isinstance(p, Discrete)]
         return ([child] if isinstance(child, Discrete) else []) + keys  # type: ignore[list-item]
@@ -186,6 +197,12 @@ class GaussianMixture(Form):
             # now [b, ..axes.. (grid axis = cells), K]
             cell = grid.cell or 1.0  # type: ignore[union-attr]
             area = coords.shape[0] * cell**dim
+        else:
+            means = ctx.param("means", 1)
+            x = ctx.child_value()[..., None]
+            s = sigma[..., None]
+            log_comp = -0.5 * ((x - means) / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
+            area = child.width  # type: ignore[union-attr]
         k = log_comp.shape[-1]
         if "weights" in ctx.params:
             weights = ctx.param("weights", 1)

@@ -104,8 +104,8 @@ class _Checker:
         self.variables: dict[str, Variable] = {}
         self.inputs: dict[str, InputDecl] = {}
 
-    def error(self, path: YPath, message: str) -> None:
-        self.problems.append(self.located.diagnostic(path, message))
+    def error(self, path: YPath, message: str, at_key: bool = False) -> None:
+        self.problems.append(self.located.diagnostic(path, message, at_key=at_key))
 
     # variables and inputs -------------------------------------------------------------------
     def check_variables(self) -> None:
@@ -156,20 +156,20 @@ class _Checker:
         defined: dict[str, int] = {}
         for i, spec in enumerate(self.doc.decomposition):
             path: YPath = ("decomposition", i)
+            name = _child_of(spec.term)
+            if name in self.variables:
+                if name in defined:
+                    self.error(
+                        path + ("term",),
+                        f"variable {name!r} has a second term {spec.term}: expected one term "
+                        f"per variable, found one already at decomposition[{defined[name]}]",
+                    )
+                    continue
+                defined[name] = i
             term = self.check_term(path + ("term",), spec.term, spec.form, spec.parameters, path)
-            if term is None:
-                continue
-            term.description = spec.description
-            name = term.child.name
-            if name in defined:
-                self.error(
-                    path + ("term",),
-                    f"variable {name!r} has a second term {term.expression}: expected one term "
-                    f"per variable, found one already at decomposition[{defined[name]}]",
-                )
-                continue
-            defined[name] = i
-            terms.append(term)
+            if term is not None:
+                term.description = spec.description
+                terms.append(term)
         missing = [n for n in self.variables if n not in defined]
         failed_children = self._failed_children()
         for name in missing:
@@ -212,7 +212,10 @@ class _Checker:
         try:
             expr = parse_expression(text)
         except ExpressionError as exc:
-            self.error(tpath, f"term: {exc}")
+            hint = ""
+            if text.count("(") != text.count(")"):
+                hint = " (inside a flow mapping {...}, quote a term that contains a comma)"
+            self.error(tpath, f"term: {exc}{hint}")
             return None
         ok = True
         if len(expr.left) != 1:
@@ -267,7 +270,7 @@ class _Checker:
             if key not in declared:
                 expected = ", ".join(declared) or "no parameters"
                 self.error(path + (key,), f"term {term.label}: unknown parameter {key!r} for "
-                           f"form {form.name!r}: expected {expected}")
+                           f"form {form.name!r}: expected {expected}", at_key=True)
         for param in form.params:
             if param.name not in raw:
                 if param.required:
@@ -279,6 +282,9 @@ class _Checker:
             value = self.param_value(term, param, raw[param.name], path + (param.name,))
             if value is not None:
                 term.params[param.name] = value
+        if len(self.problems) == before:
+            for name, message in form.check_params(term.params, term.child):
+                self.error(path + (name,), f"term {term.label}: {message}")
         return len(self.problems) - before
 
     # parameter values ---------------------------------------------------------------------------
@@ -291,21 +297,11 @@ class _Checker:
         what = f"term {term.label}: {form.name} parameter {param.name!r}"
         if isinstance(raw, dict) and set(raw) == {"input"}:
             return self.input_ref(term, param, raw["input"], path, event_ndim, keyable, what)
+        spec = _LiteralSpec(param, child, event_ndim, form.event_shape(param, child), what)
         try:
-            axes, array = self._literal(raw, param, child, keyable, event_ndim, path, what)
+            axes, array = self._literal(raw, spec, keyable, path)
         except _LiteralError as exc:
             self.error(exc.path, exc.message)
-            return None
-        expected = form.event_shape(param, child)
-        if expected is not None and array.shape[array.ndim - event_ndim :] != expected:
-            found = array.shape[array.ndim - event_ndim :]
-            states = child.describe_states() if isinstance(child, Discrete) else ""
-            self.error(path, f"{what}: expected {expected[-1]} values per row "
-                       f"(one per state of {child.name}: {states}), found {found[-1] if found else 0}")
-            return None
-        if not param.constraint.ok(array):
-            self.error(path, f"{what} must be {param.constraint}, got "
-                       f"{_offender(array, param, event_ndim)}")
             return None
         return ParamValue(axes, array)
 
@@ -327,59 +323,55 @@ class _Checker:
             return None
         return InputRef(name)
 
-    def _literal(self, raw, param, child, keyable, event_ndim, path, what):
+    def _literal(self, raw: Any, spec: _LiteralSpec, keyable: list, path: YPath):
+        """(axes, array) of a literal parameter; every row is checked where it is written."""
+        child, what = spec.child, spec.what
         if isinstance(raw, dict):
             if (
-                param.keyed_by_child_states
+                spec.param.keyed_by_child_states
                 and isinstance(child, Discrete)
-                and set(map(str, raw)) == set(child.states)
-                and event_ndim == 1
+                and spec.event_ndim == 1
+                and {str(k) for k in raw} <= set(child.states)
+                and not any(set(map(str, raw)) <= set(v.states) for v in keyable)
             ):
-                raw = [raw[s] if s in raw else raw[_maybe_int(s)] for s in child.states]
-                return self._literal(raw, param, child, keyable, event_ndim, path, what)
+                missing = [s for s in child.states if s not in {str(k) for k in raw}]
+                if missing:
+                    raise _LiteralError(path, f"{what}: a row keyed by the states of "
+                                        f"{child.name} misses {', '.join(missing[:5])}")
+                by_str = {str(k): v for k, v in raw.items()}
+                return self._literal([by_str[s] for s in child.states], spec, keyable, path)
             keys = {str(k) for k in raw}
             matches = [v for v in keyable if keys <= set(v.states)]
             if not matches:
                 names = ", ".join(v.name for v in keyable) or "none"
                 raise _LiteralError(path, f"{what}: expected a table keyed by the states of "
                                     f"one of ({names}), found keys {sorted(keys)}")
-            var = max(matches, key=lambda v: len(keys & set(v.states)))
-            if len(matches) > 1 and sum(keys == set(v.states) for v in matches) != 1:
+            exact = [v for v in matches if keys == set(v.states)]
+            if len(exact) > 1:
                 raise _LiteralError(path, f"{what}: keys {sorted(keys)} match the states of "
-                                    f"several variables ({', '.join(v.name for v in matches)})")
+                                    f"several variables ({', '.join(v.name for v in exact)})")
+            var = exact[0] if exact else max(matches, key=lambda v: len(keys & set(v.states)))
             missing = [s for s in var.states if s not in keys]
             if missing:
                 raise _LiteralError(path, f"{what}: table keyed by {var.name} misses state(s) "
                                     f"{', '.join(missing[:5])}")
             rest = [v for v in keyable if v.name != var.name]
-            parts = []
-            sub_axes = None
             by_str = {str(k): v for k, v in raw.items()}
-            for state in var.states:
-                axes, arr = self._literal(by_str[state], param, child, rest, event_ndim,
-                                          path + (state,), what)
-                if sub_axes is not None and axes != sub_axes:
+            parts = [self._literal(by_str[s], spec, rest, path + (s,)) for s in var.states]
+            for state, (axes, arr) in zip(var.states, parts, strict=True):
+                if axes != parts[0][0] or arr.shape != parts[0][1].shape:
                     raise _LiteralError(path + (state,), f"{what}: rows keyed by {var.name} "
-                                        "must all be keyed the same way")
-                sub_axes = axes
-                parts.append(arr)
-            try:
-                stacked = np.stack(parts)
-            except ValueError:
-                raise _LiteralError(path, f"{what}: rows keyed by {var.name} have different "
-                                    "shapes") from None
-            return (var.name,) + tuple(sub_axes or ()), stacked
-        try:
-            array = np.asarray(raw, dtype=float)
-        except (TypeError, ValueError):
-            raise _LiteralError(path, f"{what}: expected a number, a list of numbers, a table "
-                                f"keyed by states or {{input: NAME}}, found {raw!r}") from None
-        lead = array.ndim - event_ndim
+                                        f"must have the same layout; {var.states[0]!r} is "
+                                        f"{_layout(*parts[0])}, {state!r} is {_layout(axes, arr)}")
+            return (var.name,) + parts[0][0], np.stack([arr for _, arr in parts])
+        leaf = spec.expected[-1] if spec.expected and spec.event_ndim else None
+        array = _nested(raw, path, what, leaf, spec)
+        lead = array.ndim - spec.event_ndim
         if lead < 0:
-            raise _LiteralError(path, f"{what}: expected {event_ndim} nested list level(s), "
-                                f"found {array.ndim}")
+            raise _LiteralError(path, f"{what}: expected {spec.event_ndim} nested list "
+                                f"level(s), found {array.ndim}")
         if lead > len(keyable):
-            raise _LiteralError(path, f"{what}: expected at most {len(keyable) + event_ndim} "
+            raise _LiteralError(path, f"{what}: expected at most {len(keyable) + spec.event_ndim} "
                                 f"nested list levels, found {array.ndim}")
         axes = tuple(v.name for v in keyable[:lead])
         want = tuple(v.card for v in keyable[:lead])
@@ -387,6 +379,14 @@ class _Checker:
             raise _LiteralError(path, f"{what}: expected shape {want + array.shape[lead:]} "
                                 f"(one level per state of {', '.join(axes)}), found "
                                 f"{array.shape}")
+        for idx in np.ndindex(*array.shape[:lead]):
+            row, where = array[idx], path + tuple(int(i) for i in idx)
+            if spec.expected is not None and row.shape != spec.expected:
+                raise _LiteralError(where, f"{what}: expected {_count(spec)}, found "
+                                    f"{row.shape[-1] if row.ndim else 'a single number'}")
+            if not spec.param.constraint.ok(row):
+                raise _LiteralError(where, f"{what} must be {spec.param.constraint}, got "
+                                    f"{_offender(row, spec.param, spec.event_ndim)}")
         return axes, array
 
     # questions and ablations --------------------------------------------------------------------
@@ -468,6 +468,50 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
     return None
 
 
+@dataclass(frozen=True)
+class _LiteralSpec:
+    param: Param
+    child: Variable
+    event_ndim: int
+    expected: tuple[int, ...] | None
+    what: str
+
+
+def _count(spec: _LiteralSpec) -> str:
+    n = spec.expected[-1] if spec.expected else 0
+    if isinstance(spec.child, Discrete) and spec.param.keyed_by_child_states:
+        return (f"{n} values per row (one per state of {spec.child.name}: "
+                f"{spec.child.describe_states()})")
+    return f"{n} values per row"
+
+
+def _layout(axes: tuple[str, ...], arr: np.ndarray) -> str:
+    keyed = f"keyed by {', '.join(axes)}, " if axes else ""
+    return f"{keyed}shape {list(arr.shape)}"
+
+
+def _nested(raw: Any, path: YPath, what: str, leaf: int | None, spec: _LiteralSpec) -> np.ndarray:
+    """An array from nested lists, naming the row whose length or content is wrong."""
+    if isinstance(raw, bool) or raw is None or isinstance(raw, str):
+        raise _LiteralError(path, f"{what}: expected a number, a list of numbers, a table keyed "
+                            f"by states or {{input: NAME}}, found {raw!r}")
+    if isinstance(raw, (int, float)):
+        return np.asarray(float(raw))
+    if isinstance(raw, dict):
+        raise _LiteralError(path, f"{what}: expected a number or a list here (tables keyed by "
+                            "states go outside nested lists), found a mapping")
+    if not isinstance(raw, list):
+        raise _LiteralError(path, f"{what}: expected numbers, found {raw!r}")
+    if raw and all(not isinstance(x, list) for x in raw) and leaf is not None and len(raw) != leaf:
+        raise _LiteralError(path, f"{what}: expected {_count(spec)}, found {len(raw)}")
+    parts = [_nested(x, path + (i,), what, leaf, spec) for i, x in enumerate(raw)]
+    for i, part in enumerate(parts):
+        if part.shape != parts[0].shape:
+            raise _LiteralError(path + (i,), f"{what}: rows must have equal lengths; row 0 has "
+                                f"shape {list(parts[0].shape)}, row {i} has {list(part.shape)}")
+    return np.stack(parts) if parts else np.zeros((0,))
+
+
 class _LiteralError(Exception):
     def __init__(self, path: YPath, message: str):
         self.path, self.message = path, message
@@ -482,9 +526,10 @@ def _maybe_int(s: str) -> Any:
 
 def _child_of(text: str) -> str | None:
     try:
-        return parse_expression(text).left[0]
+        left = parse_expression(text).left
     except ExpressionError:
         return None
+    return left[0] if len(left) == 1 else None
 
 
 def _offender(array: np.ndarray, param: Param, event_ndim: int) -> str:

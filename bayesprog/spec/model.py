@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 FORMAT_VERSION = 1
 
@@ -128,6 +128,13 @@ class Document(_Strict):
     soft_evidence: list[SoftEvidenceSpec] = Field(default_factory=list)
     questions: dict[str, QuestionSpec | str] = Field(default_factory=dict)
     ablate: list[str] = Field(default_factory=list)
+
+    @field_validator("bayesprog", mode="before")
+    @classmethod
+    def _version_is_an_integer(cls, value: Any) -> Any:
+        if isinstance(value, bool):
+            raise ValueError(f"unsupported format version: expected 'bayesprog: 1', found {value}")
+        return value
 
     def question(self, name: str) -> QuestionSpec:
         q = self.questions[name]

@@ -56,10 +56,7 @@ def parse_expression(text: str) -> Expression:
         raise ExpressionError(f"expected a string like 'P(A | B)', found {text!r}")
     match = _SHAPE.match(text)
     if not match:
-        hint = ""
-        if text.count("(") != text.count(")"):
-            hint = " (inside a flow mapping {...}, quote a term that contains a comma)"
-        raise ExpressionError(f"expected the form 'P(A B | C, D=d)', found {text!r}{hint}")
+        raise ExpressionError(f"expected the form 'P(A B | C, D=d)', found {text!r}")
     body = match.group("body")
     if body.count("|") > 1:
         raise ExpressionError(f"expected at most one '|' in {text!r}")

@@ -33,6 +33,7 @@ class Located:
     data: Any
     file: str
     positions: dict[Path, tuple[int, int]] = field(default_factory=dict)
+    key_positions: dict[Path, tuple[int, int]] = field(default_factory=dict)
 
     def where(self, path: Path) -> tuple[int, int]:
         """Line and column of ``path``, or of its closest located ancestor."""
@@ -41,8 +42,13 @@ class Located:
             path = path[:-1]
         return self.positions.get(path, (1, 1))
 
-    def diagnostic(self, path: Path, message: str) -> Diagnostic:
-        line, column = self.where(path)
+    def diagnostic(self, path: Path, message: str, at_key: bool = False) -> Diagnostic:
+        """A diagnostic at ``path``'s value (or at its key, with ``at_key``)."""
+        path = tuple(path)
+        if at_key and path in self.key_positions:
+            line, column = self.key_positions[path]
+        else:
+            line, column = self.where(path)
         return Diagnostic(self.file, line, column, message)
 
 
@@ -104,6 +110,10 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
                     )
                     continue
                 out[key] = build(value_node, key_path)
+                located.key_positions[key_path] = (
+                    key_node.start_mark.line + 1,
+                    key_node.start_mark.column + 1,
+                )
             located.positions.pop(path + ("<key>",), None)
             return out
         if isinstance(node, yaml.SequenceNode):
