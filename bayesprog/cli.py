@@ -98,13 +98,11 @@ def _npy(path: str, option: str) -> np.ndarray:
 
 
 def _evidence_value(text: str) -> object:
-    """A ``.npy`` file (arrays: fields, batches), else a state name or a number."""
+    """A ``.npy`` file (arrays: fields, batches), else the text: a state, a value or an index,
+    read by the engine according to the variable's kind."""
     if text.endswith(".npy"):
         return _npy(text, "--evidence")
-    try:
-        return float(text)
-    except ValueError:
-        return text
+    return text
 
 
 def _check_seed(seed: int) -> int:
@@ -181,6 +179,25 @@ def cmd_explore(args: argparse.Namespace) -> int:
     return int(runner.explore(Path(args.target), options))
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    from bayesprog.io import import_network
+
+    out = import_network(args.network, args.output)
+    _load(str(out))  # what we write must load
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from bayesprog.io import export_program
+
+    program = _load(args.file)
+    for term in args.ablate:
+        program = program.ablate(term)
+    print(f"wrote {export_program(program, args.output)}")
+    return 0
+
+
 def cmd_schema(args: argparse.Namespace) -> int:
     from bayesprog.spec.schema import json_schema
 
@@ -233,6 +250,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=20, help="rows shown for large tables")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_query)
+
+    p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")
+    p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.yaml")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("export", help="write a discrete program as BIF, XMLBIF or UAI")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bif|.xmlbif|.uai")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("run", help="run an experiment file (a runner plugin does the work)")
     p.add_argument("experiment", metavar="EXPERIMENT.yaml")

@@ -85,6 +85,8 @@ class MapResult:
             "question": self.question,
             "map": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in assignment.items()},
             "probability": self.probability.tolist(),
+            "ties": self.ties.tolist(),
+            "zero_evidence": self.zero_evidence.tolist(),
             "ablated": list(self.ablated),
         }
 
@@ -171,10 +173,6 @@ def bind(
             raise QuestionError(f"soft evidence on {name}: expected {var.card} non-negative "
                                 f"likelihoods (one per state), found shape {arr.shape}")
         staged.append(("soft", name, arr, arr.shape[:-1], 1))
-    for decl in program.inputs.values():
-        if decl.name in program.used_inputs and decl.name not in (inputs or {}):
-            raise QuestionError(f"missing input {decl.name!r} (shape "
-                                f"{list(decl.axes) + list(decl.event)})")
     try:
         batch_shape = tuple(np.broadcast_shapes(*(s[3] for s in staged))) if staged else ()
     except ValueError:
@@ -281,7 +279,7 @@ def relevant_terms(program: Program, question: Question, bound: _Bound) -> list[
     targets |= set(bound.soft)
     terms = program.active_terms
     for t in terms:
-        if t.soft or not t.form.normalized:
+        if t.soft or not t.form.is_normalized(t.child):
             targets.add(t.child.name)
     keep = set(targets)
     for name in targets:
@@ -295,13 +293,46 @@ def relevant_terms(program: Program, question: Question, bound: _Bound) -> list[
     return [t for t in terms if t.child.name in keep]
 
 
+def _is_static(term: Term) -> bool:
+    """A term whose factor does not depend on the question's evidence or inputs."""
+    return (
+        term.child.is_discrete
+        and term.form.name != "program"
+        and not any(isinstance(v, InputRef) for v in term.params.values())
+    )
+
+
+def _bound_param(term: Term, key: str, ref: InputRef, bound: _Bound) -> ParamValue:
+    """An input bound to a parameter, checked against the parameter's declaration."""
+    if ref.name not in bound.inputs:
+        decl = f" {ref.name!r}"
+        raise QuestionError(f"missing input{decl}, needed by term {term.label}")
+    value = bound.inputs[ref.name]
+    declared = {p.name: p for p in term.form.params}.get(key)
+    if declared is None:
+        return value
+    arr = value.array
+    ndim = term.form.event_ndim(declared, term.child)
+    expected = term.form.event_shape(declared, term.child)
+    if expected is not None and arr.shape[arr.ndim - ndim :] != expected:
+        raise QuestionError(f"input {ref.name!r} for {term.form.name} parameter {key!r} of "
+                            f"{term.label}: expected trailing shape {list(expected)}, found "
+                            f"{list(arr.shape[arr.ndim - ndim:])}")
+    if not declared.constraint.ok(arr):
+        raise QuestionError(f"input {ref.name!r} for {term.form.name} parameter {key!r} of "
+                            f"{term.label}: expected values {declared.constraint}")
+    return value
+
+
 def _term_factor(program: Program, term: Term, bound: _Bound) -> _Factor:
+    static = _is_static(term)
+    if static:
+        cached = program._static_factors.get(id(term))
+        if cached is not None:
+            return cached
     params = {}
     for key, value in term.params.items():
-        if isinstance(value, InputRef):
-            params[key] = bound.inputs[value.name]
-        else:
-            params[key] = value
+        params[key] = _bound_param(term, key, value, bound) if isinstance(value, InputRef) else value
     value = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
     axes = term.axes
     cards = tuple(program.variables[a].card for a in axes)  # type: ignore[union-attr]
@@ -309,17 +340,21 @@ def _term_factor(program: Program, term: Term, bound: _Bound) -> _Factor:
                       term.extra)
     try:
         log = np.asarray(term.form.log_factor(ctx), dtype=float)
+        full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None
-    batched = log.shape[0] != 1 or any(p.batched for p in params.values()) or bool(
+    batched = full[0] != 1 or any(p.batched for p in params.values()) or bool(
         value is not None and value.batched
     )
-    log = np.broadcast_to(log, (log.shape[0],) + cards)
+    log = np.broadcast_to(log, full)
     if not batched:
         log = log[0]
     elif log.shape[0] != bound.size:
         log = np.broadcast_to(log, (bound.size,) + cards)
-    return _Factor(axes, log, batched)
+    factor = _Factor(axes, log, batched)
+    if static:
+        program._static_factors[id(term)] = factor
+    return factor
 
 
 def _slice(f: _Factor, bound: _Bound) -> _Factor:

@@ -23,7 +23,7 @@ from bayesprog.engine import (
 )
 from bayesprog.errors import Diagnostic, QuestionError, SpecError
 from bayesprog.forms import get_form
-from bayesprog.spec.check import InputDecl, InputRef, Term, check_document, question_problem
+from bayesprog.spec.check import InputDecl, Term, check_document, question_problem
 from bayesprog.spec.model import Document
 from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
 from bayesprog.spec.yamlload import Located, load_yaml
@@ -83,6 +83,7 @@ class Program:
         self.path = path
         self.ablated = ablated
         self._plans = _Plans()
+        self._static_factors: dict[int, Any] = {}
 
     # structure -------------------------------------------------------------------------------------
     @cached_property
@@ -114,11 +115,6 @@ class Program:
                          description="ablated: uniform")
             out.append(t)
         return out
-
-    @cached_property
-    def used_inputs(self) -> set[str]:
-        return {v.name for t in self.active_terms for v in t.params.values()
-                if isinstance(v, InputRef)}
 
     @property
     def is_discrete(self) -> bool:
@@ -226,8 +222,8 @@ class Program:
         new = copy.copy(self)
         new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
         new._plans = _Plans()
-        for attr in ("active_terms", "used_inputs"):
-            new.__dict__.pop(attr, None)
+        new._static_factors = {}
+        new.__dict__.pop("active_terms", None)
         return new
 
     def __repr__(self) -> str:
@@ -256,6 +252,8 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
                 loc = loc[:-1]
             elif err["type"] == "extra_forbidden":
                 msg = f"unknown key {loc[-1]!r}"
+                if ")" in str(loc[-1]):
+                    msg += " (inside a flow mapping {...}, quote text that contains a comma)"
                 at_key = True
             elif err["type"] == "literal_error" and loc == ("bayesprog",):
                 msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"

@@ -24,7 +24,10 @@ def _domain(var: Variable) -> str:
             return f"{{{var.states[0]}, ..., {var.states[-1]}}} ({var.card} states)"
         return "{" + ", ".join(var.states) + "}"
     assert isinstance(var, Continuous)
-    support = f"[{_fmt(var.low)}, {_fmt(var.high)}]" if np.isfinite(var.width) else "R"
+    if np.isfinite(var.low) or np.isfinite(var.high):
+        support = f"[{_fmt(var.low)}, {_fmt(var.high)}]"
+    else:
+        support = "R"
     if var.index is None:
         return f"real in {support}"
     return f"field over {var.index}: one real in {support} per state"

@@ -29,12 +29,17 @@ class Discrete:
         return True
 
     def index_of(self, value: object) -> int:
-        """The index of a state given by name, by integer value (ranges) or by index (grids)."""
+        """The index of a state given by name, by integer value (ranges) or else by index.
+
+        >>> g = grid_variable("O", (2, 3))
+        >>> g.index_of("1_2"), g.index_of(5), g.index_of("5")
+        (5, 5, 5)
+        """
         if isinstance(value, (str, np.str_)):
             text = str(value).strip()
             if text in self._lookup:
                 return self._lookup[text]
-            if self.values is not None and _is_int(text):
+            if _is_int(text):  # an integer value of a range, or the index of a state
                 return self.index_of(int(text))
             raise KeyError(text)
         if isinstance(value, (bool, np.bool_)):

@@ -360,7 +360,8 @@ def test_query_json_two_variables(capsys):
 def test_query_json_map(capsys):
     data = query_json(capsys, SPRINKLER, "P(Rain Sprinkler | Grass=wet)", "--map")
     assert REQUIRED_MAP <= set(data)
-    assert set(data) - REQUIRED_MAP <= {"ablated"}
+    assert set(data) - REQUIRED_MAP <= {"ablated", "ties", "zero_evidence"}
+    assert data["ties"] == 1 and data["zero_evidence"] is False
     assignment, p = map_rain_sprinkler("wet")
     assert data["question"] == "P(Rain Sprinkler | Grass=wet)"
     assert data["map"] == assignment

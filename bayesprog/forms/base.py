@@ -119,6 +119,10 @@ class Form:
     normalized: ClassVar[bool] = True
     doc: ClassVar[str] = ""
 
+    def is_normalized(self, child: Variable) -> bool:
+        """Whether this term sums (integrates) to one over ``child`` for every parent state."""
+        return self.normalized
+
     def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
         """Problems with the variables this term joins (messages without location)."""
         kind = "discrete" if child.is_discrete else "continuous"

@@ -150,6 +150,9 @@ class GaussianMixture(Form):
         Param("floor", unit_interval, default=0.0, doc="weight of a uniform component"),
     )
 
+    def is_normalized(self, child: Variable) -> bool:
+        return not child.is_discrete  # a density over a real child; a potential over a grid
+
     def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
         if child.is_discrete and not any(getattr(p, "coords", None) is not None for p in parents):
             return [
@@ -160,6 +163,11 @@ class GaussianMixture(Form):
 
     def check_params(self, params, child: Variable) -> list[tuple[str, str]]:
         means, weights = params.get("means"), params.get("weights")
+        floor = params.get("floor")
+        if (isinstance(floor, ParamValue) and np.any(floor.array > 0) and not child.is_discrete
+                and not np.isfinite(child.width)):  # type: ignore[union-attr]
+            return [("floor", "gmm parameter 'floor' needs a bounded support (a uniform over "
+                     f"it), found {child.name!r} on [{child.low}, {child.high}]")]  # type: ignore[union-attr]
         if not isinstance(means, ParamValue) or not isinstance(weights, ParamValue):
             return []
         k = means.array.shape[means.array.ndim - self.event_ndim(self.params[0], child)]

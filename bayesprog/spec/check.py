@@ -6,6 +6,7 @@ user sees all of them at once.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -198,12 +199,15 @@ class _Checker:
         return terms
 
     def _failed_children(self) -> set[str]:
+        """Variables named first in a term, even in a term too broken to parse."""
         names = set()
         for spec in self.doc.decomposition:
             try:
                 names.update(parse_expression(spec.term).left)
             except ExpressionError:
-                pass
+                match = re.match(r"\s*P\s*\(\s*([A-Za-z_][A-Za-z0-9_.\-]*)", spec.term)
+                if match:
+                    names.add(match.group(1))
         return names
 
     def check_term(

@@ -31,7 +31,8 @@ def json_schema() -> dict[str, Any]:
         form = get_form(name)
         assert form is not None
         props: dict[str, Any] = {
-            p.name: {**_PARAM_VALUE, "description": f"{p.doc} ({p.constraint})".strip()}
+            p.name: {**_PARAM_VALUE, "description": p.doc if str(p.constraint) in p.doc
+                     else f"{p.doc} ({p.constraint})".strip()}
             for p in form.params
         }
         if name == "program":
