@@ -120,6 +120,13 @@ class Program:
     def is_discrete(self) -> bool:
         return all(v.is_discrete for v in self.variables.values())
 
+    def term_of(self, variable: str) -> Term:
+        """The decomposition term that defines ``variable``."""
+        for t in self.terms:
+            if not t.soft and t.child.name == variable:
+                return t
+        raise QuestionError(f"no variable {variable!r} in {self.name}")
+
     def term(self, text: str) -> Term:
         """The term written ``text`` (parents in any order)."""
         expr = parse_expression(text)

@@ -1,8 +1,9 @@
 """Exchange with other tools: BIF, XMLBIF and UAI networks, read and written through pgmpy.
 
 ``import_network`` turns a network file into a program document (states and CPT layout kept:
-one ``table`` term per variable, parents in the file's order); ``export_program`` writes a
-discrete program back. pgmpy is imported lazily (importing it is slow).
+one ``table`` term per variable, parents in the file's order; rows that sum to 1 within 1e-6,
+as rounded files print them, are renormalised); ``export_program`` writes a discrete program
+back. pgmpy is imported lazily (importing it is slow).
 """
 
 from __future__ import annotations
@@ -99,6 +100,11 @@ def network_to_document(model: Any, name: str, source: str = "") -> dict[str, An
         variables[names[var]] = entry
         parents = list(cpd.variables[1:])
         table = np.moveaxis(np.asarray(cpd.values, dtype=float), 0, -1)
+        # Files print rounded numbers, so rows may sum to 1 +- 1e-7: make them sum to 1 (a
+        # larger deviation is left for the checker to report).
+        sums = table.sum(axis=-1, keepdims=True)
+        if np.all(np.abs(sums - 1) <= 1e-6):
+            table = table / sums
         term = f"P({names[var]} | {', '.join(names[p] for p in parents)})" if parents \
             else f"P({names[var]})"
         decomposition.append({"term": term, "form": "table", "table": table.tolist()})
