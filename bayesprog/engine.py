@@ -397,7 +397,82 @@ class _Plans:
         return expr
 
 
+#: Largest joint table (entries) that a compiled discrete question keeps (see _table_plan).
+TABLE_LIMIT = 1 << 20
+#: Below this, a row's normaliser is recomputed in log space (underflow, or subnormal precision).
+TINY = 1e-280
+
+
+@dataclass
+class _TablePlan:
+    """A compiled discrete question: the joint table over observed + searched variables."""
+
+    observed: tuple[str, ...]
+    table: np.ndarray
+    log_offset: float
+
+
+def _table_plan(program: Program, question: Question, bound: _Bound) -> _TablePlan | None:
+    """For a question over fixed tables (no continuous evidence, inputs or soft evidence),
+    ``P(observed, searched)`` is computed once, by the same scaled contraction, if it has at
+    most ``TABLE_LIMIT`` entries; every later evidence set is then a lookup in it."""
+    if bound.continuous or bound.inputs or bound.soft:
+        return None
+    searched = question.expression.left
+    observed = tuple(sorted(bound.discrete))
+    key = (searched, observed)
+    if key in program._tables:
+        return program._tables[key]
+    plan = None
+    terms = relevant_terms(program, question, bound)
+    cards = [program.variables[v].card for v in observed + searched]  # type: ignore[union-attr]
+    if all(_is_static(t) for t in terms) and int(np.prod(cards)) <= TABLE_LIMIT:
+        empty = _Bound(())
+        offset = 0.0
+        operands = []
+        for t in terms:
+            f = _term_factor(program, t, empty)
+            m = float(np.max(f.log)) if f.log.size else 0.0
+            m = m if np.isfinite(m) else 0.0
+            offset += m
+            operands.append(_Factor(f.axes, np.exp(f.log - m), False))
+        table = _contract(program, operands, observed + searched, False, 1)
+        plan = _TablePlan(observed, np.ascontiguousarray(table), offset)
+    program._tables[key] = plan
+    return plan
+
+
+def _from_table(program: Program, question: Question, bound: _Bound,
+                plan: _TablePlan) -> Posterior | None:
+    searched = question.expression.left
+    index = tuple(bound.discrete[v] for v in plan.observed)
+    rows = plan.table[index] if index else plan.table
+    cards = rows.shape[rows.ndim - len(searched) :]
+    rows = rows.reshape((-1,) + cards)
+    if rows.shape[0] != bound.size:
+        rows = np.broadcast_to(rows, (bound.size,) + cards)
+    z = rows.reshape(bound.size, -1).sum(axis=1)
+    if not np.all(z > TINY):
+        return None  # some row needs the exact log-space path
+    probs = rows / z.reshape((-1,) + (1,) * len(cards))
+    shape = bound.batch_shape
+    return Posterior(
+        question=str(question.expression),
+        variables=searched,
+        states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+        probabilities=probs.reshape(shape + cards),
+        log_evidence=(np.log(z) + plan.log_offset).reshape(shape),
+        batch_shape=shape,
+        ablated=program.ablated,
+    )
+
+
 def compute_posterior(program: Program, question: Question, bound: _Bound) -> Posterior:
+    plan = _table_plan(program, question, bound)
+    if plan is not None:
+        answer = _from_table(program, question, bound, plan)
+        if answer is not None:
+            return answer
     expr = question.expression
     searched = expr.left
     factors = []
@@ -435,7 +510,7 @@ def compute_posterior(program: Program, question: Question, bound: _Bound) -> Po
         log_z = np.log(z) + offset
     # a row is bad when its scaled contraction underflowed, or an observed value's own
     # probability (folded into the offset) is zero: both are redone exactly in log space
-    bad = ~(z > 0) | ~np.isfinite(z) | ~np.isfinite(offset)
+    bad = ~(z > TINY) | ~np.isfinite(z) | ~np.isfinite(offset)
     probs = np.empty_like(table)
     good = ~bad
     probs[good] = table[good] / z[good].reshape((-1,) + (1,) * len(axes))

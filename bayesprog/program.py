@@ -84,6 +84,7 @@ class Program:
         self.ablated = ablated
         self._plans = _Plans()
         self._static_factors: dict[int, Any] = {}
+        self._tables: dict[Any, Any] = {}
 
     # structure -------------------------------------------------------------------------------------
     @cached_property
@@ -230,6 +231,7 @@ class Program:
         new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
         new._plans = _Plans()
         new._static_factors = {}
+        new._tables = {}
         new.__dict__.pop("active_terms", None)
         return new
 
