@@ -167,8 +167,26 @@ def _experiment_runner(path: str) -> str | None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    if args.workers < 1:
+        raise _UserError(f"--workers: expected at least 1, found {args.workers}")
     runner = _runner(_experiment_runner(args.experiment))
-    return int(runner.run(Path(args.experiment), Path(args.out), {"quiet": args.quiet}))
+    options = {"quiet": args.quiet, "workers": args.workers, "scheduler": args.scheduler,
+               "no_report": args.no_report, "no_gif": args.no_gif}
+    return int(runner.run(Path(args.experiment), Path(args.out), options))
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    import json
+
+    manifest = Path(args.out) / "experiment.json"
+    try:
+        name = json.loads(manifest.read_text(encoding="utf-8"))["experiment"].get("runner")
+    except FileNotFoundError:
+        raise _UserError(f"{args.out}: no experiment.json: not an experiment's output folder") \
+            from None
+    except (ValueError, KeyError, AttributeError):
+        raise _UserError(f"{manifest}: not a readable experiment manifest") from None
+    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_gif}))
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
@@ -265,8 +283,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run an experiment file (a runner plugin does the work)")
     p.add_argument("experiment", metavar="EXPERIMENT.yaml")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for results and figures")
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--workers", type=int, default=1, metavar="N", help="local processes")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="an existing Dask scheduler (install bayesprog[dask])")
+    p.add_argument("--no-report", action="store_true", help="do not build the report")
+    p.add_argument("--no-gif", action="store_true", help="report without the animation")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
+    p.add_argument("out", metavar="DIR")
+    p.add_argument("--no-gif", action="store_true", help="report without the animation")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")
     p.add_argument("target", metavar="SCENARIO_OR_MODELS")

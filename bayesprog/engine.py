@@ -210,14 +210,15 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
                                 f"(0..{var.card - 1})")
         return arr.astype(np.intp)
     if arr.dtype.kind in "USO":
-        out = np.empty(arr.shape, dtype=np.intp)
-        for pos, item in np.ndenumerate(arr):
+        names, inverse = np.unique(arr.astype(str), return_inverse=True)
+        codes = np.empty(len(names), dtype=np.intp)
+        for i, item in enumerate(names):
             try:
-                out[pos] = var.index_of(str(item))
+                codes[i] = var.index_of(str(item))
             except KeyError:
                 raise QuestionError(f"unknown state {str(item)!r} of {var.name} (expected one "
                                     f"of {var.describe_states()})") from None
-        return out
+        return codes[inverse].reshape(arr.shape)
     raise QuestionError(f"evidence for {var.name}: expected state names or indices, "
                         f"found {arr.dtype} values")
 

@@ -8,21 +8,20 @@ numbers whatever the batching, and the configurations are compared on paired run
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from bayesprog.errors import SpecError
+from bayesprog.errors import BayesprogError, SpecError
 from bayesprog.spec.yamlload import load_yaml
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
 from runner.sensor import SyntheticSensor
+from runner.store import ResultStore, Unit
 
 
 class ExperimentSpec(BaseModel):
@@ -38,6 +37,7 @@ class ExperimentSpec(BaseModel):
     runs: int = Field(ge=1)
     iterations: int = Field(ge=1)
     seed: int = 0
+    chunk: int = Field(25, ge=1, description="runs per stored piece of results")
 
 
 @dataclass
@@ -112,21 +112,6 @@ def simulate(
     return {"gamma": out_gamma, "paths": out_paths}
 
 
-def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that a reader never sees a partial file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def mean_sem(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and standard error of the mean over axis 0 (ddof = 1; SEM 0 for a single run)."""
     n = values.shape[0]
@@ -135,41 +120,104 @@ def mean_sem(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, sem
 
 
-def run_quick(experiment: Experiment, out: Path, progress: bool = False) -> dict[str, dict]:
-    """Every task x configuration, all runs in one batch; writes results and figures to ``out``."""
-    spec = experiment.spec
-    starts = experiment.start_cells()
-    run_ids = np.arange(spec.runs)
-    results: dict[str, dict] = {}
+def units(spec: ExperimentSpec) -> list[Unit]:
+    """The experiment cut into (task, configuration, chunk of runs) pieces, in a fixed order."""
+    out = []
     for task in spec.tasks:
         for conf in spec.configurations:
-            res = simulate(experiment.scenario, task, conf, starts, run_ids, spec.seed,
-                           spec.iterations)
-            key = f"{task}/{conf}"
-            results[key] = res
-            mean, _ = mean_sem(res["gamma"])
-            if progress:
-                print(f"{key}: final Gamma {mean[-1]:.3f} m (mean over {spec.runs} runs)")
-    out.mkdir(parents=True, exist_ok=True)
-    summary = {
-        "experiment": spec.model_dump(),
-        "start_cells": starts.tolist(),
-        "results": {
-            key: {"gamma": r["gamma"].tolist(), "paths": r["paths"].tolist()}
-            for key, r in results.items()
-        },
-    }
-    atomic_write(out / "results.json", json.dumps(summary).encode())
-    lines = ["task,configuration,k,gamma_mean,gamma_sem"]
-    for key, r in results.items():
-        task, conf = key.split("/")
-        mean, sem = mean_sem(r["gamma"])
-        lines += [f"{task},{conf},{k},{m:.6f},{s:.6f}" for k, (m, s) in enumerate(zip(mean, sem, strict=True))]
-    atomic_write(out / "gamma.csv", ("\n".join(lines) + "\n").encode())
-    from runner.plots import plot_gamma, plot_visits
+            for i, start in enumerate(range(0, spec.runs, spec.chunk)):
+                runs = tuple(range(start, min(start + spec.chunk, spec.runs)))
+                out.append(Unit(task, conf, i, runs))
+    return out
 
-    for task in spec.tasks:
-        subset = {c: results[f"{task}/{c}"] for c in spec.configurations}
-        plot_gamma(subset, out / f"gamma_{task}.png", title=f"Task {task}")
-        plot_visits(experiment.scenario, task, subset, out / f"visits_{task}.png")
-    return results
+
+def manifest(experiment: Experiment) -> dict:
+    """What identifies the results: the spec, the start cells and every file it resolved."""
+    scenario = experiment.scenario
+    files = {"experiment": experiment.path, "scenario": scenario.path}
+    for which in ("perception", "shape", "target"):
+        files[which] = scenario.program_path(which)
+    return {
+        "experiment": experiment.spec.model_dump(),
+        "start_cells": experiment.start_cells().tolist(),
+        "files": {k: {"path": str(v), "text": Path(v).read_text(encoding="utf-8")}
+                  for k, v in files.items()},
+    }
+
+
+def compute_unit(experiment_path: str, unit: Unit) -> dict[str, np.ndarray]:
+    """One unit of work, from the experiment file alone (so that any process can do it)."""
+    experiment = load_experiment(experiment_path)
+    starts = experiment.start_cells()[list(unit.runs)]
+    spec = experiment.spec
+    return simulate(experiment.scenario, unit.task, unit.configuration, starts,
+                    np.asarray(unit.runs), spec.seed, spec.iterations)
+
+
+def run_experiment(
+    experiment: Experiment,
+    out: Path,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool | None = None,
+) -> ResultStore:
+    """Compute every unit not yet stored in ``out``, saving each as soon as it is finished.
+
+    ``workers > 1`` uses local processes, ``scheduler`` an existing Dask cluster; the numbers
+    do not depend on either, nor on the chunk size (randomness is keyed by run).
+    """
+    store = ResultStore(out)
+    store.open(manifest(experiment))
+    todo = [u for u in units(experiment.spec) if not store.done(u)]
+    total = len(units(experiment.spec))
+    bar = _progress(total, total - len(todo), progress)
+    path = str(experiment.path.resolve())
+    try:
+        if scheduler is not None:
+            _run_dask(scheduler, path, todo, store, bar)
+        elif workers > 1:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                futures = {pool.submit(compute_unit, path, u): u for u in todo}
+                try:
+                    for future in as_completed(futures):
+                        store.save(futures[future], future.result())
+                        bar.update(1)
+                except BaseException:
+                    for future in futures:
+                        future.cancel()
+                    raise
+        else:
+            for unit in todo:
+                store.save(unit, compute_unit(path, unit))
+                bar.update(1)
+    finally:
+        bar.close()
+    return store
+
+
+def _run_dask(address: str, path: str, todo: list[Unit], store: ResultStore, bar) -> None:
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:
+        raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
+    with Client(address) as client:
+        futures = {client.submit(compute_unit, path, u, pure=False): u for u in todo}
+        for future in as_completed(futures):
+            store.save(futures[future], future.result())
+            bar.update(1)
+
+
+def _progress(total: int, done: int, enabled: bool | None):
+    from tqdm import tqdm
+
+    disable = not sys.stderr.isatty() if enabled is None else not enabled
+    return tqdm(total=total, initial=done, unit="chunk", disable=disable, desc="experiment")
+
+
+def load_results(store: ResultStore, spec: ExperimentSpec) -> dict[str, dict[str, np.ndarray]]:
+    """``{"T1/full": {"gamma": [runs, K], "paths": [runs, K], "runs": [runs]}, ...}``."""
+    all_units = units(spec)
+    return {f"{t}/{c}": store.load(t, c, all_units)
+            for t in spec.tasks for c in spec.configurations}

@@ -1,6 +1,6 @@
 """The haptic runner as a plugin of the ``bayesprog`` command line (entry point ``haptic`` of
-the group ``bayesprog.runners``): ``bayesprog run EXPERIMENT --out DIR`` and
-``bayesprog explore SCENARIO --stdio``."""
+the group ``bayesprog.runners``): ``bayesprog run EXPERIMENT --out DIR``, ``bayesprog report
+DIR`` and ``bayesprog explore SCENARIO --stdio``."""
 
 from __future__ import annotations
 
@@ -11,12 +11,30 @@ from bayesprog.errors import BayesprogError
 
 
 def run(experiment: Path, out: Path, options: dict) -> int:
-    """Run an experiment file and write its results and figures into ``out``."""
-    from runner.experiment import load_experiment, run_quick
+    """Run an experiment file (resuming what ``out`` already holds), then write its report."""
+    from runner.experiment import load_experiment, run_experiment
 
     exp = load_experiment(experiment)
-    run_quick(exp, out, progress=not options.get("quiet", False))
-    print(f"results and figures written to {out}")
+    try:
+        run_experiment(exp, out, workers=options.get("workers", 1),
+                       scheduler=options.get("scheduler"),
+                       progress=False if options.get("quiet") else None)
+    except KeyboardInterrupt:
+        print(f"interrupted: the finished chunks are kept in {out}; run the same command "
+              "again to resume", file=sys.stderr)
+        return 130
+    if not options.get("no_report"):
+        return report(out, options)
+    print(f"results written to {out}")
+    return 0
+
+
+def report(out: Path, options: dict) -> int:
+    """Rebuild ``out/report`` from the stored results."""
+    from runner.report import build_report
+
+    folder = build_report(out, gif=not options.get("no_gif", False))
+    print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 
 

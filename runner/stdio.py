@@ -17,9 +17,26 @@ from runner.explorer import Explorer
 
 def _reading(obj: dict, key: str) -> float:
     value = obj.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"expected a finite number for {key!r}, found {value!r}")
-    return float(value)
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ValueError(f"expected a finite number for {key!r}, found {_short(value)}")
+    return number
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _seed(value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"expected a non-negative integer seed, found {_short(value)}")
+    return value
 
 
 def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) -> int:
@@ -36,7 +53,7 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
                 raise ValueError("expected a JSON object")
             if "reset" in obj:
                 opts = obj["reset"] if isinstance(obj["reset"], dict) else {}
-                seed = int(opts.get("seed", seed))
+                seed = _seed(opts.get("seed", seed))
                 started, k = False, 0
                 reply: dict = {"reset": True, "seed": seed}
             else:
@@ -45,9 +62,13 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
                     raise ValueError(f"missing {', '.join(missing)}: expected "
                                      '{"cell": [ix, iy], "texture": e, "compliance": c}')
                 cell = obj["cell"]
+                nx, ny = explorer.scenario.shape
                 if (not isinstance(cell, list) or len(cell) != 2
                         or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
-                    raise ValueError(f"expected 'cell' as two integers [ix, iy], found {cell!r}")
+                    raise ValueError(f"expected 'cell' as two integers [ix, iy], found "
+                                     f"{_short(cell)}")
+                if not (0 <= cell[0] < nx and 0 <= cell[1] < ny):
+                    raise ValueError(f"cell {_short(cell)} is outside the {nx} x {ny} grid")
                 texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
                 if not started:
                     explorer.reset(start=cell, seed=seed)

@@ -18,6 +18,7 @@ import warnings
 from dataclasses import dataclass
 from functools import reduce
 
+import networkx as nx
 import numpy as np
 import pytest
 import yaml
@@ -82,9 +83,14 @@ class Net:
         eq = ",".join(subs) + "->" + "".join(sym[v] for v in self.order)
         return np.einsum(eq, *(self.cpts[v] for v in self.order))
 
-    def unnormalised(self, searched, known: dict[str, int]) -> np.ndarray:
-        """``P(searched, known)`` by brute-force enumeration, axes in ``searched`` order."""
+    def unnormalised(self, searched, known: dict[str, int], soft=None) -> np.ndarray:
+        """``P(searched, known)`` by brute-force enumeration, axes in ``searched`` order;
+        ``soft`` maps variables to likelihood vectors multiplied into the joint."""
         joint = self.joint()
+        for v, lik in (soft or {}).items():
+            shape = [1] * len(self.order)
+            shape[self.order.index(v)] = len(lik)
+            joint = joint * np.reshape(lik, shape)
         sub = joint[tuple(known.get(v, slice(None)) for v in self.order)]
         remaining = [v for v in self.order if v not in known]
         summed = tuple(i for i, v in enumerate(remaining) if v not in searched)
@@ -226,7 +232,14 @@ def agrum_posterior(net: Net, q: Query) -> tuple[np.ndarray, float]:
     out = np.empty([net.cards[v] for v in q.searched])
     for combo in np.ndindex(out.shape):
         out[combo] = pot[dict(zip(q.searched, (int(i) for i in combo), strict=True))]
-    return out, (ie.evidenceProbability() if q.known else 1.0)
+    if not q.known:
+        return out, 1.0
+    # P(evidence) from an engine without targets: with a joint target declared, pyAgrum's
+    # evidenceProbability() may cover only the part of the network around the target
+    whole = gum.LazyPropagation(ie.BN())
+    whole.setEvidence(dict(q.known))
+    whole.makeInference()
+    return out, whole.evidenceProbability()
 
 
 def check_map(program, text, evidence, posterior: np.ndarray, net: Net, searched, seed):
@@ -262,7 +275,10 @@ def test_random_programs_against_enumeration_pgmpy_and_pyagrum(data):
             program.ask(text, evidence)
         result = _ask(program, text, evidence, kind="map")
         assert bool(result.zero_evidence)
-        assert int(result.ties) == marg.size
+        assert int(result.ties) == marg.size  # a uniform choice among every assignment
+        assert result.indices.shape == (len(q.searched),)
+        assert all(0 <= int(i) < net.cards[v]
+                   for v, i in zip(q.searched, result.indices, strict=True))
         return
     posterior = marg / p_evidence
 
@@ -282,6 +298,14 @@ def test_random_programs_against_enumeration_pgmpy_and_pyagrum(data):
     np.testing.assert_allclose(np.exp(result.log_evidence), ref_pe, rtol=1e-9, atol=1e-12)
     # MAP
     check_map(program, text, evidence, posterior, net, q.searched, data.draw(st.integers(0, 99)))
+    # with soft evidence (virtual evidence) on a random variable: brute force again
+    soft_var = data.draw(st.sampled_from(net.order))
+    lik = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))).uniform(
+        0.05, 1.0, size=net.cards[soft_var])
+    marg = net.unnormalised(q.searched, q.known, {soft_var: lik})
+    result = _ask(program, text, evidence, soft={soft_var: lik})
+    np.testing.assert_allclose(result.probabilities, marg / marg.sum(), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.log_evidence, np.log(marg.sum()), rtol=1e-9, atol=1e-9)
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=SLOW_OK)
@@ -307,7 +331,9 @@ def test_factor_graph_product_is_the_posterior(data):
     np.testing.assert_allclose(values / values.sum(), marg / marg.sum(), rtol=0, atol=1e-9)
     result = _ask(program, text, evidence)
     np.testing.assert_allclose(result.probabilities, values / values.sum(), rtol=0, atol=1e-9)
-    if len(q.searched) == 1:  # pgmpy's (exact, junction tree) belief propagation on it
+    # pgmpy's (exact, junction tree) belief propagation; it cannot take a graph made of
+    # several components
+    if len(q.searched) == 1 and nx.is_connected(graph):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FutureWarning)
             bp = BeliefPropagation(graph).query(q.searched, show_progress=False)
@@ -395,6 +421,40 @@ def test_batched_map_with_one_generator_per_row_equals_single_calls():
     assert batched.assignment["A"].shape == (2, 3)
     with pytest.raises(QuestionError):
         program.ask("P(A | B)", {"B": b}, kind="map", rng=[1, 2])
+
+
+def test_map_with_zero_evidence_from_a_sliced_factor_is_a_uniform_choice():
+    program = _loads({
+        "bayesprog": 1,
+        "variables": {"A": {"states": ["a0", "a1"]}, "B": {"states": ["b0", "b1"]}},
+        "decomposition": [{"term": "P(A)", "form": "table", "table": [0.0, 1.0]},
+                          {"term": "P(B)", "form": "table", "table": [0.3, 0.7]}],
+    })
+    with pytest.raises(ZeroEvidenceError):
+        program.ask("P(B | A=a0)")
+    result = _ask(program, "P(B | A=a0)", kind="map")
+    assert bool(result.zero_evidence)
+    assert int(result.ties) == 2  # every assignment is as (im)probable as any other
+    choices = {int(_ask(program, "P(B | A=a0)", kind="map", rng=s).indices[0])
+               for s in range(20)}
+    assert choices == {0, 1}
+
+
+def test_map_with_zero_evidence_from_a_child_is_a_uniform_choice():
+    # the same situation when the zero sits in a factor that keeps an axis: uniform choice
+    program = _loads({
+        "bayesprog": 1,
+        "variables": {"A": {"states": ["a0", "a1"]}, "B": {"states": ["b0", "b1"]}},
+        "decomposition": [{"term": "P(A)", "form": "table", "table": [0.4, 0.6]},
+                          {"term": "P(B | A)", "form": "table", "table": [[1, 0], [1, 0]]}],
+    })
+    with pytest.raises(ZeroEvidenceError):
+        program.ask("P(A | B=b1)")
+    result = _ask(program, "P(A | B=b1)", kind="map")
+    assert bool(result.zero_evidence) and int(result.ties) == 2
+    choices = {int(_ask(program, "P(A | B=b1)", kind="map", rng=s).indices[0])
+               for s in range(20)}
+    assert choices == {0, 1}
 
 
 # batching --------------------------------------------------------------------------------------
@@ -495,6 +555,45 @@ def test_batched_continuous_evidence_and_soft_evidence():
                    + stats.beta.logpdf(c, [2, 1, 0.5], 1.5) - np.log(3))
         np.testing.assert_allclose(result.probabilities[pos], softmax(log_ref), rtol=1e-9)
         np.testing.assert_allclose(result.log_evidence[pos], logsumexp(log_ref), rtol=1e-9)
+
+
+
+def test_batched_continuous_evidence_with_batched_discrete_parents():
+    # P(E | M, K) is batched through E and sliced by a batched K: both batch paths at once
+    mean = np.array([[-1.0, 0.5], [0.0, 2.0], [1.0, -0.5]])  # [M, K]
+    sigma = np.array([0.3, 0.9])  # [K]
+    pk_m = np.array([[0.2, 0.8], [0.5, 0.5], [0.9, 0.1]])  # [M, K]
+    program = _loads({
+        "bayesprog": 1,
+        "variables": {"M": {"states": ["m0", "m1", "m2"]}, "K": {"states": ["k0", "k1"]},
+                      "E": {"continuous": [-np.inf, np.inf]}},
+        "decomposition": [
+            {"term": "P(M)", "form": "uniform"},
+            {"term": "P(K | M)", "form": "table", "table": pk_m.tolist()},
+            {"term": "P(E | M, K)", "form": "normal",
+             "mean": {m: dict(zip(["k0", "k1"], row, strict=True))
+                      for m, row in zip(["m0", "m1", "m2"], mean.tolist(), strict=True)},
+             "sigma": {"k0": 0.3, "k1": 0.9}},
+        ],
+    })
+    e = np.array([-1.1, 0.4, 2.2, 0.0, 1.3])
+    k = np.array([0, 1, 1, 0, 1])
+    result = _ask(program, "P(M | E, K)", {"E": e, "K": k})
+    for row in range(5):
+        log_ref = (np.log(pk_m[:, k[row]]) - np.log(3)
+                   + stats.norm.logpdf(e[row], mean[:, k[row]], sigma[k[row]]))
+        np.testing.assert_allclose(result.probabilities[row], softmax(log_ref), rtol=1e-9)
+        np.testing.assert_allclose(result.log_evidence[row], logsumexp(log_ref), rtol=1e-9)
+        single = _ask(program, "P(M | E, K)", {"E": e[row], "K": int(k[row])})
+        np.testing.assert_allclose(result.probabilities[row], single.probabilities,
+                                   rtol=0, atol=1e-12)
+    # E batched (2, 1) against K batched (5,): a (2, 5) batch
+    result = _ask(program, "P(M | E, K)", {"E": e[:2, None], "K": k})
+    assert result.batch_shape == (2, 5)
+    for i, j in np.ndindex(2, 5):
+        log_ref = (np.log(pk_m[:, k[j]]) - np.log(3)
+                   + stats.norm.logpdf(e[i], mean[:, k[j]], sigma[k[j]]))
+        np.testing.assert_allclose(result.probabilities[i, j], softmax(log_ref), rtol=1e-9)
 
 
 # sub-programs ----------------------------------------------------------------------------------
@@ -697,11 +796,48 @@ def test_program_term_equals_the_hand_joint(sub_dir):
     np.testing.assert_allclose(result.probabilities, ref / ref.sum(), rtol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: ProgramForm.log_factor passes the parents' state INDICES (np.arange) as evidence "
-    "to the sub-program, but integer evidence for a `range` variable is read as VALUES "
-    "(engine._state_indices), so a program term whose parent is a range not starting at 0 "
-    "raises QuestionError 'unknown value 0'"))
+
+def test_program_term_with_two_parents_in_another_order(tmp_path):
+    rng = np.random.default_rng(5)
+    table = rng.dirichlet(np.ones(2), size=(2, 3))  # P_sub(X | K, J): [K, J, X]
+    (tmp_path / "sub.yaml").write_text(yaml.safe_dump({
+        "bayesprog": 1,
+        "variables": {"X": {"states": ["x0", "x1"]}, "K": {"states": ["k0", "k1"]},
+                      "J": {"states": ["j0", "j1", "j2"]}},
+        "decomposition": [
+            {"term": "P(K)", "form": "uniform"},
+            {"term": "P(J)", "form": "table", "table": [0.1, 0.3, 0.6]},
+            {"term": "P(X | K, J)", "form": "table", "table": table.tolist()},
+        ],
+    }, sort_keys=False))
+    pk, pj = np.array([0.35, 0.65]), np.array([0.5, 0.2, 0.3])
+    (tmp_path / "outer.yaml").write_text(yaml.safe_dump({
+        "bayesprog": 1,
+        "variables": {"X": {"states": ["x0", "x1"]}, "K": {"states": ["k0", "k1"]},
+                      "J": {"states": ["j0", "j1", "j2"]}},
+        "decomposition": [
+            {"term": "P(K)", "form": "table", "table": pk.tolist()},
+            {"term": "P(J)", "form": "table", "table": pj.tolist()},
+            {"term": "P(X | J, K)", "form": "program", "program": "sub.yaml",
+             "question": "P(X | K, J)"},
+        ],
+    }, sort_keys=False))
+    program = bayesprog.load(tmp_path / "outer.yaml")
+    joint = pk[:, None, None] * pj[None, :, None] * table  # [K, J, X]
+    for x in range(2):
+        result = _ask(program, "P(K J | X)", {"X": x})
+        ref = joint[:, :, x]
+        np.testing.assert_allclose(result.probabilities, ref / ref.sum(), rtol=1e-12)
+        np.testing.assert_allclose(result.log_evidence, np.log(ref.sum()), rtol=1e-12)
+    result = _ask(program, "P(X | J=j2, K=k0)")
+    np.testing.assert_allclose(result.probabilities, table[0, 2], rtol=1e-12)
+    # batched evidence on the term's parents
+    k, j = np.array(["k0", "k1", "k1", "k0"]), np.array([2, 0, 1, 1])
+    result = _ask(program, "P(X | K, J)", {"K": k, "J": j})
+    for row in range(4):
+        np.testing.assert_allclose(result.probabilities[row],
+                                   table[int(k[row][1]), j[row]], rtol=1e-12)
+
 def test_program_term_with_a_range_parent(tmp_path):
     (tmp_path / "sub.yaml").write_text(
         "bayesprog: 1\n"
@@ -805,6 +941,8 @@ def _ablation_joint(b_uniform):
 
 def test_ablate_equals_the_program_written_with_a_uniform():
     program = _loads(_ablation_doc())
+    for question, evidence in ABLATION_QUESTIONS:  # fill the original's caches first
+        _ask(program, question, evidence)
     ablated = program.ablate("P(B|A)")
     written = _loads(_ablation_doc(b_uniform=True))
     assert ablated.ablated == ("P(B | A)",)
@@ -929,12 +1067,12 @@ def test_underflowing_likelihoods_stay_exact_in_log_space(seed, card, shift_e, s
 
 
 def test_underflow_in_some_rows_of_a_batch():
-    # E favours m0, F favours m1, each by ~1e6 nats: the scaled product underflows to 0 for
-    # every state of the first row; the second row is benign.
+    # row 0: E favours m0, F favours m1, each by ~5e5 nats: the scaled product underflows to 0
+    # for every state; row 1: E and F both favour m1, nothing underflows.
     means_e, means_f, sigma = [0.0, 1.0, 2.0], [1.0, 0.0, 2.0], 1e-3
     program = _tiny_program(means_e, means_f, sigma)
     e = np.array([0.0002, 1.0004])
-    f = np.array([0.0003, 1.0])
+    f = np.array([0.0003, 0.0001])
     result = _ask(program, "P(M | E, F)", {"E": e, "F": f})
     for row in range(2):
         log_joint = (stats.norm.logpdf(e[row], means_e, sigma)
@@ -944,6 +1082,64 @@ def test_underflow_in_some_rows_of_a_batch():
         np.testing.assert_allclose(result.log_evidence[row], logsumexp(log_joint), rtol=1e-12)
     best = _ask(program, "P(M | E, F)", {"E": e, "F": f}, kind="map")
     assert best.indices[:, 0].tolist() == [0, 1]
+
+
+
+@pytest.mark.parametrize("gap", [300.0, 340.0, 355.0, 365.0, 370.0, 372.0])
+def test_partially_underflowing_contraction_is_exact(gap):
+    # three fields, each favouring one state of M by ~gap nats: after each factor is scaled
+    # by its maximum, every state's product is ~exp(-2 gap); at gap 370 a subnormal double
+    # with a few bits of precision, which must not leak into the posterior
+    gaps = gap + np.array([[-gap, 0.0, 0.3], [-0.2, -gap, 0.0], [0.3, -0.2, -gap]])
+    means = np.sqrt(2 * gaps)  # N(0; mean, 1) is exp(-gap) times N(0; 0, 1)
+    states = ["m0", "m1", "m2"]
+    doc = {"bayesprog": 1, "variables": {"M": {"states": states}},
+           "decomposition": [{"term": "P(M)", "form": "uniform"}]}
+    for i in range(3):
+        doc["variables"][f"E{i}"] = {"continuous": [-np.inf, np.inf]}
+        doc["decomposition"].append({"term": f"P(E{i} | M)", "form": "normal",
+                                     "mean": dict(zip(states, means[i].tolist(), strict=True)),
+                                     "sigma": 1.0})
+    program = _loads(doc)
+    log_joint = sum(stats.norm.logpdf(0.0, means[i], 1.0) for i in range(3)) - np.log(3)
+    if gap >= 365:
+        assert np.exp(log_joint).max() < np.finfo(float).tiny  # subnormal in linear space
+    result = _ask(program, "P(M | E0, E1, E2)", {"E0": 0.0, "E1": 0.0, "E2": 0.0})
+    np.testing.assert_allclose(result.probabilities, softmax(log_joint), rtol=1e-9)
+    np.testing.assert_allclose(result.log_evidence, logsumexp(log_joint), rtol=1e-12)
+
+
+@pytest.mark.parametrize("exponent", [50, 90, 100, 103, 110, 150])
+def test_tiny_discrete_probabilities_stay_exact(exponent):
+    """Three observed children, each of probability ~10^-exponent: P(evidence) ranges from
+    normal doubles through subnormals (~1e-300 .. 1e-320) to exact underflow (1e-450)."""
+    tiny = 10.0 ** -exponent
+    rows = np.array([[1.0, 2.0, 0.5], [3.0, 1.0, 0.25], [0.7, 1.5, 2.5]]) * tiny  # [C_i, M]
+    prior = np.array([0.5, 0.3, 0.2])
+    states = ["m0", "m1", "m2"]
+    doc = {"bayesprog": 1,
+           "variables": {"M": {"states": states}},
+           "decomposition": [{"term": "P(M)", "form": "table", "table": prior.tolist()}]}
+    for i in range(3):
+        doc["variables"][f"C{i}"] = {"states": [f"c{i}_rare", f"c{i}_usual"]}
+        doc["decomposition"].append({
+            "term": f"P(C{i} | M)", "form": "table",
+            "table": {m: [float(rows[i, j]), 1.0 - float(rows[i, j])]
+                      for j, m in enumerate(states)}})
+    program = _loads(doc)
+    log_joint = np.log(prior) + np.log(rows).sum(axis=0)
+    question = "P(M | C0=c0_rare, C1=c1_rare, C2=c2_rare)"
+    result = _ask(program, question)
+    np.testing.assert_allclose(result.probabilities, softmax(log_joint), rtol=1e-12)
+    np.testing.assert_allclose(result.log_evidence, logsumexp(log_joint), rtol=1e-12)
+    # the same through a batch that mixes rare and usual observations
+    c0 = np.array(["c0_rare", "c0_usual", "c0_rare"])
+    batched = _ask(program, "P(M | C0, C1=c1_rare, C2=c2_rare)", {"C0": c0})
+    for row, name in enumerate(c0):
+        lik0 = rows[0] if name == "c0_rare" else 1.0 - rows[0]
+        log_ref = np.log(prior) + np.log(lik0) + np.log(rows[1:]).sum(axis=0)
+        np.testing.assert_allclose(batched.probabilities[row], softmax(log_ref), rtol=1e-12)
+        np.testing.assert_allclose(batched.log_evidence[row], logsumexp(log_ref), rtol=1e-12)
 
 
 def test_grid_with_many_fields_multiplying_small_values():

@@ -84,6 +84,31 @@ def test_normal_against_scipy(card, means, sigmas, per_state_sigma, xs):
     _check_posterior(_ask(program, "P(M | E)", {"E": x}), ref, log_prior)
 
 
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), batch=st.integers(1, 4), x=st.floats(-3, 3))
+def test_normal_with_runtime_mean_and_sigma(seed, batch, x):
+    rng = np.random.default_rng(seed)
+    mean = rng.uniform(-2, 2, size=(batch, 3))
+    sigma = rng.uniform(0.1, 2, size=3)
+    program = _load({
+        "bayesprog": 1,
+        "variables": {"M": {"states": _states(3)}, "E": {"continuous": [-np.inf, np.inf]}},
+        "inputs": {"mu": {"shape": ["M"]}, "s": {"shape": ["M"]}},
+        "decomposition": [
+            {"term": "P(M)", "form": "uniform"},
+            {"term": "P(E | M)", "form": "normal", "mean": {"input": "mu"},
+             "sigma": {"input": "s"}},
+        ],
+    })
+    result = _ask(program, "P(M | E)", {"E": x}, inputs={"mu": mean, "s": sigma})
+    assert result.probabilities.shape == (batch, 3)
+    ref = stats.norm.logpdf(x, loc=mean, scale=sigma)
+    _check_posterior(result, ref, np.full(3, -np.log(3)))
+    with pytest.raises(QuestionError):  # sigma must stay > 0 at question time too
+        program.ask("P(M | E)", {"E": x}, inputs={"mu": mean, "s": -sigma})
+
+
 def test_normal_fixed_in_question_text():
     program = _load({
         "bayesprog": 1,
@@ -228,12 +253,8 @@ def test_gmm_continuous_child_with_floor(k, seed, sigma, floor, low, width, frac
     _check_posterior(_ask(program, "P(M | E)", {"E": x}), np.log(value), np.log([0.5, 0.3, 0.2]))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: GaussianMixture.normalized = False is a class attribute, so a gmm term over a "
-    "continuous child is never pruned as barren (engine.relevant_terms) and any question "
-    "that does not give that leaf raises QuestionError, although a mixture of normals "
-    "integrates to one like the 'normal' form (which is pruned)"))
 def test_gmm_continuous_leaf_is_barren_when_unobserved():
+    # a mixture of normals integrates to one over a real child: an unobserved leaf sums out
     program = _load({
         "bayesprog": 1,
         "variables": {"M": {"states": ["m0", "m1"]}, "E": {"continuous": [-np.inf, np.inf]}},
@@ -330,6 +351,15 @@ def test_gmm_grid_against_multivariate_normal(case):
         _check_posterior(result, np.log(value[r]), log_prior)
     # R unobserved: the potential is kept and summed over R (it is not normalised over R)
     _check_posterior(_ask(program, "P(O)"), np.log(value.sum(axis=0)), log_prior)
+    # a cell given by name ("i_j") or by index: P(R | O=o) is the potential at o over R
+    cols = case["shape"][1]
+    for o in {0, value.shape[1] - 1, value.shape[1] // 2}:
+        name = f"{o // cols}_{o % cols}"
+        by_name = _ask(program, f"P(R | O={name})")
+        by_index = _ask(program, "P(R | O)", {"O": o})
+        ref = value[:, o] / value[:, o].sum()
+        np.testing.assert_allclose(by_name.probabilities, ref, rtol=1e-9, atol=1e-14)
+        np.testing.assert_allclose(by_index.probabilities, ref, rtol=1e-9, atol=1e-14)
 
 
 @SETTINGS
@@ -350,6 +380,61 @@ def test_gmm_grid_with_runtime_input_means(case, seed):
         np.testing.assert_allclose(result.probabilities[i], softmax(joint), rtol=1e-9,
                                    atol=1e-12)
         np.testing.assert_allclose(result.log_evidence[i], logsumexp(joint), rtol=1e-9)
+
+
+
+def _two_template_grid(origin, cell, sigma, means):
+    return _load({
+        "bayesprog": 1,
+        "variables": {"O": {"grid": {"shape": [4, 5], "cell": cell, "origin": origin}},
+                      "R": {"states": ["r0", "r1"]}},
+        "decomposition": [
+            {"term": "P(O)", "form": "uniform"},
+            {"term": "P(R | O)", "form": "gmm", "sigma": sigma,
+             "means": {"r0": means[0].tolist(), "r1": means[1].tolist()}},
+        ],
+    })
+
+
+def test_gmm_grid_far_from_the_origin():
+    origin, cell, sigma = [1000.0, -2000.0], 0.01, 0.015
+    means = np.array(origin) + np.array([[[1.0, 2.0]], [[3.0, 1.0]]]) * cell  # [R, K, 2]
+    program = _two_template_grid(origin, cell, sigma, means)
+    centres = _grid_centres((4, 5), cell, origin)
+    value = _grid_gmm_value(centres, means, np.ones((2, 1)), sigma, 0.0, cell)
+    result = _ask(program, "P(O | R=r0)")
+    np.testing.assert_allclose(result.probabilities, value[0] / value[0].sum(), rtol=1e-9)
+
+
+def test_gmm_grid_near_the_origin_is_exact():
+    # the same grid and templates, shifted to the origin: the reference agrees to 1e-12
+    origin, cell, sigma = [0.0, 0.0], 0.01, 0.015
+    means = np.array([[[1.0, 2.0]], [[3.0, 1.0]]]) * cell
+    program = _two_template_grid(origin, cell, sigma, means)
+    value = _grid_gmm_value(_grid_centres((4, 5), cell, origin), means, np.ones((2, 1)),
+                            sigma, 0.0, cell)
+    result = _ask(program, "P(O | R=r0)")
+    np.testing.assert_allclose(result.probabilities, value[0] / value[0].sum(), rtol=1e-12)
+
+
+def test_gmm_grid_sigma_keyed_by_cell():
+    sigmas = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
+    names = [f"{i // 3}_{i % 3}" for i in range(6)]
+    program = _load({
+        "bayesprog": 1,
+        "variables": {"O": {"grid": {"shape": [2, 3], "cell": 1.0}},
+                      "R": {"states": ["r0", "r1"]}},
+        "decomposition": [
+            {"term": "P(O)", "form": "uniform"},
+            {"term": "P(R | O)", "form": "gmm", "means": {"r0": [[0.5, 0.5]], "r1": [[1.5, 2.5]]},
+             "sigma": dict(zip(names, sigmas, strict=True))},
+        ],
+    })
+    centres = _grid_centres((2, 3), 1.0, [0.0, 0.0])
+    value = np.array([stats.multivariate_normal([0.5, 0.5], s**2 * np.eye(2)).pdf(c)
+                      for c, s in zip(centres, sigmas, strict=True)])
+    result = _ask(program, "P(O | R=r0)")
+    np.testing.assert_allclose(result.probabilities, value / value.sum(), rtol=1e-9)
 
 
 # categorical / table -----------------------------------------------------------------------------
@@ -485,7 +570,9 @@ def test_uniform_continuous_is_one_over_width(low, width, frac, f, seed):
     result = _ask(program, "P(M | U, F)", {"U": u, "F": f})
     np.testing.assert_allclose(result.probabilities, softmax(np.log(prior) + ref), rtol=1e-9,
                                atol=1e-14)
-    log_u = stats.uniform.logpdf(u, loc=low, scale=width)
+    # 1 / (high - low) on the closed support (scipy's uniform can put x == high just
+    # outside [loc, loc + scale] by rounding, so the density is written out here)
+    log_u = -np.log(high - low)
     np.testing.assert_allclose(result.log_evidence, log_u + logsumexp(np.log(prior) + ref),
                                rtol=1e-9, atol=1e-9)
     # an unbounded uniform is the constant 1: it changes neither posterior nor evidence

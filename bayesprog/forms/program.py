@@ -122,8 +122,10 @@ class ProgramForm(Form):
         inputs: dict[str, Any] = {}
         for i, name in enumerate(parents):
             shape = [1] * lead
-            shape[1 + i] = ctx.variables[name].card  # type: ignore[union-attr]
-            evidence[name] = np.arange(shape[1 + i]).reshape(shape)
+            states = ctx.variables[name].states  # type: ignore[union-attr]
+            shape[1 + i] = len(states)
+            # by name: an integer would read as a value for a range variable
+            evidence[name] = np.asarray(states).reshape(shape)
         for key, value in ctx.params.items():
             name = key.removeprefix("bind:")
             arr = value.array if value.batched else value.array[np.newaxis]

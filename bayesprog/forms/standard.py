@@ -190,17 +190,27 @@ class GaussianMixture(Form):
         if isinstance(child, Discrete):
             grid = next(p for p in ctx.parents if getattr(p, "coords", None) is not None)
             gi = 1 + ctx.axes.index(grid.name)
-            coords = grid.coords  # type: ignore[union-attr]
-            means = np.take(ctx.param("means", 2), 0, axis=gi)  # [b, ..other axes.., K, D]
+            # coordinates relative to the grid's centre: no cancellation far from the origin
+            centre = grid.coords.mean(axis=0)  # type: ignore[union-attr]
+            coords = grid.coords - centre  # type: ignore[union-attr]
+            means = ctx.param("means", 2) - centre  # [b, ..axes.., K, D]
             dim = means.shape[-1]
             if coords.shape[1] != dim:
                 raise ValueError(
                     f"gmm means have {dim} coordinates, grid {grid.name!r} has {coords.shape[1]}"
                 )
-            # |c - m|^2 = |c|^2 + |m|^2 - 2 c.m, as one matrix product: [b, .., K, cells]
-            sq = (means**2).sum(-1)[..., None] + (coords**2).sum(-1) - 2 * (means @ coords.T)
-            s = np.take(sigma, 0, axis=gi)[..., None, None]
-            log_comp = -0.5 * np.maximum(sq, 0.0) / s**2 - dim * np.log(s) - 0.5 * dim * _LOG_2PI
+            s = np.moveaxis(sigma, gi, -1)[..., None, :]  # [b, ..other.., 1, cells or 1]
+            if means.shape[gi] == 1:
+                # |c - m|^2 = |c|^2 + |m|^2 - 2 c.m, as one matrix product: [b, .., K, cells]
+                m = np.take(means, 0, axis=gi)
+                sq = (m**2).sum(-1)[..., None] + (coords**2).sum(-1) - 2 * (m @ coords.T)
+                sq = np.maximum(sq, 0.0)
+            else:  # means that vary by cell: the direct difference
+                shape = [1] * (means.ndim - 2) + [dim]
+                shape[gi] = coords.shape[0]
+                diff = coords.reshape(shape)[..., None, :] - means
+                sq = np.moveaxis((diff**2).sum(-1), gi, -1)  # [b, ..other.., K, cells]
+            log_comp = -0.5 * sq / s**2 - dim * np.log(s) - 0.5 * dim * _LOG_2PI
             log_comp = np.moveaxis(np.expand_dims(log_comp, gi), -1, gi)[..., 0, :]
             # now [b, ..axes.. (grid axis = cells), K]
             cell = grid.cell or 1.0  # type: ignore[union-attr]

@@ -1,0 +1,327 @@
+"""The experiment report: figures (paper Fig. 9, 10, 11), a statistics table, and the paper's
+findings (Sec. 6.3) beside what was measured. Built from stored results only."""
+
+from __future__ import annotations
+
+import html
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from runner.experiment import ExperimentSpec, load_experiment, load_results, mean_sem
+from runner.explorer import CONFIGURATIONS, Explorer
+from runner.scenario import Scenario
+from runner.store import ResultStore, atomic_write
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def area_under(gamma: np.ndarray) -> np.ndarray:
+    """Area under Gamma(k) over k = 0..K-1 (trapezoids, unit steps), per run: metre-steps."""
+    return np.trapezoid(gamma, axis=-1)
+
+
+def paired_test(ablated: np.ndarray, full: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of paired runs (1.0 when they never differ)."""
+    if np.allclose(ablated, full):
+        return 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return float(stats.wilcoxon(ablated, full).pvalue)
+
+
+def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int]) -> list[dict]:
+    rows = []
+    for task in spec.tasks:
+        full = results.get(f"{task}/full")
+        for conf in spec.configurations:
+            g = results[f"{task}/{conf}"]["gamma"]
+            final, auc = g[:, -1], area_under(g)
+            fm, fs = mean_sem(final[:, None])
+            am, as_ = mean_sem(auc[:, None])
+            row = {"task": task, "configuration": conf, "runs": int(g.shape[0]),
+                   "final_mean": float(fm[0]), "final_sem": float(fs[0]),
+                   "final_per_border_cell_mm": 1000 * float(fm[0]) / borders[task],
+                   "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
+            if full is not None and conf != "full":
+                row["p_final"] = paired_test(final, full["gamma"][:, -1])
+                row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
+            rows.append(row)
+    return rows
+
+
+def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
+    """Fig. 10: Gamma(k) mean +- SEM over runs, five curves per task."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(spec.tasks), figsize=(5 * len(spec.tasks), 3.8),
+                             squeeze=False)
+    for ax, task in zip(axes[0], spec.tasks, strict=True):
+        for conf in spec.configurations:
+            mean, sem = mean_sem(results[f"{task}/{conf}"]["gamma"])
+            k = np.arange(mean.size)
+            ax.plot(k, mean, label=conf.replace("_", " "))
+            ax.fill_between(k, mean - sem, mean + sem, alpha=0.25)
+        ax.set_title(f"Task {task}")
+        ax.set_xlabel("iteration k")
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel(r"$\Gamma(k)$ [m]")
+    axes[0, -1].legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path) -> None:
+    """Fig. 9: visits summed over runs, tasks x configurations, beside the ground-truth border."""
+    plt = _plt()
+    nx, ny = scenario.shape
+    cols = len(spec.configurations) + 1
+    fig, axes = plt.subplots(len(spec.tasks), cols, figsize=(1.9 * cols, 3.6 * len(spec.tasks)),
+                             squeeze=False)
+    extent = (0, nx * scenario.cell, 0, ny * scenario.cell)
+    for r, task in enumerate(spec.tasks):
+        border = scenario.border(task)
+        bx, by = np.nonzero(border)
+        ax = axes[r, 0]
+        ax.imshow(scenario.material_map.T, origin="lower", extent=extent, cmap="Pastel1")
+        ax.scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=2, c="k")
+        ax.set_title(f"{task}: border", fontsize=8)
+        for c, conf in enumerate(spec.configurations, 1):
+            paths = results[f"{task}/{conf}"]["paths"]
+            counts = np.bincount(paths.ravel(), minlength=nx * ny).reshape(nx, ny)
+            axes[r, c].imshow(counts.T, origin="lower", extent=extent, cmap="hot")
+            axes[r, c].scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=0.4,
+                               c="c")
+            axes[r, c].set_title(f"{task} {conf.replace('_', ' ')}", fontsize=8)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def replay(experiment, task: str, configuration: str, run: int, steps: int):
+    """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
+    from runner.sensor import SyntheticSensor
+
+    spec = experiment.spec
+    scenario = experiment.scenario
+    explorer = Explorer(scenario, task, ablate=CONFIGURATIONS[configuration])
+    explorer.reset(experiment.start_cells()[run : run + 1], seed=[(spec.seed, run, 0)])
+    sensor = SyntheticSensor(scenario.material_map, explorer.perception, [(spec.seed, run, 1)],
+                             scenario.spec.sensor.extra_noise)
+    shape_only = explorer.target.ablate("P(I | O)", "P(S | O, T)", "P(U | O)")
+    cells = explorer.expected
+    for _ in range(steps):
+        texture, compliance = sensor.probe(cells)
+        explorer.perceive(cells, texture, compliance)
+        decision_cells = explorer.decide()
+        d = explorer.last
+        evidence = {"T": task, "I": d.inhibition, "S": d.saliency, "U": d.uncertainty}
+        if d.templates is not None and "P(R | O)" not in explorer.target.ablated:
+            inputs = {"templates": d.templates, "l_rectangle": d.shape_error[:, 0],
+                      "l_triangle": d.shape_error[:, 1]}
+            shape = shape_only.posterior("P(O | T, I, S, U)", evidence, inputs=inputs)
+            shape_field = shape.probabilities[0]
+        else:
+            shape_field = np.full(len(scenario.centres), 1.0 / len(scenario.centres))
+        posterior = explorer.target_answer.posterior.probabilities[0]
+        yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0],
+               "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
+               "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}
+        cells = decision_cells
+
+
+_FIELDS = [("I", "inhibition I"), ("S", "saliency S"), ("U", "uncertainty U"),
+           ("shape", "shape cue (GMM)"), ("posterior", "P(O | ...)")]
+
+
+def _draw_fields(axes, frame: dict, scenario: Scenario, k: int):
+    nx, ny = scenario.shape
+    extent = (0, nx * scenario.cell, 0, ny * scenario.cell)
+    images = []
+    path = np.array(frame["path"])
+    for ax, (key, title) in zip(axes, _FIELDS, strict=True):
+        ax.clear()
+        images.append(ax.imshow(frame[key].reshape(nx, ny).T, origin="lower", extent=extent,
+                                cmap="viridis"))
+        px, py = (path // ny + 0.5) * scenario.cell, (path % ny + 0.5) * scenario.cell
+        ax.plot(px, py, "w-", lw=0.6)
+        nxt = frame["next"]
+        ax.plot((nxt // ny + 0.5) * scenario.cell, (nxt % ny + 0.5) * scenario.cell, "r*", ms=8)
+        ax.set_title(f"{title}, k={k}", fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return images
+
+
+def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
+                  out_png: Path, out_gif: Path | None, steps: int) -> None:
+    """Fig. 11: the fields behind one decision, and (GIF) over every step of the run."""
+    plt = _plt()
+    frames = list(replay(experiment, task, configuration, run, steps))
+    fig, axes = plt.subplots(1, len(_FIELDS), figsize=(2.2 * len(_FIELDS), 4))
+    _draw_fields(axes, frames[min(step, len(frames) - 1)], experiment.scenario, step)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    if out_gif is not None:
+        from matplotlib.animation import FuncAnimation, PillowWriter
+
+        anim = FuncAnimation(fig, lambda k: _draw_fields(axes, frames[k], experiment.scenario, k),
+                             frames=len(frames))
+        anim.save(out_gif, writer=PillowWriter(fps=8), dpi=60)
+    plt.close(fig)
+
+
+FINDINGS = [
+    ("S", "Removing S degrades the most (the exploration becomes random)."),
+    ("U", "Removing U degrades considerably."),
+    ("I", "Removing I stays near the full model."),
+    ("R", "Removing R has no strong influence."),
+    ("T", "T1 and T2 are followed more accurately than T3."),
+]
+
+
+def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str]]:
+    """Each finding of the paper, what was measured, and whether they agree."""
+    by = {(r["task"], r["configuration"]): r for r in rows}
+    out = []
+    tasks = spec.tasks
+
+    def rel(task: str, conf: str) -> float:
+        return by[(task, conf)]["auc_mean"] / by[(task, "full")]["auc_mean"] - 1
+
+    def have(conf: str) -> bool:
+        return all((t, conf) in by for t in tasks) and all((t, "full") in by for t in tasks)
+
+    for key, text in FINDINGS:
+        if key == "T":
+            per = {t: by[(t, "full")]["final_per_border_cell_mm"] for t in tasks if (t, "full") in by}
+            if {"T1", "T2", "T3"} <= set(per):
+                agree = per["T1"] < per["T3"] and per["T2"] < per["T3"]
+                measured = ", ".join(f"{t}: {v:.1f} mm" for t, v in per.items())
+                out.append((text, f"final Gamma per border cell (full model): {measured}",
+                            "agrees" if agree else "differs"))
+            continue
+        conf = f"without_{key}"
+        if not have(conf):
+            continue
+        changes = {t: rel(t, conf) for t in tasks}
+        ps = {t: by[(t, conf)]["p_auc"] for t in tasks}
+        measured = "; ".join(f"{t}: {100 * changes[t]:+.0f}% area under Gamma (p={ps[t]:.2g})"
+                             for t in tasks)
+        if key == "S":
+            worst = [max((c for c in spec.configurations if c != "full"),
+                         key=lambda c, t=t: by[(t, c)]["auc_mean"]) for t in tasks]
+            agree = all(w == conf for w in worst)
+            measured += f"; the worst ablation per task: {', '.join(worst)}"
+        elif key == "U":
+            agree = all(changes[t] > 0.05 and ps[t] < 0.05 for t in tasks)
+        else:  # I and R: near the full model
+            agree = all(abs(changes[t]) < 0.10 or ps[t] >= 0.05 for t in tasks)
+        out.append((text, measured, "agrees" if agree else "differs"))
+    return out
+
+
+def build_report(out: Path, gif: bool = True) -> Path:
+    """Write ``out/report/`` (figures, table, report.md, report.html) from stored results."""
+    store = ResultStore(out)
+    manifest = store.manifest()
+    experiment = load_experiment(manifest["files"]["experiment"]["path"])
+    spec = ExperimentSpec.model_validate(manifest["experiment"])
+    results = load_results(store, spec)
+    scenario = experiment.scenario
+    folder = out / "report"
+    folder.mkdir(parents=True, exist_ok=True)
+    borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
+    rows = statistics_table(results, spec, borders)
+    plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
+    plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png")
+    task = spec.tasks[0]
+    step = min(40, spec.iterations - 2)
+    plot_decision(experiment, task, "full", 0, step, folder / "fig11_decision.png",
+                  folder / "fig11_decision.gif" if gif else None, spec.iterations - 1)
+    found = findings(rows, spec)
+    atomic_write(folder / "statistics.json", json.dumps(rows, indent=1).encode())
+    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"])
+    atomic_write(folder / "report.md", md.encode())
+    atomic_write(folder / "report.html", _html(md, spec, rows, found).encode())
+    return folder
+
+
+def _table_lines(rows: list[dict]) -> list[str]:
+    lines = ["| task | configuration | final Gamma [m] | per border cell [mm] | area under "
+             "Gamma [m x steps] | p (final) | p (area) |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        p1 = f"{r['p_final']:.3g}" if "p_final" in r else ""
+        p2 = f"{r['p_auc']:.3g}" if "p_auc" in r else ""
+        lines.append(f"| {r['task']} | {r['configuration']} | {r['final_mean']:.3f} +- "
+                     f"{r['final_sem']:.3f} | {r['final_per_border_cell_mm']:.1f} | "
+                     f"{r['auc_mean']:.1f} +- {r['auc_sem']:.1f} | {p1} | {p2} |")
+    return lines
+
+
+def _markdown(spec, rows, found, borders, step, task, digest) -> str:
+    lines = [f"# Experiment {spec.name}", "",
+             f"{spec.description.strip()}", "",
+             f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
+             f"{spec.runs} runs x {spec.iterations} iterations, seed {spec.seed}, configuration "
+             f"hash `{digest}`. Border cells per task: "
+             + ", ".join(f"{t} {n}" for t, n in borders.items()) + ".", "",
+             "## Gamma(k) (paper Fig. 10)", "", "![Gamma](fig10_gamma.png)", "",
+             "Gamma (eq. 16) sums over the task's border cells the distance to the nearest probed "
+             "cell; lower is better. Mean +- SEM over runs.", "",
+             "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
+             f"## One decision (paper Fig. 11): task {task}, full model, run 0, step {step}", "",
+             "![Decision](fig11_decision.png)", "",
+             "The animation over every step of that run is `fig11_decision.gif` (when built).", "",
+             "## Final Gamma and area under Gamma(k)", "",
+             "Mean +- SEM over runs; p: two-sided Wilcoxon signed-rank test of each ablation "
+             "against the full model over the shared start cells.", ""]
+    lines += _table_lines(rows)
+    lines += ["", "## The paper's findings (Sec. 6.3) and ours", "",
+              "| the paper | measured here | verdict |", "|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} |" for a, b, c in found]
+    lines += ["", "Verdicts: *S* agrees when removing S gives the largest area under Gamma of "
+              "the four ablations in every task; *U* when removing U raises it by more than 5% "
+              "with p < 0.05 in every task; *I* and *R* when the change is under 10% or not "
+              "significant (p >= 0.05); *T* compares the final Gamma per border cell.", ""]
+    return "\n".join(lines)
+
+
+def _html(md: str, spec, rows, found) -> str:
+    body = [f"<h1>Experiment {html.escape(spec.name)}</h1>",
+            f"<p>{html.escape(spec.description)}</p>"]
+    for title, image in [("Gamma(k) (Fig. 10)", "fig10_gamma.png"),
+                         ("Visits (Fig. 9)", "fig9_visits.png"),
+                         ("One decision (Fig. 11)", "fig11_decision.png")]:
+        body += [f"<h2>{title}</h2>", f'<img src="{image}" style="max-width:100%">']
+    body += ["<h2>Statistics</h2>", "<table border=1 cellpadding=3><tr><th>task</th>"
+             "<th>configuration</th><th>final Gamma [m]</th><th>area under Gamma</th>"
+             "<th>p (final)</th><th>p (area)</th></tr>"]
+    for r in rows:
+        body.append(f"<tr><td>{r['task']}</td><td>{r['configuration']}</td>"
+                    f"<td>{r['final_mean']:.3f} &plusmn; {r['final_sem']:.3f}</td>"
+                    f"<td>{r['auc_mean']:.1f} &plusmn; {r['auc_sem']:.1f}</td>"
+                    f"<td>{r.get('p_final', float('nan')):.3g}</td>"
+                    f"<td>{r.get('p_auc', float('nan')):.3g}</td></tr>")
+    body += ["</table>", "<h2>The paper's findings and ours</h2>",
+             "<table border=1 cellpadding=3><tr><th>paper</th><th>measured</th>"
+             "<th>verdict</th></tr>"]
+    body += [f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td><td>{c}</td></tr>"
+             for a, b, c in found]
+    body.append("</table>")
+    return ("<!doctype html><html><head><meta charset='utf-8'><title>"
+            f"{html.escape(spec.name)}</title></head><body>" + "\n".join(body) + "</body></html>")

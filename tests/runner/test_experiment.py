@@ -1,0 +1,171 @@
+"""Experiments: stored per chunk, resumable, identical across executors and chunkings; the
+report and its statistics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayesprog.cli import main
+from runner import experiment as experiment_module
+from runner.experiment import load_experiment, load_results, run_experiment, units
+from runner.report import area_under, paired_test
+from runner.store import ResultStore, StoreError
+
+MODELS = Path(__file__).parents[2] / "models"
+
+
+def write_experiment(folder: Path, **changes) -> Path:
+    spec = {"experiment": 1, "name": "small", "runner": "haptic",
+            "scenario": str(MODELS / "scenarios" / "paper.yaml"), "tasks": ["T1", "T3"],
+            "configurations": ["full", "without_S"], "runs": 4, "iterations": 6, "seed": 7,
+            "chunk": 2}
+    spec.update(changes)
+    path = folder / f"small_{len(list(folder.glob('small_*.yaml')))}.yaml"
+    import yaml
+
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def results_of(out: Path) -> dict:
+    store = ResultStore(out)
+    spec = load_experiment(store.manifest()["files"]["experiment"]["path"]).spec
+    return load_results(store, spec)
+
+
+def assert_same(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        for field in ("gamma", "paths", "runs"):
+            np.testing.assert_array_equal(a[key][field], b[key][field], err_msg=f"{key} {field}")
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("reference")
+    path = write_experiment(folder)
+    run_experiment(load_experiment(path), folder / "out", progress=False)
+    return folder / "out", results_of(folder / "out")
+
+
+def test_chunk_size_does_not_change_the_numbers(reference, tmp_path):
+    for chunk in (1, 3, 4):
+        path = write_experiment(tmp_path, chunk=chunk)
+        run_experiment(load_experiment(path), tmp_path / f"out{chunk}", progress=False)
+        assert_same(results_of(tmp_path / f"out{chunk}"), reference[1])
+
+
+def test_local_processes_give_the_same_numbers(reference, tmp_path):
+    path = write_experiment(tmp_path)
+    run_experiment(load_experiment(path), tmp_path / "out", workers=2, progress=False)
+    assert_same(results_of(tmp_path / "out"), reference[1])
+
+
+def test_dask_cluster_gives_the_same_numbers(reference, tmp_path):
+    from dask.distributed import LocalCluster
+
+    path = write_experiment(tmp_path)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        run_experiment(load_experiment(path), tmp_path / "out", scheduler=cluster.scheduler_address,
+                       progress=False)
+    assert_same(results_of(tmp_path / "out"), reference[1])
+
+
+def test_interruption_loses_only_the_chunk_in_flight_and_resume_completes(reference, tmp_path,
+                                                                           monkeypatch):
+    path = write_experiment(tmp_path)
+    experiment = load_experiment(path)
+    calls = []
+    real = experiment_module.compute_unit
+
+    def interrupted(experiment_path, unit):
+        calls.append(unit)
+        if len(calls) == 4:
+            raise KeyboardInterrupt  # Ctrl-C while the 4th chunk is computed
+        return real(experiment_path, unit)
+
+    monkeypatch.setattr(experiment_module, "compute_unit", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(experiment, tmp_path / "out", progress=False)
+    store = ResultStore(tmp_path / "out")
+    all_units = units(experiment.spec)
+    assert [store.done(u) for u in all_units] == [True] * 3 + [False] * (len(all_units) - 3)
+    assert not list((tmp_path / "out").rglob("*.tmp"))  # no partial file left behind
+    monkeypatch.setattr(experiment_module, "compute_unit", real)
+    before = {u: store.path(u).stat().st_mtime_ns for u in all_units[:3]}
+    run_experiment(experiment, tmp_path / "out", progress=False)
+    assert {u: store.path(u).stat().st_mtime_ns for u in all_units[:3]} == before  # skipped
+    assert_same(results_of(tmp_path / "out"), reference[1])
+
+
+def test_a_finished_experiment_run_twice_gives_identical_numbers(reference, tmp_path, capsys):
+    path = write_experiment(tmp_path)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-report", "-q"]) == 0
+    assert main(["run", str(path), "--out", str(out), "--no-report", "-q"]) == 0
+    assert_same(results_of(out), reference[1])
+
+
+def test_a_changed_configuration_is_refused(tmp_path, capsys):
+    out = tmp_path / "out"
+    first = write_experiment(tmp_path)
+    assert main(["run", str(first), "--out", str(out), "--no-report", "-q"]) == 0
+    changed = write_experiment(tmp_path, iterations=7)
+    assert main(["run", str(changed), "--out", str(out), "--no-report", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "another configuration" in err and "Traceback" not in err
+    with pytest.raises(StoreError):
+        run_experiment(load_experiment(changed), out, progress=False)
+
+
+def test_manifest_records_seed_starts_programs_and_hash(reference):
+    manifest = json.loads((reference[0] / "experiment.json").read_text())
+    assert manifest["experiment"]["seed"] == 7
+    assert len(manifest["start_cells"]) == 4
+    assert set(manifest["files"]) == {"experiment", "scenario", "perception", "shape", "target"}
+    assert "P(O | T, I, S, U)" in manifest["files"]["target"]["text"]
+    assert len(manifest["hash"]) == 16
+
+
+def test_same_start_cells_for_every_configuration(reference):
+    results = reference[1]
+    starts = {key: r["paths"][:, 0].tolist() for key, r in results.items()}
+    assert len({tuple(v) for v in starts.values()}) == 1
+
+
+def test_report_builds_every_figure(reference, capsys):
+    out = reference[0]
+    assert main(["report", str(out)]) == 0
+    folder = out / "report"
+    for name in ("fig9_visits.png", "fig10_gamma.png", "fig11_decision.png",
+                 "fig11_decision.gif", "report.md", "report.html", "statistics.json"):
+        assert (folder / name).stat().st_size > 0, name
+    assert (folder / "fig9_visits.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (folder / "fig11_decision.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    text = (folder / "report.md").read_text()
+    assert "Removing S degrades the most" in text and "| T3 | without_S |" in text
+
+
+def test_report_of_a_folder_without_results(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert "not an experiment's output folder" in capsys.readouterr().err
+
+
+def test_statistics_against_scipy():
+    rng = np.random.default_rng(0)
+    gamma = rng.random((12, 30))
+    from runner.experiment import mean_sem
+
+    mean, sem = mean_sem(gamma)
+    np.testing.assert_allclose(mean, gamma.mean(axis=0))
+    np.testing.assert_allclose(sem, stats.sem(gamma, axis=0))
+    np.testing.assert_allclose(area_under(gamma), [np.trapezoid(g) for g in gamma])
+    a, b = rng.random(20), rng.random(20) + 0.2
+    assert paired_test(a, b) == pytest.approx(stats.wilcoxon(a, b).pvalue)
+    assert paired_test(a, a) == 1.0
