@@ -176,9 +176,14 @@ def run_experiment(
         if scheduler is not None:
             _run_dask(scheduler, path, todo, store, bar)
         elif workers > 1:
+            import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            with ProcessPoolExecutor(max_workers=workers) as pool:
+            # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked
+            # child must not inherit; each worker then uses one thread (no oversubscription)
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                     initializer=_one_thread) as pool:
                 futures = {pool.submit(compute_unit, path, u): u for u in todo}
                 try:
                     for future in as_completed(futures):
@@ -195,6 +200,12 @@ def run_experiment(
     finally:
         bar.close()
     return store
+
+
+def _one_thread() -> None:
+    import numba
+
+    numba.set_num_threads(1)
 
 
 def _run_dask(address: str, path: str, todo: list[Unit], store: ResultStore, bar) -> None:

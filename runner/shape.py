@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from runner._icp import icp
+
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
 MIN_POINTS = 3  # fewer probed cells than this: no shape evidence (R uniform)
 _OFFSETS = np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
@@ -46,24 +48,12 @@ def _transform(angle: np.ndarray, shift: np.ndarray, pts: np.ndarray) -> np.ndar
     return np.stack([c * x - s * y, s * x + c * y], -1) + shift[..., None, :]
 
 
-def closest_on_outline(points: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points on closed polygons: ``points`` [..., k, 2], ``vertices`` [..., V, 2].
-
-    Returns the closest points [..., k, 2] and their squared distances [..., k].
-    """
-    a = vertices
-    b = np.roll(vertices, -1, axis=-2)
-    ab = b - a  # [..., V, 2]
-    ap = points[..., :, None, :] - a[..., None, :, :]  # [..., k, V, 2]
-    length2 = (ab * ab).sum(-1)[..., None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(length2 > 0, (ap * ab[..., None, :, :]).sum(-1) / length2, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    proj = a[..., None, :, :] + t[..., None] * ab[..., None, :, :]
-    d2 = ((points[..., :, None, :] - proj) ** 2).sum(-1)  # [..., k, V]
-    best = d2.argmin(-1)
-    closest = np.take_along_axis(proj, best[..., None, None], axis=-2)[..., 0, :]
-    return closest, np.take_along_axis(d2, best[..., None], axis=-1)[..., 0]
+def _vertex_count(padded: np.ndarray) -> int:
+    """Vertices of a padded outline (the padding repeats the last vertex)."""
+    n = len(padded)
+    while n > 1 and np.array_equal(padded[n - 1], padded[n - 2]):
+        n -= 1
+    return n
 
 
 def pad_outlines(outlines: list[np.ndarray]) -> np.ndarray:
@@ -100,25 +90,11 @@ def match(
     if warm is not None:
         angle = np.concatenate([angle, warm[0][..., None]], axis=2)
         shift = np.concatenate([shift, warm[1][:, :, None, :]], axis=2)
-    pts = path[:, None, None]  # [runs, 1, 1, k, 2]
-    verts = outlines[None, :, None]  # [1, T, 1, V, 2]
-    for _ in range(iterations):
-        moved = _transform(angle, shift, verts)
-        dst_free, _ = closest_on_outline(pts, moved)  # closest outline points, path frame
-        # Pair path point p with its closest outline point q; express q in the template frame.
-        c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
-        q = dst_free - shift[..., None, :]
-        src = np.stack([c * q[..., 0] + s * q[..., 1], -s * q[..., 0] + c * q[..., 1]], -1)
-        dst = np.broadcast_to(pts, src.shape)
-        ms, md = src.mean(-2), dst.mean(-2)
-        a, b = src - ms[..., None, :], dst - md[..., None, :]
-        cross = (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]).sum(-1)
-        dot = (a * b).sum(-1).sum(-1)
-        angle = np.arctan2(cross, dot)
-        c, s = np.cos(angle), np.sin(angle)
-        shift = md - np.stack([c * ms[..., 0] - s * ms[..., 1], s * ms[..., 0] + c * ms[..., 1]], -1)
-    _, d2 = closest_on_outline(pts, _transform(angle, shift, verts))
-    dist = np.sqrt(d2).mean(-1)  # [runs, T, S]
+    angle = np.ascontiguousarray(angle, dtype=float)
+    shift = np.ascontiguousarray(shift, dtype=float)
+    nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
+    dist = icp(np.ascontiguousarray(path, dtype=float), np.ascontiguousarray(outlines, float),
+               nverts, angle, shift, iterations)
     best = dist.argmin(-1)[..., None]
     angle = np.take_along_axis(angle, best, -1)[..., 0]
     shift = np.take_along_axis(shift, best[..., None], 2)[:, :, 0]
@@ -136,24 +112,38 @@ def match(
 class ShapeTracker:
     """ICP over a growing path, one update per step, batched over runs.
 
-    The path grows by one point per step, so each step starts from the previous step's transform
-    (a few iterations); every ``restart_every`` steps (and while the path is short) the full
-    multi-start search runs as well, to leave a wrong basin.
+    The path grows by one point per step, so each step starts from the previous step's
+    transform (a few iterations). The full multi-start search runs again while the path is
+    short, every ``restart_every`` steps, and at once for the runs whose warm fit got clearly
+    worse than at the previous step (it is sliding into a wrong basin).
     """
 
     def __init__(self, outlines: np.ndarray, points: np.ndarray, restart_every: int = 10,
-                 short: int = 12, warm_iterations: int = 8):
+                 short: int = 12, warm_iterations: int = 8, worse: float = 0.002):
         self.outlines, self.points = outlines, points
-        self.restart_every, self.short, self.warm_iterations = restart_every, short, warm_iterations
-        self.warm: tuple[np.ndarray, np.ndarray] | None = None
+        self.restart_every, self.short = restart_every, short
+        self.warm_iterations, self.worse = warm_iterations, worse
+        self.reset()
 
     def reset(self) -> None:
-        self.warm = None
+        self.warm: tuple[np.ndarray, np.ndarray] | None = None
+        self.distance: np.ndarray | None = None
 
     def update(self, path: np.ndarray) -> Registration:
         k = path.shape[1]
-        full = self.warm is None or k <= self.short or k % self.restart_every == 0
-        reg = match(path, self.outlines, self.points, rotations=8 if full else 0,
-                    iterations=25 if full else self.warm_iterations, warm=self.warm)
+        if self.warm is None or k <= self.short or k % self.restart_every == 0:
+            reg = match(path, self.outlines, self.points, warm=self.warm)
+        else:
+            reg = match(path, self.outlines, self.points, rotations=0,
+                        iterations=self.warm_iterations, warm=self.warm)
+            assert self.distance is not None
+            # a fit worse than last step's by more than `worse` metres: search again there
+            redo = np.flatnonzero((reg.distance > self.distance + self.worse).any(axis=1))
+            if redo.size:
+                again = match(path[redo], self.outlines, self.points,
+                              warm=(reg.angle[redo], reg.shift[redo]))
+                for name in ("error", "distance", "points", "angle", "shift"):
+                    getattr(reg, name)[redo] = getattr(again, name)
         self.warm = (reg.angle, reg.shift)
+        self.distance = reg.distance
         return reg

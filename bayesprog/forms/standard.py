@@ -176,6 +176,31 @@ class GaussianMixture(Form):
                      f"mean), found {weights.array.shape[-1]}")]
         return []
 
+    @staticmethod
+    def _separable(ctx, grid, gi, coords, means, s, floor) -> np.ndarray | None:
+        """A 2-D grid, one sigma per mixture, a floor > 0: the Gaussians factor along the axes,
+        so the mixture over all cells is one matrix product of per-axis terms per mixture
+        (exact: where the product underflows, the floor dominates to double precision)."""
+        shape = grid.grid_shape
+        if (shape is None or len(shape) != 2 or means.shape[gi] != 1 or s.shape[-1] != 1
+                or "weights" in ctx.params or not np.all(floor > 0) or floor.shape[gi] != 1):
+            return None
+        nx, ny = shape
+        m = np.take(means, 0, axis=gi)  # [b, ..other.., K, 2]
+        sig = s[..., 0]  # [b, ..other.., 1]
+        xs = coords.reshape(nx, ny, 2)[:, 0, 0]
+        ys = coords.reshape(nx, ny, 2)[0, :, 1]
+        gx = np.exp(-0.5 * ((xs - m[..., 0:1]) / sig[..., None]) ** 2)  # [.., K, nx]
+        gy = np.exp(-0.5 * ((ys - m[..., 1:2]) / sig[..., None]) ** 2)  # [.., K, ny]
+        k = m.shape[-2]
+        mix = np.einsum("...ki,...kj->...ij", gx, gy).reshape(gx.shape[:-2] + (nx * ny,))
+        mix = mix / (k * 2 * np.pi * sig**2)
+        cell = grid.cell or 1.0
+        f = np.take(floor, 0, axis=gi)[..., None]  # [b, ..other.., 1]
+        value = (1 - f) * mix + f / (nx * ny * cell**2)
+        out = np.log(value)  # [b, ..other.., cells]
+        return np.moveaxis(out[..., None], -2, gi)[..., 0]
+
     def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
         keys = [p for p in parents if isinstance(p, Discrete)]
         return ([child] if isinstance(child, Discrete) else []) + keys  # type: ignore[list-item]
@@ -200,6 +225,9 @@ class GaussianMixture(Form):
                     f"gmm means have {dim} coordinates, grid {grid.name!r} has {coords.shape[1]}"
                 )
             s = np.moveaxis(sigma, gi, -1)[..., None, :]  # [b, ..other.., 1, cells or 1]
+            fast = self._separable(ctx, grid, gi, coords, means, s, floor)
+            if fast is not None:
+                return fast
             if means.shape[gi] == 1:
                 # |c - m|^2 = |c|^2 + |m|^2 - 2 c.m, as one matrix product: [b, .., K, cells]
                 m = np.take(means, 0, axis=gi)

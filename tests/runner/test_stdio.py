@@ -1,0 +1,206 @@
+"""The JSON-lines step interface (runner/stdio.py) driven by scripted sessions, in process and
+through the real ``bayesprog explore --stdio`` command."""
+
+from __future__ import annotations
+
+import functools
+import io
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from runner.explorer import Explorer
+from runner.scenario import load_scenario
+from runner.stdio import serve
+
+ROOT = Path(__file__).parents[2]
+PAPER = ROOT / "models" / "scenarios" / "paper.yaml"
+NX, NY = 30, 60
+
+# readings at the proxy material means of models/pi_per.yaml (texture E, compliance C)
+READINGS = {"silicone": (0.12, 0.35), "wood": (0.52, 0.08), "plush": (0.66, 0.62)}
+
+
+@functools.cache
+def scenario():
+    return load_scenario(PAPER)
+
+
+def explorer(task: str = "T2") -> Explorer:
+    return Explorer(scenario(), task)
+
+
+def probe(cell, material: str = "wood") -> str:
+    e, c = READINGS[material]
+    return json.dumps({"cell": list(cell), "texture": e, "compliance": c})
+
+
+def session(lines: list[str], *, seed: int = 0, ex: Explorer | None = None) -> list[dict]:
+    out = io.StringIO()
+    serve(ex or explorer(), io.StringIO("".join(line + "\n" for line in lines)), out, seed=seed)
+    return [json.loads(line) for line in out.getvalue().splitlines()]
+
+
+# a walk across the rectangle's lower edge (silicone inside, wood outside)
+WALK = [probe((10, 12), "silicone"), probe((11, 12), "silicone"), probe((11, 13), "wood"),
+        probe((12, 13), "silicone"), probe((12, 14), "wood"), probe((13, 14), "silicone")]
+
+
+def assert_step_replies(replies: list[dict], first_k: int = 0) -> None:
+    for j, reply in enumerate(replies):
+        assert set(reply) == {"k", "next"}, reply
+        assert reply["k"] == first_k + j
+        ix, iy = reply["next"]
+        assert isinstance(ix, int) and isinstance(iy, int)
+        assert 0 <= ix < NX and 0 <= iy < NY
+
+
+def test_valid_probes_get_numbered_replies_in_order():
+    out = io.StringIO()
+    answered = serve(explorer(), io.StringIO("\n".join(WALK) + "\n"), out)
+    replies = [json.loads(line) for line in out.getvalue().splitlines()]
+    assert answered == len(WALK) == len(replies)
+    assert_step_replies(replies)
+
+
+def test_following_the_suggestions_like_a_robot():
+    """A robot that probes the cell each reply suggests, with the readings of its true material;
+    the input is produced lazily, after the previous reply was written."""
+    sc = scenario()
+    out = io.StringIO()
+    probed = []
+
+    def robot() -> Iterator[str]:
+        cell = (15, 9)  # wood, below the rectangle
+        for _ in range(12):
+            probed.append(cell)
+            yield probe(cell, sc.materials[sc.material_map[cell]]) + "\n"
+            cell = tuple(json.loads(out.getvalue().splitlines()[-1])["next"])
+
+    assert serve(explorer(), robot(), out) == 12
+    replies = [json.loads(line) for line in out.getvalue().splitlines()]
+    assert_step_replies(replies)
+    # each reply is the cell probed next
+    assert [tuple(r["next"]) for r in replies[:-1]] == probed[1:]
+
+
+BAD_LINES = {
+    "not json": "this is not JSON",
+    "missing texture": json.dumps({"cell": [3, 4], "compliance": 0.1}),
+    "outside the grid": json.dumps({"cell": [30, 4], "texture": 0.5, "compliance": 0.1}),
+    "negative cell": json.dumps({"cell": [-1, 4], "texture": 0.5, "compliance": 0.1}),
+    "texture not a number": json.dumps({"cell": [3, 4], "texture": "rough", "compliance": 0.1}),
+    "texture NaN": '{"cell": [3, 4], "texture": NaN, "compliance": 0.1}',
+    "cell not integers": json.dumps({"cell": [3.0, 4], "texture": 0.5, "compliance": 0.1}),
+    "not an object": "[1, 2, 3]",
+}
+
+
+@pytest.mark.parametrize("bad", list(BAD_LINES.values()), ids=list(BAD_LINES))
+@pytest.mark.parametrize("where", [0, 3], ids=["first line", "mid-session"])
+def test_malformed_line_gets_an_error_and_the_session_goes_on(bad, where):
+    lines = WALK[:where] + [bad] + WALK[where:]
+    replies = session(lines)
+    assert len(replies) == len(lines)
+    error = replies[where]
+    assert set(error) == {"error"}
+    assert f"line {where + 1}" in error["error"]
+    # the other replies are exactly those of the session without the bad line
+    clean = session(WALK)
+    assert replies[:where] + replies[where + 1:] == clean
+    assert_step_replies(clean)
+
+
+def test_error_line_numbers_count_every_input_line():
+    lines = [WALK[0], "", "oops", WALK[1], "   ", '{"cell": [1, 2]}', WALK[2]]
+    replies = session(lines)
+    # blank lines get no reply but are counted
+    assert [r.get("k") for r in replies] == [0, None, 1, None, 2]
+    assert "line 3" in replies[1]["error"]
+    assert "line 6" in replies[3]["error"]
+    assert "texture" in replies[3]["error"]
+
+
+def test_reset_restarts_the_exploration():
+    before = WALK[:3]
+    after = [probe((10, 13), "wood"), probe((11, 13), "silicone"), probe((12, 12), "wood"),
+             probe((12, 14), "silicone")]
+    replies = session(before + [json.dumps({"reset": {"seed": 3}})] + after)
+    assert replies[3] == {"reset": True, "seed": 3}
+    assert_step_replies(replies[:3])
+    assert_step_replies(replies[4:])  # k counts from 0 again
+    # after the reset the session is a fresh one with seed 3: nothing of the first walk remains
+    assert replies[4:] == session(after, seed=3)
+    # (and this is not trivially so: without the reset, the first walk changes the answers)
+    assert [r["next"] for r in session(before + after)[3:]] != [r["next"] for r in replies[4:]]
+
+
+def test_same_script_twice_gives_the_same_replies():
+    script = WALK[:2] + ["garbage"] + WALK[2:] + ['{"reset": {"seed": 3}}'] + WALK[:4]
+    first = session(script)
+    assert first == session(script)
+    # also when the same explorer serves the script again
+    ex = explorer()
+    assert session(script, ex=ex) == first
+    assert session(script, ex=ex) == first
+
+
+def test_cli_explore_stdio_subprocess():
+    bayesprog = Path(sys.executable).with_name("bayesprog")
+    lines = WALK[:4] + ["{not json"] + WALK[4:]
+    proc = subprocess.run(
+        [str(bayesprog), "explore", "models/scenarios/paper.yaml", "--stdio", "--task", "T2"],
+        input="".join(line + "\n" for line in lines), capture_output=True, text=True,
+        cwd=ROOT, timeout=60, check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    replies = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert len(replies) == len(lines)
+    assert "line 5" in replies[4]["error"]
+    assert_step_replies(replies[:4] + replies[5:])
+    # the command serves the same explorer as the in-process one (task T2, seed 0)
+    assert replies == session(lines)
+
+
+# --- lines that crashed the session at commit b2fab07 (fixed since in runner/stdio.py) ----------
+
+
+def test_huge_cell_index_gets_an_error_reply():
+    # was: OverflowError from np.asarray(cell, dtype=int) in Explorer.flat, not caught
+    lines = [json.dumps({"cell": [10**30, 4], "texture": 0.5, "compliance": 0.1}), WALK[0]]
+    replies = session(lines)
+    assert "line 1" in replies[0]["error"]
+    assert replies[1] == session(WALK[:1])[0]
+
+
+def test_huge_integer_reading_gets_an_error_reply():
+    # was: OverflowError from math.isfinite on an int too large for a float, not caught
+    lines = ['{"cell": [3, 4], "texture": 1' + "0" * 400 + ', "compliance": 0.1}', WALK[0]]
+    replies = session(lines)
+    assert "line 1" in replies[0]["error"]
+    assert len(replies[0]["error"]) < 200  # the 400-digit number is not echoed in full
+    assert replies[1] == session(WALK[:1])[0]
+
+
+@pytest.mark.parametrize("seed", ["null", "[1, 2]", '"three"'])
+def test_reset_with_a_non_numeric_seed_gets_an_error_reply(seed):
+    # was: TypeError from int(None) / int([1, 2]), not caught
+    lines = [WALK[0], '{"reset": {"seed": ' + seed + "}}", WALK[1]]
+    replies = session(lines)
+    assert "line 2" in replies[1]["error"]
+    assert replies[2] == session(WALK[:2])[1]  # the session goes on, unreset
+
+
+def test_reset_with_a_negative_seed_is_refused_or_works():
+    # was: acknowledged, then np.random.default_rng refused it at every following probe
+    replies = session(['{"reset": {"seed": -1}}', WALK[0], WALK[1]])
+    if "error" in replies[0]:
+        assert "line 1" in replies[0]["error"]
+    else:
+        assert replies[0] == {"reset": True, "seed": -1}
+    assert_step_replies(replies[1:])
