@@ -119,10 +119,11 @@ class ShapeTracker:
     """
 
     def __init__(self, outlines: np.ndarray, points: np.ndarray, restart_every: int = 10,
-                 short: int = 12, warm_iterations: int = 8, worse: float = 0.002):
+                 short: int = 12, warm_iterations: int = 8, worse: float = 1.25,
+                 slack: float = 0.0005):
         self.outlines, self.points = outlines, points
         self.restart_every, self.short = restart_every, short
-        self.warm_iterations, self.worse = warm_iterations, worse
+        self.warm_iterations, self.worse, self.slack = warm_iterations, worse, slack
         self.reset()
 
     def reset(self) -> None:
@@ -137,8 +138,9 @@ class ShapeTracker:
             reg = match(path, self.outlines, self.points, rotations=0,
                         iterations=self.warm_iterations, warm=self.warm)
             assert self.distance is not None
-            # a fit worse than last step's by more than `worse` metres: search again there
-            redo = np.flatnonzero((reg.distance > self.distance + self.worse).any(axis=1))
+            # a fit clearly worse than last step's (x `worse`, + `slack` metres): search again
+            limit = self.distance * self.worse + self.slack
+            redo = np.flatnonzero((reg.distance > limit).any(axis=1))
             if redo.size:
                 again = match(path[redo], self.outlines, self.points,
                               warm=(reg.angle[redo], reg.shift[redo]))

@@ -244,12 +244,6 @@ def test_tracker_on_a_growing_path_matches_a_cold_match():
     assert checked == 6
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: ShapeTracker warm-only steps keep a pose that has stopped fitting (runner/shape.py, "
-    "ShapeTracker.update): a noise-free rectangle path from outline point 15 is ambiguous at "
-    "the restart k = 20 (its 9.6 x 8.6 cm L fits the rectangle turned by 90 degrees exactly); "
-    "the full search keeps that pose, and from k = 22 to 29 the 8 warm ICP iterations cannot "
-    "leave it: L(rectangle) grows to 0.32 at k = 29 where a cold match gives 5e-5"))
 def test_tracker_leaves_a_wrong_basin_when_the_path_grows():
     _, _, outlines, points = templates()
     _, _, path = make_path(0, 0.0, (0.15, 0.3), start=15, m=29, sigma=0.0, seed=0)
