@@ -101,11 +101,27 @@ class Explorer:
             raise bayesprog.QuestionError(f"expected {self.runs} seeds, got {len(seeds)}")
         self.rngs = [np.random.default_rng(s) for s in seeds]
         self.posterior = np.full((self.runs, len(self.centres), self.materials), 1.0 / self.materials)
+        # U of every cell, kept up to date one probed cell per step (uniform maps: U = 1)
+        self.uncertainty = uncertainty(self.posterior[:, :1]).repeat(len(self.centres), axis=1)
         self.path: list[np.ndarray] = []
         self.expected = self.flat(start)
         self.visits = np.zeros((self.runs, len(self.centres)), dtype=int)
         self.tracker.reset()
         self.last = None
+
+    def inhibition_at(self, last: np.ndarray) -> np.ndarray:
+        """Eq. (10) around the last probed cells [runs] -> [runs, cells], by lookup: I depends
+        only on the offset between cells, so it is computed once for every offset."""
+        nx, ny = self.scenario.shape
+        if not hasattr(self, "_inhibition_table"):
+            offsets = np.stack(np.meshgrid(np.arange(-nx + 1, nx), np.arange(-ny + 1, ny),
+                                           indexing="ij"), axis=-1).reshape(-1, 2)
+            table = inhibition(offsets * self.scenario.cell, np.zeros((1, 2)), self.diagonal)
+            self._inhibition_table = table.reshape(2 * nx - 1, 2 * ny - 1)
+        ix, iy = np.divmod(np.arange(nx * ny), ny)
+        lx, ly = np.divmod(np.asarray(last), ny)
+        return self._inhibition_table[ix[None] - lx[:, None] + nx - 1,
+                                      iy[None] - ly[:, None] + ny - 1]
 
     def flat(self, cells: np.ndarray) -> np.ndarray:
         """Flat cell indices of ``cells`` [..., 2] (ix, iy), checked against the grid."""
@@ -128,6 +144,7 @@ class Explorer:
         answer = self.perception.ask("P(M | E, C)", {"E": texture, "C": compliance},
                                      soft={"M": prior})
         self.posterior[rows, cells] = answer.probabilities
+        self.uncertainty[rows, cells] = uncertainty(answer.probabilities)
         self.path.append(cells)
         self.visits[rows, cells] += 1
 
@@ -135,10 +152,10 @@ class Explorer:
         """Ask pi_tar for the next cell of every run (flat indices)."""
         nx, ny = self.scenario.shape
         last = self.path[-1]
-        u = uncertainty(self.posterior)
+        u = self.uncertainty.copy()
         d = self.posterior[..., self.target_material].reshape(self.runs, nx, ny)
         s = saliency(d).reshape(self.runs, -1)
-        i = inhibition(self.centres, self.centres[last], self.diagonal)
+        i = self.inhibition_at(last)
         evidence = {"T": self.task, "I": i, "S": s, "U": u}
         k = len(self.path)
         if k >= MIN_POINTS and "P(R | O)" not in self.target.ablated:

@@ -193,7 +193,7 @@ class GaussianMixture(Form):
         gx = np.exp(-0.5 * ((xs - m[..., 0:1]) / sig[..., None]) ** 2)  # [.., K, nx]
         gy = np.exp(-0.5 * ((ys - m[..., 1:2]) / sig[..., None]) ** 2)  # [.., K, ny]
         k = m.shape[-2]
-        mix = np.einsum("...ki,...kj->...ij", gx, gy).reshape(gx.shape[:-2] + (nx * ny,))
+        mix = (np.swapaxes(gx, -1, -2) @ gy).reshape(gx.shape[:-2] + (nx * ny,))
         mix = mix / (k * 2 * np.pi * sig**2)
         cell = grid.cell or 1.0
         f = np.take(floor, 0, axis=gi)[..., None]  # [b, ..other.., 1]
