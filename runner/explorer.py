@@ -9,6 +9,8 @@ lockstep as arrays with a leading run axis: one engine call per program per step
 
 from __future__ import annotations
 
+import time
+from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -86,6 +88,8 @@ class Explorer:
         self.tracker = ShapeTracker(self.outlines, self.template_points)
         self.last: Decision | None = None
         self.registration: Registration | None = None
+        #: seconds spent per phase since construction (perception, cues, shape, decision)
+        self.timings: dict[str, float] = defaultdict(float)
 
     # state --------------------------------------------------------------------------------------
     def reset(self, start: Sequence[int] | np.ndarray, seed: int | Sequence[int] = 0) -> None:
@@ -139,6 +143,7 @@ class Explorer:
     # the loop -----------------------------------------------------------------------------------
     def perceive(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> None:
         """Update the perceptual map at the probed cells (one per run): recursive Bayes by pi_per."""
+        start = time.perf_counter()
         rows = np.arange(self.runs)
         prior = self.posterior[rows, cells]
         answer = self.perception.ask("P(M | E, C)", {"E": texture, "C": compliance},
@@ -147,20 +152,29 @@ class Explorer:
         self.uncertainty[rows, cells] = uncertainty(answer.probabilities)
         self.path.append(cells)
         self.visits[rows, cells] += 1
+        self.timings["perception"] += time.perf_counter() - start
+
+    def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
+        nx, ny = self.scenario.shape
+        d = self.posterior[..., self.target_material].reshape(self.runs, nx, ny)
+        s = saliency(d).reshape(self.runs, -1)
+        return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
+
+    def shape_cue(self) -> Registration:
+        """The templates registered onto every run's path (eq. 6-7)."""
+        return self.tracker.update(self.centres[np.stack(self.path, axis=1)])
 
     def decide(self) -> np.ndarray:
         """Ask pi_tar for the next cell of every run (flat indices)."""
-        nx, ny = self.scenario.shape
-        last = self.path[-1]
-        u = self.uncertainty.copy()
-        d = self.posterior[..., self.target_material].reshape(self.runs, nx, ny)
-        s = saliency(d).reshape(self.runs, -1)
-        i = self.inhibition_at(last)
+        start = time.perf_counter()
+        i, s, u = self.cue_fields()
         evidence = {"T": self.task, "I": i, "S": s, "U": u}
         k = len(self.path)
+        shape_start = time.perf_counter()
+        self.timings["cues"] += shape_start - start
         if k >= MIN_POINTS and "P(R | O)" not in self.target.ablated:
-            path = self.centres[np.stack(self.path, axis=1)]
-            reg = self.tracker.update(path)
+            reg = self.shape_cue()
             self.registration = reg
             inputs = {"templates": reg.points, "l_rectangle": reg.error[:, 0],
                       "l_triangle": reg.error[:, 1]}
@@ -170,11 +184,14 @@ class Explorer:
             # no shape evidence yet: P(R | O) is uniform, and so the soft evidence on R is moot
             inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
             program = self.target_no_shape
+        ask_start = time.perf_counter()
+        self.timings["shape"] += ask_start - shape_start
         answer = program.ask("next_target", evidence, inputs=inputs, rng=self.rngs)
         nxt = answer.indices[:, 0]
         self.last = Decision(k, i, s, u, None if reg is None else reg.error,
                              None if reg is None else reg.points, nxt)
         self.target_answer = answer
+        self.timings["decision"] += time.perf_counter() - ask_start
         return nxt
 
     def step(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> np.ndarray:
