@@ -6,6 +6,10 @@ a cached opt_einsum expression. Evidence arrays carry leading batch dimensions, 
 are one contraction with a batch index. Rows whose scaled contraction underflows are recomputed
 exactly in log space; rows whose evidence truly has probability zero raise
 :class:`~bayesprog.errors.ZeroEvidenceError` for posteriors, and get a seeded uniform choice for MAP.
+
+A discrete question over fixed tables whose observed and searched variables span at most
+``TABLE_LIMIT`` joint states is compiled, at its first call, into the table
+``P(observed, searched)``; later evidence sets are lookups in it.
 """
 
 from __future__ import annotations
