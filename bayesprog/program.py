@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 import networkx as nx
-from pydantic import ValidationError
 
 from bayesprog.engine import (
     MapResult,
@@ -24,7 +23,7 @@ from bayesprog.engine import (
 from bayesprog.errors import Diagnostic, QuestionError, SpecError
 from bayesprog.forms import get_form
 from bayesprog.spec.check import InputDecl, Term, check_document, question_problem
-from bayesprog.spec.model import Document
+from bayesprog.spec.model import Document, validate_located
 from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
 from bayesprog.spec.yamlload import Located, load_yaml
 from bayesprog.variables import Variable
@@ -245,50 +244,7 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
     if not isinstance(located.data, dict):
         return None, [located.diagnostic((), "expected a program: a mapping with bayesprog, "
                                          f"variables, decomposition; found {type(located.data).__name__}")]
-    try:
-        return Document.model_validate(located.data), []
-    except ValidationError as exc:
-        out = []
-        for err in exc.errors():
-            raw_loc = tuple(err["loc"])
-            if "str" in raw_loc and not isinstance(err.get("input"), str):
-                continue  # the string shorthand of a union did not apply: the other branch speaks
-            loc = tuple(p for p in raw_loc if not (isinstance(p, str) and p in _UNION_TAGS))
-            msg = err["msg"].removeprefix("Value error, ")
-            at_key = False
-            if err["type"] == "missing":
-                msg = f"missing required key {loc[-1]!r}"
-                loc = loc[:-1]
-            elif err["type"] == "extra_forbidden":
-                msg = f"unknown key {loc[-1]!r}"
-                if ")" in str(loc[-1]):
-                    msg += " (inside a flow mapping {...}, quote text that contains a comma)"
-                at_key = True
-            elif err["type"] == "literal_error" and loc == ("bayesprog",):
-                msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
-            elif err["type"] == "value_error":
-                msg = f"{'.'.join(map(str, loc))}: {msg}"
-            else:
-                msg = f"{'.'.join(map(str, loc))}: {msg}, found {_short(err.get('input'))}"
-            out.append(located.diagnostic(loc, msg, at_key=at_key))
-        return None, _dedupe(out)
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-_UNION_TAGS = {"QuestionSpec", "str"}
-
-
-def _dedupe(diags: list[Diagnostic]) -> list[Diagnostic]:
-    seen, out = set(), []
-    for d in diags:
-        if (d.line, d.column) not in seen:
-            seen.add((d.line, d.column))
-            out.append(d)
-    return out
+    return validate_located(located, Document)
 
 
 def loads(text: str, file: str = "<string>", base_dir: Path | None = None) -> Program:

@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
 from bayesprog.errors import BayesprogError, SpecError
-from bayesprog.spec.yamlload import load_yaml
+from bayesprog.spec.model import load_document
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
@@ -55,17 +55,7 @@ class Experiment:
 
 def load_experiment(path: str | Path) -> Experiment:
     path = Path(path)
-    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path))
-    if problems:
-        raise SpecError(problems)
-    try:
-        spec = ExperimentSpec.model_validate(located.data)
-    except ValidationError as exc:
-        raise SpecError([
-            located.diagnostic(tuple(e["loc"]), f"{'.'.join(map(str, e['loc']))}: "
-                               f"{e['msg'].removeprefix('Value error, ')}")
-            for e in exc.errors()
-        ]) from None
+    located, spec = load_document(path, ExperimentSpec)
     scenario = load_scenario((path.parent / spec.scenario).resolve())
     diags = []
     for i, task in enumerate(spec.tasks):

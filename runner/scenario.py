@@ -11,11 +11,11 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 import bayesprog
 from bayesprog.errors import SpecError
-from bayesprog.spec.yamlload import load_yaml
+from bayesprog.spec.model import load_document
 
 
 class _Strict(BaseModel):
@@ -172,17 +172,7 @@ class Scenario:
 def load_scenario(path: str | Path) -> Scenario:
     """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
     path = Path(path)
-    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path))
-    if problems:
-        raise SpecError(problems)
-    try:
-        spec = ScenarioSpec.model_validate(located.data)
-    except ValidationError as exc:
-        raise SpecError([
-            located.diagnostic(tuple(e["loc"]), f"{'.'.join(map(str, e['loc']))}: "
-                               f"{e['msg'].removeprefix('Value error, ')}")
-            for e in exc.errors()
-        ]) from None
+    located, spec = load_document(path, ScenarioSpec)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     diags = []

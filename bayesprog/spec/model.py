@@ -6,11 +6,16 @@ states in tables, parameter constraints) is checked by :mod:`bayesprog.spec.chec
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from pathlib import Path
+from typing import Any, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from bayesprog.errors import Diagnostic, SpecError
+from bayesprog.spec.yamlload import Located, load_yaml
 
 FORMAT_VERSION = 1
+M = TypeVar("M", bound=BaseModel)
 
 
 class _Strict(BaseModel):
@@ -84,32 +89,30 @@ class InputSpec(_Strict):
     description: str = ""
 
 
-class TermSpec(BaseModel):
-    """``P(X | parents)`` with a form; the form's parameters sit beside ``form``."""
+class _WithParameters(BaseModel):
+    """A form and its parameters, which sit beside ``form`` (checked by the form itself)."""
 
     model_config = ConfigDict(extra="allow")
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class TermSpec(_WithParameters):
+    """``P(X | parents)`` with a form."""
 
     term: str = Field(description="P(X | parents)")
     form: str = Field(description="name of a registered parametric form")
     description: str = ""
 
-    @property
-    def parameters(self) -> dict[str, Any]:
-        return dict(self.model_extra or {})
 
-
-class SoftEvidenceSpec(BaseModel):
+class SoftEvidenceSpec(_WithParameters):
     """A likelihood over the states of ``variable`` (virtual evidence), given by a form."""
-
-    model_config = ConfigDict(extra="allow")
 
     variable: str = Field(description="the discrete variable the likelihood is over")
     form: str = Field(description="categorical (a vector or an input) or program")
     description: str = ""
-
-    @property
-    def parameters(self) -> dict[str, Any]:
-        return dict(self.model_extra or {})
 
 
 class QuestionSpec(_Strict):
@@ -139,3 +142,57 @@ class Document(_Strict):
     def question(self, name: str) -> QuestionSpec:
         q = self.questions[name]
         return QuestionSpec(ask=q) if isinstance(q, str) else q
+
+
+_UNION_TAGS = {"QuestionSpec", "str"}
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[Diagnostic]]:
+    """Validate loaded data against a pydantic model; problems located by line and column."""
+    try:
+        return model.model_validate(located.data), []
+    except ValidationError as exc:
+        out: list[Diagnostic] = []
+        seen: set[tuple[int, int]] = set()
+        for err in exc.errors():
+            raw_loc = tuple(err["loc"])
+            if "str" in raw_loc and not isinstance(err.get("input"), str):
+                continue  # the string shorthand of a union did not apply: the other branch speaks
+            loc = tuple(p for p in raw_loc if not (isinstance(p, str) and p in _UNION_TAGS))
+            msg = err["msg"].removeprefix("Value error, ")
+            at_key = False
+            if err["type"] == "missing":
+                msg = f"missing required key {loc[-1]!r}"
+                loc = loc[:-1]
+            elif err["type"] == "extra_forbidden":
+                msg = f"unknown key {loc[-1]!r}"
+                if ")" in str(loc[-1]):
+                    msg += " (inside a flow mapping {...}, quote text that contains a comma)"
+                at_key = True
+            elif err["type"] == "literal_error" and loc == ("bayesprog",):
+                msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
+            elif err["type"] == "value_error":
+                msg = f"{'.'.join(map(str, loc))}: {msg}"
+            else:
+                msg = f"{'.'.join(map(str, loc))}: {msg}, found {_short(err.get('input'))}"
+            d = located.diagnostic(loc, msg, at_key=at_key)
+            if (d.line, d.column) not in seen:
+                seen.add((d.line, d.column))
+                out.append(d)
+        return None, out
+
+
+def load_document(path: Path, model: type[M]) -> tuple[Located, M]:
+    """Read a YAML file strictly into ``model``; raises :class:`SpecError` with every problem."""
+    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    if problems:
+        raise SpecError(problems)
+    spec, problems = validate_located(located, model)
+    if spec is None:
+        raise SpecError(problems)
+    return located, spec
