@@ -279,7 +279,6 @@ def relevant_terms(program: Program, question: Question, bound: _Bound) -> list[
     A barren variable (no observed descendant, not searched) sums out to one with its term,
     unless a term is unnormalised (a potential): those children are always kept.
     """
-    graph = program.graph
     targets = set(question.expression.left) | set(bound.discrete) | set(bound.continuous)
     targets |= set(bound.soft)
     terms = program.active_terms
@@ -289,7 +288,6 @@ def relevant_terms(program: Program, question: Question, bound: _Bound) -> list[
     keep = set(targets)
     for name in targets:
         keep |= program.ancestors(name)
-    del graph
     for name in keep:
         var = program.variables[name]
         if not var.is_discrete and name not in bound.continuous:
