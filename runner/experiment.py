@@ -172,17 +172,21 @@ def run_experiment(
             # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked
             # child must not inherit; each worker then uses one thread (no oversubscription)
             context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                                     initializer=_one_thread) as pool:
-                futures = {pool.submit(compute_unit, path, u): u for u in todo}
-                try:
-                    for future in as_completed(futures):
-                        store.save(futures[future], future.result())
-                        bar.update(1)
-                except BaseException:
-                    for future in futures:
-                        future.cancel()
-                    raise
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                       initializer=_worker_init)
+            futures = {pool.submit(compute_unit, path, u): u for u in todo}
+            try:
+                for future in as_completed(futures):
+                    store.save(futures[future], future.result())
+                    bar.update(1)
+            except BaseException:
+                # Ctrl-C or a failed chunk: what is saved stays; stop the workers at once
+                processes = list((getattr(pool, "_processes", None) or {}).values())
+                pool.shutdown(wait=False, cancel_futures=True)
+                for process in processes:
+                    process.terminate()
+                raise
+            pool.shutdown()
         else:
             for unit in todo:
                 store.save(unit, compute_unit(path, unit))
@@ -192,9 +196,13 @@ def run_experiment(
     return store
 
 
-def _one_thread() -> None:
+def _worker_init() -> None:
+    """A worker process: one compiled-kernel thread, and Ctrl-C left to the parent."""
+    import signal
+
     import numba
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     numba.set_num_threads(1)
 
 
