@@ -169,3 +169,34 @@ def test_statistics_against_scipy():
     a, b = rng.random(20), rng.random(20) + 0.2
     assert paired_test(a, b) == pytest.approx(stats.wilcoxon(a, b).pvalue)
     assert paired_test(a, a) == 1.0
+
+
+def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
+    """A real SIGINT to `bayesprog run --workers 2`: exit 130 promptly, chunks kept, resume."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = write_experiment(tmp_path, runs=8, chunk=1, iterations=25)
+    out = tmp_path / "out"
+    script = Path(sys.executable).with_name("bayesprog")
+    command = [str(script), "run", str(path), "--out", str(out), "--workers", "2", "-q",
+               "--no-report"]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("chunks/*/*/*.npz")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    sent = time.monotonic()
+    _, err = process.communicate(timeout=60)
+    assert time.monotonic() - sent < 10
+    assert process.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    kept = list(out.glob("chunks/*/*/*.npz"))
+    assert 1 <= len(kept) < 32
+    assert not list(out.rglob("*.tmp"))
+    assert subprocess.run(command, capture_output=True, text=True).returncode == 0
+    reference = tmp_path / "reference"
+    run_experiment(load_experiment(path), reference, progress=False)
+    assert_same(results_of(out), results_of(reference))
