@@ -37,6 +37,24 @@ def _load(path: str):
         raise _UserError(f"cannot read {path}: expected UTF-8 text") from None
 
 
+def _kind_hint(file: str) -> str | None:
+    """Why a file is not a program, when it is plainly another kind of file."""
+    from bayesprog.spec.yamlload import load_yaml
+
+    try:
+        located, _ = load_yaml(Path(file).read_text(encoding="utf-8"), file)
+    except (OSError, UnicodeDecodeError):
+        return None
+    data = located.data
+    if isinstance(data, dict) and "bayesprog" not in data:
+        for key in ("scenario", "experiment"):
+            if key in data:
+                article = "an" if key[0] in "aeiou" else "a"
+                return (f"{file}: this is {article} {key} file, not a program (validate checks programs; "
+                        "`bayesprog run` checks experiments and their scenarios)")
+    return None
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     problems = 0
     for file in args.files:
@@ -44,6 +62,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
             _load(file)
         except SpecError as exc:
             problems += len(exc.diagnostics)
+            hint = _kind_hint(file)
+            if hint:
+                print(f"bayesprog: {hint}", file=sys.stderr)
+                continue
             for d in exc.diagnostics:
                 print(d, file=sys.stderr)
             continue

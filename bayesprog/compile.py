@@ -26,7 +26,8 @@ def to_bayesian_network(program: Program) -> Any:
     from pgmpy.models import DiscreteBayesianNetwork
 
     if not program.is_discrete:
-        raise QuestionError(f"{program.name} has continuous variables: use to_factor_graph")
+        raise QuestionError(f"{program.name} has continuous variables: a Bayesian network (and so BIF, XMLBIF or "
+                            "UAI export) needs a discrete program")
     model = DiscreteBayesianNetwork()
     model.add_nodes_from(program.variables)
     cpds = []
@@ -36,7 +37,8 @@ def to_bayesian_network(program: Program) -> Any:
         if term.soft:
             raise QuestionError("soft evidence has no place in a Bayesian network")
         if any(isinstance(v, InputRef) for v in term.params.values()):
-            raise QuestionError(f"term {term.label} takes a runtime input: use to_factor_graph")
+            raise QuestionError(f"term {term.label} takes a runtime input: a Bayesian network (and so "
+                                "BIF, XMLBIF or UAI export) needs literal tables")
         factor = _term_factor(program, term, bound)
         values = np.exp(factor.log)  # axes: child, parents
         child = term.child

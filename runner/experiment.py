@@ -211,7 +211,12 @@ def _run_dask(address: str, path: str, todo: list[Unit], store: ResultStore, bar
         from dask.distributed import Client, as_completed
     except ImportError:
         raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
-    with Client(address) as client:
+    try:
+        client = Client(address, timeout="10s")
+    except OSError as exc:
+        raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
+            from None
+    with client:
         futures = {client.submit(compute_unit, path, u, pure=False): u for u in todo}
         for future in as_completed(futures):
             store.save(futures[future], future.result())

@@ -301,6 +301,10 @@ def _markdown(spec, rows, found, borders, step, task, digest) -> str:
     return "\n".join(lines)
 
 
+def _p(row: dict, key: str) -> str:
+    return f"{row[key]:.3g}" if key in row else ""
+
+
 def _html(md: str, spec, rows, found) -> str:
     body = [f"<h1>Experiment {html.escape(spec.name)}</h1>",
             f"<p>{html.escape(spec.description)}</p>"]
@@ -315,8 +319,7 @@ def _html(md: str, spec, rows, found) -> str:
         body.append(f"<tr><td>{r['task']}</td><td>{r['configuration']}</td>"
                     f"<td>{r['final_mean']:.3f} &plusmn; {r['final_sem']:.3f}</td>"
                     f"<td>{r['auc_mean']:.1f} &plusmn; {r['auc_sem']:.1f}</td>"
-                    f"<td>{r.get('p_final', float('nan')):.3g}</td>"
-                    f"<td>{r.get('p_auc', float('nan')):.3g}</td></tr>")
+                    f"<td>{_p(r, 'p_final')}</td><td>{_p(r, 'p_auc')}</td></tr>")
     body += ["</table>", "<h2>The paper's findings and ours</h2>",
              "<table border=1 cellpadding=3><tr><th>paper</th><th>measured</th>"
              "<th>verdict</th></tr>"]

@@ -52,7 +52,10 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
             if not isinstance(obj, dict):
                 raise ValueError("expected a JSON object")
             if "reset" in obj:
-                opts = obj["reset"] if isinstance(obj["reset"], dict) else {}
+                opts = obj["reset"]
+                if not isinstance(opts, dict) or set(opts) - {"seed"}:
+                    raise ValueError('expected {"reset": {"seed": S}} (or {"reset": {}}), found '
+                                     f"{_short(opts)}")
                 seed = _seed(opts.get("seed", seed))
                 started, k = False, 0
                 reply: dict = {"reset": True, "seed": seed}

@@ -665,3 +665,21 @@ def test_schema(capsys, tmp_path):
     target = tmp_path / "schema.json"
     code, _, _ = run(capsys, "schema", "-o", target)
     assert code == 0 and json.loads(target.read_text(encoding="utf-8")) == schema
+
+
+def test_validate_names_the_kind_of_a_scenario_or_experiment_file(capsys):
+    root = Path(__file__).parents[1]
+    assert main(["validate", str(root / "models/scenarios/paper.yaml"),
+                 str(root / "models/experiments/quick.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "paper.yaml: this is a scenario file, not a program" in err
+    assert "quick.yaml: this is an experiment file, not a program" in err
+    assert "Traceback" not in err
+
+
+def test_import_of_a_file_without_variables_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.bif"
+    bad.write_text("garbage\n")
+    assert main(["import", str(bad), "-o", str(tmp_path / "x.yaml")]) == 2
+    assert "bad.bif" in capsys.readouterr().err
+    assert not (tmp_path / "x.yaml").exists()

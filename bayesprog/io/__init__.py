@@ -135,6 +135,9 @@ def import_network(path: str | Path, out: str | Path) -> Path:
     """Convert the network at ``path`` into a program file ``out``; returns ``out``."""
     path, out = Path(path), Path(out)
     model = read_network(path)
+    if not list(model.nodes()):
+        raise NetworkError(f"{path}: no variables found: expected a {network_format(path).upper()} "
+                           "network")
     name = path.name.split(".")[0]
     out.write_text(dump_document(network_to_document(model, name, path.name)), encoding="utf-8")
     return out

@@ -204,3 +204,9 @@ def test_reset_with_a_negative_seed_is_refused_or_works():
     else:
         assert replies[0] == {"reset": True, "seed": -1}
     assert_step_replies(replies[1:])
+
+
+def test_reset_with_an_unknown_key_gets_an_error_reply():
+    replies = session(['{"reset": {"start": [3, 4]}}', WALK[0]])
+    assert "line 1" in replies[0]["error"] and "start" in replies[0]["error"]
+    assert replies[1]["k"] == 0
