@@ -47,7 +47,7 @@ def _kind_hint(file: str) -> str | None:
         return None
     data = located.data
     if isinstance(data, dict) and "bayesprog" not in data:
-        for key in ("scenario", "experiment"):
+        for key in ("experiment", "scenario"):
             if key in data:
                 article = "an" if key[0] in "aeiou" else "a"
                 return (f"{file}: this is {article} {key} file, not a program (validate checks programs; "
