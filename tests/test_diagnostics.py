@@ -15,6 +15,8 @@ import pytest
 
 import bayesprog
 
+PROGRAMS = Path(__file__).parent / "programs"
+
 FILE = "model.yaml"
 
 
@@ -778,47 +780,9 @@ def test_question_errors(sprinkler, question, evidence, words):
 
 
 # a program with a grid, fields, beta, gmm, runtime inputs and a soft-evidence sub-program ------------
-OBJ = """\
-bayesprog: 1
-variables:
-  R: {states: [rectangle, triangle]}
-  L1: {continuous: [0, 1]}
-  L2: {continuous: [0, 1]}
-decomposition:
-  - {term: P(R), form: uniform}
-  - {term: P(L1 | R), form: beta, a: {rectangle: 1, triangle: 1}, b: {rectangle: 4.5, triangle: 1}}
-  - {term: P(L2 | R), form: beta, a: 1, b: {rectangle: 1, triangle: 4.5}}
-questions:
-  shape: P(R | L1, L2)
-"""
+OBJ = (PROGRAMS / "obj.yaml").read_text(encoding="utf-8")
 
-TAR = """\
-bayesprog: 1
-variables:
-  O: {grid: {shape: [4, 5], cell: 0.01}}
-  T: {states: [T1, T2]}
-  R: {states: [rectangle, triangle]}
-  I: {continuous: [0, 1], indexed_by: O}
-  S: {continuous: [0, 1], indexed_by: O}
-inputs:
-  templates: {shape: [R, K, 2]}
-  l1: {}
-  l2: {}
-decomposition:
-  - {term: P(O), form: uniform}
-  - {term: P(T), form: uniform}
-  - {term: P(I | O), form: beta, a: 1, b: 2.5}
-  - {term: "P(S | O, T)", form: beta, a: {T1: 3, T2: 2}, b: 1}
-  - {term: P(R | O), form: gmm, means: {input: templates}, sigma: 0.015, floor: 0.1}
-soft_evidence:
-  - variable: R
-    form: program
-    program: obj.yaml
-    question: shape
-    bind: {L1: {input: l1}, L2: {input: l2}}
-questions:
-  next: {ask: "P(O | T, I, S)", kind: map}
-"""
+TAR = (PROGRAMS / "tar.yaml").read_text(encoding="utf-8")
 
 N_CELLS = 20
 TEMPLATES = np.array([[[0.01, 0.01], [0.02, 0.03]], [[0.03, 0.04], [0.01, 0.02]]])  # [R, K, 2]

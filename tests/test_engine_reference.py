@@ -17,6 +17,7 @@ import itertools
 import warnings
 from dataclasses import dataclass
 from functools import reduce
+from pathlib import Path
 
 import networkx as nx
 import numpy as np
@@ -30,6 +31,8 @@ from scipy.special import logsumexp, softmax
 import bayesprog
 from bayesprog.compile import to_bayesian_network, to_factor_graph
 from bayesprog.errors import QuestionError, ZeroEvidenceError
+
+PROGRAMS = Path(__file__).parent / "programs"
 
 with warnings.catch_warnings():
     # pgmpy warns about its deprecated modules when imported; pyagrum's SWIG module emits
@@ -597,47 +600,9 @@ def test_batched_continuous_evidence_with_batched_discrete_parents():
 
 
 # sub-programs ----------------------------------------------------------------------------------
-TAR_YAML = """\
-bayesprog: 1
-variables:
-  O: {grid: {shape: [4, 5], cell: 0.01}}
-  T: {states: [T1, T2]}
-  R: {states: [rectangle, triangle]}
-  I: {continuous: [0, 1], indexed_by: O}
-  S: {continuous: [0, 1], indexed_by: O}
-inputs:
-  templates: {shape: [R, K, 2]}
-  l1: {}
-  l2: {}
-decomposition:
-  - {term: P(O), form: uniform}
-  - {term: P(T), form: uniform}
-  - {term: P(I | O), form: beta, a: 1, b: 2.5}
-  - {term: "P(S | O, T)", form: beta, a: {T1: 3, T2: 2}, b: 1}
-  - {term: P(R | O), form: gmm, means: {input: templates}, sigma: 0.015, floor: 0.1}
-soft_evidence:
-  - variable: R
-    form: program
-    program: obj.yaml
-    question: shape
-    bind: {L1: {input: l1}, L2: {input: l2}}
-questions:
-  next: {ask: "P(O | T, I, S)", kind: map}
-"""
+TAR_YAML = (PROGRAMS / "tar.yaml").read_text(encoding="utf-8")
 
-OBJ_YAML = """\
-bayesprog: 1
-variables:
-  R: {states: [rectangle, triangle]}
-  L1: {continuous: [0, 1]}
-  L2: {continuous: [0, 1]}
-decomposition:
-  - {term: P(R), form: uniform}
-  - {term: P(L1 | R), form: beta, a: {rectangle: 1, triangle: 1}, b: {rectangle: 4.5, triangle: 1}}
-  - {term: P(L2 | R), form: beta, a: 1, b: {rectangle: 1, triangle: 4.5}}
-questions:
-  shape: P(R | L1, L2)
-"""
+OBJ_YAML = (PROGRAMS / "obj.yaml").read_text(encoding="utf-8")
 
 
 @pytest.fixture(scope="module")
