@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.engine import _slice, _term_factor, bind, relevant_terms
+from bayesprog.engine import _Bound, _slice, _term_factor, bind, relevant_terms
 from bayesprog.errors import QuestionError
 from bayesprog.program import Program, Question
 from bayesprog.spec.check import InputRef
@@ -31,8 +31,7 @@ def to_bayesian_network(program: Program) -> Any:
     model = DiscreteBayesianNetwork()
     model.add_nodes_from(program.variables)
     cpds = []
-    empty = Question(_empty_question(program))
-    bound = bind(program, empty, {}, {}, {})
+    bound = _Bound(())  # no evidence, no inputs: the literal tables as they are
     for term in program.active_terms:
         if term.soft:
             raise QuestionError("soft evidence has no place in a Bayesian network")
@@ -91,9 +90,3 @@ def to_factor_graph(
         graph.add_edges_from((a, factor) for a in factor.variables)
     graph.check_model()
     return graph
-
-
-def _empty_question(program: Program):
-    from bayesprog.spec.terms import Expression
-
-    return Expression(tuple(program.variables)[:1])

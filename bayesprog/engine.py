@@ -384,7 +384,7 @@ class _Plans:
     def __init__(self) -> None:
         self._cache: dict[Any, Any] = {}
 
-    def get(self, operands: list[_Factor], output: tuple[str, ...], batched_out: bool, size: int):
+    def get(self, operands: list[_Factor], output: tuple[str, ...], batched_out: bool):
         key = (tuple((f.axes, f.batched, f.log.shape) for f in operands), output, batched_out)
         expr = self._cache.get(key)
         if expr is None:
@@ -548,7 +548,7 @@ def _contract(program, operands, searched, batched_out, size):
             operands.append(_Factor((v,), np.ones(program.variables[v].card), False))
     if batched_out and not any(f.batched for f in operands):
         operands.append(_Factor((), np.ones(size), True))
-    expr = program._plans.get(operands, searched, batched_out, size)
+    expr = program._plans.get(operands, searched, batched_out)
     return expr(*(f.log for f in operands))
 
 

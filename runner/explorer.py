@@ -86,6 +86,11 @@ class Explorer:
         self.centres = scenario.centres
         self.diagonal = float(np.hypot(*(np.asarray(scenario.shape) * scenario.cell)))
         self.tracker = ShapeTracker(self.outlines, self.template_points)
+        nx, ny = scenario.shape
+        offsets = np.stack(np.meshgrid(np.arange(-nx + 1, nx), np.arange(-ny + 1, ny),
+                                       indexing="ij"), axis=-1).reshape(-1, 2)
+        self._inhibition_table = inhibition(offsets * scenario.cell, np.zeros((1, 2)),
+                                            self.diagonal).reshape(2 * nx - 1, 2 * ny - 1)
         self.last: Decision | None = None
         self.registration: Registration | None = None
         #: seconds spent per phase since construction (perception, cues, shape, decision)
@@ -114,14 +119,9 @@ class Explorer:
         self.last = None
 
     def inhibition_at(self, last: np.ndarray) -> np.ndarray:
-        """Eq. (10) around the last probed cells [runs] -> [runs, cells], by lookup: I depends
-        only on the offset between cells, so it is computed once for every offset."""
+        """Eq. (10) around the last probed cells [runs] -> [runs, cells], by lookup in the table
+        of I over every offset between two cells (I depends only on the offset)."""
         nx, ny = self.scenario.shape
-        if not hasattr(self, "_inhibition_table"):
-            offsets = np.stack(np.meshgrid(np.arange(-nx + 1, nx), np.arange(-ny + 1, ny),
-                                           indexing="ij"), axis=-1).reshape(-1, 2)
-            table = inhibition(offsets * self.scenario.cell, np.zeros((1, 2)), self.diagonal)
-            self._inhibition_table = table.reshape(2 * nx - 1, 2 * ny - 1)
         ix, iy = np.divmod(np.arange(nx * ny), ny)
         lx, ly = np.divmod(np.asarray(last), ny)
         return self._inhibition_table[ix[None] - lx[:, None] + nx - 1,

@@ -33,7 +33,7 @@ def material_normals(perception: Program) -> dict[str, tuple[np.ndarray, np.ndar
         for name in ("mean", "sigma"):
             p = term.params[name]
             assert isinstance(p, ParamValue), f"P({feature} | M) {name} must be a literal"
-            values.append(np.broadcast_to(p.array if p.axes else p.array, (card,)).astype(float))
+            values.append(np.broadcast_to(p.array, (card,)).astype(float))
         out[feature] = (values[0], values[1])
     return out
 

@@ -11,7 +11,7 @@ import json
 import math
 from typing import IO
 
-from bayesprog.errors import BayesprogError
+from bayesprog.errors import BayesprogError, short_repr
 from runner.explorer import Explorer
 
 
@@ -29,8 +29,7 @@ def _reading(obj: dict, key: str) -> float:
 
 
 def _short(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return short_repr(value, 40)
 
 
 def _seed(value: object) -> int:

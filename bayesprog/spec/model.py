@@ -11,7 +11,7 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from bayesprog.errors import Diagnostic, SpecError
+from bayesprog.errors import Diagnostic, SpecError, short_repr
 from bayesprog.spec.yamlload import Located, load_yaml
 
 FORMAT_VERSION = 1
@@ -147,11 +147,6 @@ class Document(_Strict):
 _UNION_TAGS = {"QuestionSpec", "str"}
 
 
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[Diagnostic]]:
     """Validate loaded data against a pydantic model; problems located by line and column."""
     try:
@@ -179,7 +174,7 @@ def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[D
             elif err["type"] == "value_error":
                 msg = f"{'.'.join(map(str, loc))}: {msg}"
             else:
-                msg = f"{'.'.join(map(str, loc))}: {msg}, found {_short(err.get('input'))}"
+                msg = f"{'.'.join(map(str, loc))}: {msg}, found {short_repr(err.get('input'))}"
             d = located.diagnostic(loc, msg, at_key=at_key)
             if (d.line, d.column) not in seen:
                 seen.add((d.line, d.column))
