@@ -238,11 +238,14 @@ def _continuous_values(var: Continuous, value: Any, variables: Mapping) -> np.nd
             raise QuestionError(f"evidence for field {var.name}: expected a last dimension of "
                                 f"{card} (one value per state of {var.index}), found shape "
                                 f"{arr.shape}")
-    if np.any(np.isnan(arr)):
-        raise QuestionError(f"evidence for {var.name}: expected numbers, found NaN")
-    if not np.all(np.isfinite(arr)) and np.isfinite(var.width):
+    missing = np.isnan(arr)
+    if missing.any() and var.index is None:
+        raise QuestionError(f"evidence for {var.name}: expected numbers, found NaN (a variable "
+                            "that is not observed is left out of the evidence)")
+    if not np.all(np.isfinite(arr[~missing])) and np.isfinite(var.width):
         raise QuestionError(f"evidence for {var.name}: expected finite values")
-    outside = (arr < var.low) | (arr > var.high)
+    with np.errstate(invalid="ignore"):
+        outside = (arr < var.low) | (arr > var.high)
     if np.any(outside):
         raise QuestionError(f"evidence {var.name}={arr[outside].ravel()[0]:g} is outside its "
                             f"support [{var.low:g}, {var.high:g}]")
@@ -327,6 +330,25 @@ def _bound_param(term: Term, key: str, ref: InputRef, bound: _Bound) -> ParamVal
     return value
 
 
+def _observed_part(term: Term, value: ParamValue | None
+                   ) -> tuple[ParamValue | None, ParamValue | None]:
+    """A field's value with its missing (NaN) entries moved into the support, and where they
+    are. A missing entry is marginalised: the term's factor is 1 there, which needs a form that
+    integrates to one over the child."""
+    if value is None or not np.isnan(value.array).any():
+        return value, None
+    child = term.child
+    assert isinstance(child, Continuous)
+    if not term.form.is_normalized(child):
+        raise QuestionError(f"evidence for {child.name}: a missing (NaN) field value needs a "
+                            f"normalised form, but {term.label} is a {term.form.name} potential")
+    missing = np.isnan(value.array)
+    low, high = (b if np.isfinite(b) else None for b in (child.low, child.high))
+    inside = (low + high) / 2 if low is not None and high is not None else (low or high or 0.0)
+    return (ParamValue(value.axes, np.where(missing, inside, value.array), value.batched),
+            ParamValue(value.axes, missing, value.batched))
+
+
 def _term_factor(program: Program, term: Term, bound: _Bound) -> _Factor:
     static = _is_static(term)
     if static:
@@ -337,6 +359,7 @@ def _term_factor(program: Program, term: Term, bound: _Bound) -> _Factor:
     for key, value in term.params.items():
         params[key] = _bound_param(term, key, value, bound) if isinstance(value, InputRef) else value
     value = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
+    value, missing = _observed_part(term, value)
     axes = term.axes
     cards = tuple(program.variables[a].card for a in axes)  # type: ignore[union-attr]
     ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,
@@ -350,6 +373,9 @@ def _term_factor(program: Program, term: Term, bound: _Bound) -> _Factor:
         value is not None and value.batched
     )
     log = np.broadcast_to(log, full)
+    if missing is not None:
+        # a field value that is not observed: the density integrates to one over it
+        log = np.where(missing.aligned(axes, 0), 0.0, log)
     if not batched:
         log = log[0]
     elif log.shape[0] != bound.size:

@@ -35,14 +35,14 @@ def _closest(qx, qy, poly, nv):
 
 
 @njit(cache=True, parallel=True)
-def icp(path, outlines, nverts, angle, shift, iterations):
+def icp(path, counts, outlines, nverts, angle, shift, iterations):
     """Refine every start in place; returns the mean distance per start.
 
-    path [R, k, 2]; outlines [T, V, 2] with ``nverts[t]`` vertices used; angle [R, T, S] and
+    path [R, k, 2], of which run r uses its first ``counts[r]`` (>= 1) points; outlines
+    [T, V, 2] with ``nverts[t]`` vertices used; angle [R, T, S] and
     shift [R, T, S, 2] are the starts (overwritten with the results).
     """
     runs, n_t, n_s = angle.shape
-    k = path.shape[1]
     dist = np.empty((runs, n_t, n_s))
     for job in prange(runs * n_t * n_s):
         r = job // (n_t * n_s)
@@ -50,6 +50,7 @@ def icp(path, outlines, nverts, angle, shift, iterations):
         s = job % n_s
         poly = outlines[t]
         nv = nverts[t]
+        k = counts[r]
         a, tx, ty = angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1]
         for _ in range(iterations):
             c, sn = math.cos(a), math.sin(a)

@@ -1,8 +1,9 @@
-"""The per-cell cue fields of pi_tar, batched over runs (leading axis).
+"""The per-cell cue fields of pi_tar, batched over runs (leading axes).
 
 * uncertainty U, eq. (11): entropy of the cell's material posterior / log(number of materials);
-* saliency S, eq. (12): 3x3 Sobel of the map d(v) = P(M_v = target material);
-  S = max(|s_x|, |s_y|) / 4 (4 is the largest Sobel response on a [0, 1] map); s_z exists in 3D only;
+* saliency S, eq. (12): a 3x3 Sobel of the *perceived* stimulus d(v) = P(M_v = target material),
+  taken over the cells that have been probed only (see :func:`saliency`);
+  S = max(|s_x|, |s_y|, |s_z|) / s_norm, with s_norm = 4 (the largest response on a [0, 1] map);
 * inhibition I, eq. (10): I(d) = 1 - f(d) / max f with the Beta kernel
   f(d) = d^(alpha-1) (1-d)^(beta-1), d = distance to the last probed cell / workspace diagonal.
   (The paper prints (1-d)^(1-beta), which diverges at d = 1; we read it as the Beta kernel.)
@@ -11,11 +12,13 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 from scipy.special import xlog1py, xlogy
 
 SOBEL_NORM = 4.0
 INHIBITION_ALPHA = 1.01
 INHIBITION_BETA = 9.0
+_SMOOTH = np.array([1.0, 2.0, 1.0])
 
 
 def uncertainty(posterior: np.ndarray) -> np.ndarray:
@@ -27,21 +30,98 @@ def uncertainty(posterior: np.ndarray) -> np.ndarray:
 
 def sobel(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """3x3 Sobel responses (s_x along axis -2, s_y along axis -1), edges replicated."""
-    p = np.pad(d, [(0, 0)] * (d.ndim - 2) + [(1, 1), (1, 1)], mode="edge")
-    nx, ny = d.shape[-2:]
-
-    def at(dx: int, dy: int) -> np.ndarray:
-        return p[..., 1 + dx : 1 + dx + nx, 1 + dy : 1 + dy + ny]
-
-    sx = (at(1, -1) + 2 * at(1, 0) + at(1, 1)) - (at(-1, -1) + 2 * at(-1, 0) + at(-1, 1))
-    sy = (at(-1, 1) + 2 * at(0, 1) + at(1, 1)) - (at(-1, -1) + 2 * at(0, -1) + at(1, -1))
-    return sx, sy
+    return (ndimage.sobel(d, axis=-2, mode="nearest"), ndimage.sobel(d, axis=-1, mode="nearest"))
 
 
-def saliency(target_probability: np.ndarray) -> np.ndarray:
-    """Eq. (12) on a map ``[..., nx, ny]`` of P(M = target material), in [0, 1]."""
-    sx, sy = sobel(target_probability)
-    return np.clip(np.maximum(np.abs(sx), np.abs(sy)) / SOBEL_NORM, 0.0, 1.0)
+def _line_means(values: np.ndarray, weights: np.ndarray, axis: int, dims: int):
+    """Per cell, the (1, 2, 1)-weighted mean of ``values`` over the weighted cells of each of
+    the three lines (offsets -1, 0, +1 along ``axis``) of its 3^dims neighbourhood, and whether
+    that line has any weight. Cells outside the grid have no weight."""
+    num, den = values * weights, weights.astype(float)
+    for other in range(-dims, 0):
+        if other != axis:
+            num = ndimage.correlate1d(num, _SMOOTH, axis=other, mode="constant")
+            den = ndimage.correlate1d(den, _SMOOTH, axis=other, mode="constant")
+    out = []
+    for offset in (-1, 0, 1):
+        n, w = _shift(num, offset, axis), _shift(den, offset, axis)
+        has = w > 1e-12
+        out.append((np.where(has, n / np.where(has, w, 1.0), 0.0), has))
+    return out
+
+
+def _shift(a: np.ndarray, offset: int, axis: int) -> np.ndarray:
+    """``out[..., i, ...] = a[..., i + offset, ...]`` along ``axis``, zero outside."""
+    if offset == 0:
+        return a
+    out = np.zeros_like(a)
+    n = a.shape[axis]
+    src = [slice(None)] * a.ndim
+    dst = [slice(None)] * a.ndim
+    src[axis] = slice(max(offset, 0), n + min(offset, 0))
+    dst[axis] = slice(max(-offset, 0), n - max(offset, 0))
+    out[tuple(dst)] = a[tuple(src)]
+    return out
+
+
+def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
+             dims: int = 2) -> np.ndarray:
+    """Eq. (12): saliency of the perceived stimulus, ``[..., nx, ny(, nz)]`` -> same, in [0, 1].
+
+    ``target_map`` is the perceived stimulus for the task's material (d(v) in [0, 1]) and
+    ``perceived`` marks the cells that have been probed (every cell when None). Along each grid
+    axis the Sobel kernel compares the two lines of the cell's 3x3 neighbourhood on either side
+    of it, each a (1, 2, 1)-weighted sum; divided by s_norm = 4 this is the difference of the two
+    lines' weighted means. Here each line's mean runs over its *perceived* cells only, and a line
+    with none is replaced by the centre line, as the standard Sobel replicates the centre line at
+    the edge of an image (cells outside the grid are not perceived); along an axis with fewer
+    than two perceived lines there is nothing to compare. So the frontier between probed and
+    unprobed cells is not salient, a perceived change of material is, and so are the unprobed
+    cells that continue a perceived border: they lie between perceived cells of the target
+    material and perceived cells of another. Inside the grid, with every cell perceived, this
+    is the standard Sobel.
+
+    Where the neighbourhood holds perceived cells but nothing to compare, the saliency is not
+    observed (NaN: the term is marginalised); where it holds no perceived cell, the map there is
+    the uniform prior, whose Sobel response is 0. ``dims`` = 3 adds s_z for a 3-D grid.
+
+    >>> d = np.array([[1.0, 1.0, 0.0, 0.0],
+    ...               [1.0, 1.0, 0.0, 0.0],
+    ...               [0.0, 0.0, 0.0, 0.0]])
+    >>> probed = np.array([[True, True, True, False],
+    ...                    [True, False, False, False],
+    ...                    [False, False, False, False]])
+    >>> saliency(d, probed).round(2)
+    array([[ 0.,  1.,  1., nan],
+           [ 0.,  1.,  1., nan],
+           [nan, nan,  0.,  0.]])
+    """
+    d = np.asarray(target_map, dtype=float)
+    mask = np.ones(d.shape, bool) if perceived is None else np.asarray(perceived, bool)
+    best = np.zeros(d.shape)
+    compared_any = np.zeros(d.shape, bool)
+    for axis in range(-dims, 0):
+        (lo, has_lo), (mid, has_mid), (hi, has_hi) = _line_means(d, mask, axis, dims)
+        upper = np.where(has_hi, hi, mid)
+        lower = np.where(has_lo, lo, mid)
+        compared = (has_lo.astype(int) + has_mid + has_hi) >= 2
+        np.maximum(best, np.where(compared, np.abs(upper - lower), 0.0), out=best)
+        compared_any |= compared
+    size = (1,) * (d.ndim - dims) + (3,) * dims
+    near = ndimage.maximum_filter(mask, size=size, mode="constant")
+    return np.where(compared_any, np.clip(best, 0.0, 1.0), np.where(near, np.nan, 0.0))
+
+
+def perceived_border(target_probability: np.ndarray, perceived: np.ndarray,
+                     dims: int = 2) -> np.ndarray:
+    """The probed cells on a perceived border: perceived as the target material (d >= 1/2) with
+    a probed neighbour (3^dims neighbourhood) perceived as another, or the reverse."""
+    mask = np.asarray(perceived, bool)
+    target = (np.asarray(target_probability) >= 0.5) & mask
+    size = (1,) * (mask.ndim - dims) + (3,) * dims
+    near_target = ndimage.maximum_filter(target, size=size, mode="constant")
+    near_other = ndimage.maximum_filter(mask & ~target, size=size, mode="constant")
+    return mask & np.where(target, near_other, near_target)
 
 
 def _log_kernel(d: np.ndarray, alpha: float, beta: float) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 import bayesprog
 from bayesprog import Program
-from runner.cues import inhibition, saliency, uncertainty
+from runner.cues import inhibition, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
 from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
 
@@ -43,6 +43,8 @@ class Decision:
     shape_error: np.ndarray | None
     templates: np.ndarray | None
     next_cell: np.ndarray
+    #: the runs whose shape cue was in force (enough probed cells on the perceived border)
+    shape_ready: np.ndarray | None = None
 
 
 class Explorer:
@@ -116,6 +118,7 @@ class Explorer:
         self.expected = self.flat(start)
         self.visits = np.zeros((self.runs, len(self.centres)), dtype=int)
         self.tracker.reset()
+        self._border = np.zeros((self.runs, len(self.centres)), bool)
         self.last = None
 
     def inhibition_at(self, last: np.ndarray) -> np.ndarray:
@@ -154,43 +157,73 @@ class Explorer:
         self.visits[rows, cells] += 1
         self.timings["perception"] += time.perf_counter() - start
 
+    def target_map(self) -> np.ndarray:
+        """d(v) = P(M_v = the task's material) and the probed cells, [runs, nx, ny] each."""
+        shape = (self.runs, *self.scenario.shape)
+        d = self.posterior[..., self.target_material].reshape(shape)
+        return d, (self.visits > 0).reshape(shape)
+
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
-        nx, ny = self.scenario.shape
-        d = self.posterior[..., self.target_material].reshape(self.runs, nx, ny)
-        s = saliency(d).reshape(self.runs, -1)
+        d, perceived = self.target_map()
+        s = saliency(d, perceived).reshape(self.runs, -1)
         return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
 
-    def shape_cue(self) -> Registration:
-        """The templates registered onto every run's path (eq. 6-7)."""
-        return self.tracker.update(self.centres[np.stack(self.path, axis=1)])
+    def border_cells(self) -> np.ndarray:
+        """The probed cells on the perceived border of the task's material, [runs, cells]."""
+        d, perceived = self.target_map()
+        return perceived_border(d, perceived).reshape(self.runs, -1)
+
+    def shape_cue(self) -> tuple[Registration, np.ndarray]:
+        """The templates registered onto the part of every run's path that lies on the perceived
+        border (eq. 6-7), and which runs have enough such cells (``MIN_POINTS``) for a shape cue.
+        Runs whose set of border cells did not change keep their registration."""
+        border = self.border_cells()
+        counts = border.sum(axis=1)
+        ready = counts >= MIN_POINTS
+        changed = ready & np.any(border != self._border, axis=1)
+        self._border = border
+        top = max(int(counts.max()), 1)
+        cells = np.argsort(~border, axis=1, kind="stable")[:, :top]  # border cells first
+        registration = self.tracker.update(self.centres[cells], np.maximum(counts, 1),
+                                           np.flatnonzero(changed))
+        return registration, ready
 
     def decide(self) -> np.ndarray:
         """Ask pi_tar for the next cell of every run (flat indices)."""
         start = time.perf_counter()
         i, s, u = self.cue_fields()
         evidence = {"T": self.task, "I": i, "S": s, "U": u}
-        k = len(self.path)
         shape_start = time.perf_counter()
         self.timings["cues"] += shape_start - start
-        if k >= MIN_POINTS and "P(R | O)" not in self.target.ablated:
-            reg = self.shape_cue()
+        reg, ready = None, np.zeros(self.runs, bool)
+        if "P(R | O)" not in self.target.ablated:
+            reg, ready = self.shape_cue()
             self.registration = reg
-            inputs = {"templates": reg.points, "l_rectangle": reg.error[:, 0],
-                      "l_triangle": reg.error[:, 1]}
-            program = self.target
-        else:
-            reg = None
-            # no shape evidence yet: P(R | O) is uniform, and so the soft evidence on R is moot
-            inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
-            program = self.target_no_shape
         ask_start = time.perf_counter()
         self.timings["shape"] += ask_start - shape_start
-        answer = program.ask("next_target", evidence, inputs=inputs, rng=self.rngs)
-        nxt = answer.indices[:, 0]
-        self.last = Decision(k, i, s, u, None if reg is None else reg.error,
-                             None if reg is None else reg.points, nxt)
-        self.target_answer = answer
+        nxt = np.empty(self.runs, dtype=np.int64)
+        probabilities = np.empty((self.runs, len(self.centres)))
+        for group, with_shape in ((np.flatnonzero(ready), True), (np.flatnonzero(~ready), False)):
+            if not group.size:
+                continue
+            rows = {k: (v[group] if isinstance(v, np.ndarray) else v) for k, v in evidence.items()}
+            if with_shape:
+                assert reg is not None
+                inputs = {"templates": reg.points[group], "l_rectangle": reg.error[group, 0],
+                          "l_triangle": reg.error[group, 1]}
+                program = self.target
+            else:
+                # no shape evidence: P(R | O) is uniform, and so the soft evidence on R is moot
+                inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
+                program = self.target_no_shape
+            answer = program.ask("next_target", rows, inputs=inputs,
+                                 rng=[self.rngs[r] for r in group])
+            nxt[group] = answer.indices[:, 0]
+            probabilities[group] = answer.posterior.probabilities
+        self.last = Decision(len(self.path), i, s, u, None if reg is None else reg.error,
+                             None if reg is None else reg.points, nxt, ready)
+        self.target_probabilities = probabilities
         self.timings["decision"] += time.perf_counter() - ask_start
         return nxt
 

@@ -129,14 +129,14 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         decision_cells = explorer.decide()
         d = explorer.last
         evidence = {"T": task, "I": d.inhibition, "S": d.saliency, "U": d.uncertainty}
-        if d.templates is not None and "P(R | O)" not in explorer.target.ablated:
+        if d.templates is not None and d.shape_ready is not None and d.shape_ready[0]:
             inputs = {"templates": d.templates, "l_rectangle": d.shape_error[:, 0],
                       "l_triangle": d.shape_error[:, 1]}
             shape = shape_only.posterior("P(O | T, I, S, U)", evidence, inputs=inputs)
             shape_field = shape.probabilities[0]
         else:
             shape_field = np.full(len(scenario.centres), 1.0 / len(scenario.centres))
-        posterior = explorer.target_answer.posterior.probabilities[0]
+        posterior = explorer.target_probabilities[0]
         yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0],
                "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
                "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}

@@ -67,6 +67,7 @@ def match(
     outlines: np.ndarray,
     points: np.ndarray,
     *,
+    counts: np.ndarray | None = None,
     rotations: int = 8,
     iterations: int = 25,
     error_scale: float = ERROR_SCALE,
@@ -74,17 +75,24 @@ def match(
 ) -> Registration:
     """Register templates onto ``path`` [runs, k, 2].
 
+    ``counts`` [runs] (each in 1..k) says how many of its first points each run uses (all k
+    when None): runs with point sets of different sizes are registered in one batch.
     ``outlines`` [T, V, 2] are the template polygons and ``points`` [T, K, 2] the template points
     returned registered (both in the template frame, centred). ``warm`` = (angle, shift) of
     shape [runs, T] and [runs, T, 2] adds the previous step's transform as one more start.
     """
-    runs = path.shape[0]
+    runs, k = path.shape[:2]
+    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
+    if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
+        raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
     n_t = outlines.shape[0]
     radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
     angles = np.repeat(np.arange(rotations) * (2 * np.pi / max(rotations, 1)), len(_OFFSETS))
     moves = np.tile(_OFFSETS, (rotations, 1))[None] * radius[:, None, None]  # [T, S, 2]
     angle = np.broadcast_to(angles, (runs, n_t, angles.size)).copy()
-    shift = path.mean(axis=1)[:, None, None, :] + moves[None]
+    used = np.arange(k)[None, :] < counts[:, None]
+    centroid = (path * used[..., None]).sum(axis=1) / counts[:, None]
+    shift = centroid[:, None, None, :] + moves[None]
     if rotations == 0 and warm is None:
         raise ValueError("match needs rotations > 0 or a warm start")
     if warm is not None:
@@ -93,8 +101,8 @@ def match(
     angle = np.ascontiguousarray(angle, dtype=float)
     shift = np.ascontiguousarray(shift, dtype=float)
     nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
-    dist = icp(np.ascontiguousarray(path, dtype=float), np.ascontiguousarray(outlines, float),
-               nverts, angle, shift, iterations)
+    dist = icp(np.ascontiguousarray(path, dtype=float), counts,
+               np.ascontiguousarray(outlines, float), nverts, angle, shift, iterations)
     best = dist.argmin(-1)[..., None]
     angle = np.take_along_axis(angle, best, -1)[..., 0]
     shift = np.take_along_axis(shift, best[..., None], 2)[:, :, 0]
@@ -109,13 +117,17 @@ def match(
     )
 
 
-class ShapeTracker:
-    """ICP over a growing path, one update per step, batched over runs.
+_FIELDS = ("error", "distance", "points", "angle", "shift")
 
-    The path grows by one point per step, so each step starts from the previous step's
-    transform (a few iterations). The full multi-start search runs again while the path is
-    short, every ``restart_every`` steps, and at once for the runs whose warm fit got clearly
-    worse than at the previous step (it is sliding into a wrong basin).
+
+class ShapeTracker:
+    """ICP over point sets that change a little from one step to the next, batched over runs.
+
+    Each run keeps its last registration. ``update`` recomputes only the runs it is given
+    (those whose point set changed), starting from their previous transform (a few
+    iterations). The full multi-start search runs again while a run's set is short, each time
+    its size passes a multiple of ``restart_every``, and at once for the runs whose warm fit got
+    clearly worse than their previous one (it is sliding into a wrong basin).
     """
 
     def __init__(self, outlines: np.ndarray, points: np.ndarray, restart_every: int = 10,
@@ -127,25 +139,67 @@ class ShapeTracker:
         self.reset()
 
     def reset(self) -> None:
-        self.warm: tuple[np.ndarray, np.ndarray] | None = None
-        self.distance: np.ndarray | None = None
+        self.state: Registration | None = None
+        self.fitted: np.ndarray | None = None  # runs registered at least once
+        self.searched: np.ndarray | None = None  # point count at each run's last full search
 
-    def update(self, path: np.ndarray) -> Registration:
-        k = path.shape[1]
-        if self.warm is None or k <= self.short or k % self.restart_every == 0:
-            reg = match(path, self.outlines, self.points, warm=self.warm)
+    def _allocate(self, runs: int) -> Registration:
+        n_t, n_k = self.points.shape[:2]
+        nan = np.full((runs, n_t), np.nan)
+        self.fitted = np.zeros(runs, bool)
+        self.searched = np.zeros(runs, np.int64)
+        return Registration(error=nan.copy(), distance=nan.copy(),
+                            points=np.full((runs, n_t, n_k, 2), np.nan), angle=nan.copy(),
+                            shift=np.full((runs, n_t, 2), np.nan))
+
+    def update(self, path: np.ndarray, counts: np.ndarray | None = None,
+               runs: np.ndarray | None = None) -> Registration:
+        """Register the templates onto ``path`` [runs, k, 2] (the first ``counts[r]`` points of
+        run r) for the ``runs`` given (all when None); the other runs keep their registration
+        (NaN until they have one). Returns every run's registration."""
+        n, k = path.shape[:2]
+        counts = np.full(n, k, np.int64) if counts is None else np.asarray(counts, np.int64)
+        todo = np.arange(n) if runs is None else np.asarray(runs, np.int64)
+        if self.state is None:
+            self.state = self._allocate(n)
+        state, fitted, searched = self.state, self.fitted, self.searched
+        assert fitted is not None and searched is not None
+        every = self.restart_every
+        full = ~fitted[todo] | (counts[todo] <= self.short) \
+            | (counts[todo] // every > searched[todo] // every)
+        warm_runs = todo[~full]
+        if warm_runs.size:
+            reg = self._match(path, counts, warm_runs, rotations=0,
+                              iterations=self.warm_iterations)
+            # a fit clearly worse than the run's last one (x `worse`, + `slack` metres): search
+            limit = state.distance[warm_runs] * self.worse + self.slack
+            worse = (reg.distance > limit).any(axis=1)
+            self._store(warm_runs[~worse], reg, ~worse)
+            full = full.copy()
+            todo_full = np.concatenate([todo[full], warm_runs[worse]])
+            if worse.any():
+                # start the search from the warm result too
+                state.angle[warm_runs[worse]] = reg.angle[worse]
+                state.shift[warm_runs[worse]] = reg.shift[worse]
         else:
-            reg = match(path, self.outlines, self.points, rotations=0,
-                        iterations=self.warm_iterations, warm=self.warm)
-            assert self.distance is not None
-            # a fit clearly worse than last step's (x `worse`, + `slack` metres): search again
-            limit = self.distance * self.worse + self.slack
-            redo = np.flatnonzero((reg.distance > limit).any(axis=1))
-            if redo.size:
-                again = match(path[redo], self.outlines, self.points,
-                              warm=(reg.angle[redo], reg.shift[redo]))
-                for name in ("error", "distance", "points", "angle", "shift"):
-                    getattr(reg, name)[redo] = getattr(again, name)
-        self.warm = (reg.angle, reg.shift)
-        self.distance = reg.distance
-        return reg
+            todo_full = todo[full]
+        for group in (todo_full[fitted[todo_full]], todo_full[~fitted[todo_full]]):
+            if group.size:
+                reg = self._match(path, counts, group, rotations=8, iterations=25,
+                                  warm=bool(fitted[group[0]]))
+                self._store(group, reg, np.ones(group.size, bool))
+                searched[group] = counts[group]
+        fitted[todo] = True
+        return Registration(**{name: getattr(state, name).copy() for name in _FIELDS})
+
+    def _match(self, path, counts, runs, *, rotations, iterations, warm=True) -> Registration:
+        top = int(counts[runs].max())
+        assert self.state is not None
+        start = (self.state.angle[runs], self.state.shift[runs]) if warm else None
+        return match(path[runs, :top], self.outlines, self.points, counts=counts[runs],
+                     rotations=rotations, iterations=iterations, warm=start)
+
+    def _store(self, runs: np.ndarray, reg: Registration, keep: np.ndarray) -> None:
+        assert self.state is not None
+        for name in _FIELDS:
+            getattr(self.state, name)[runs] = getattr(reg, name)[keep]

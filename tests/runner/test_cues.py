@@ -126,18 +126,99 @@ def test_saliency_batched_over_runs():
     s = saliency(d)
     assert s.shape == d.shape
     for r in range(3):  # scipy on each 2-D slice (a 3-D scipy Sobel would smooth across runs)
-        np.testing.assert_allclose(s[r], reference_saliency(d[r]), atol=1e-12)
+        np.testing.assert_allclose(s[r, 1:-1, 1:-1], reference_saliency(d[r])[1:-1, 1:-1],
+                                   atol=1e-12)
+        np.testing.assert_allclose(s[r], saliency(d[r]), atol=1e-12)
 
 
 @FAST
-@given(d=arrays(np.float64, st.tuples(st.integers(1, 9), st.integers(1, 9)),
+@given(d=arrays(np.float64, st.tuples(st.integers(2, 9), st.integers(2, 9)),
                 elements=st.floats(0.0, 1.0)))
-def test_saliency_in_unit_interval_and_matches_scipy(d):
+def test_saliency_in_unit_interval_and_matches_scipy_inside(d):
+    """Every cell perceived: the standard Sobel / 4 away from the grid's edge (at the edge the
+    cells outside count as unperceived, and each line's weights are renormalised)."""
     s = saliency(d)
     assert s.shape == d.shape
     assert np.all((s >= 0.0) & (s <= 1.0))
-    # unclipped reference: 4 really is the largest response on a [0, 1] map
-    np.testing.assert_allclose(s, reference_saliency(d), atol=1e-12)
+    np.testing.assert_allclose(s[1:-1, 1:-1], reference_saliency(d)[1:-1, 1:-1], atol=1e-12)
+
+
+def test_saliency_in_3d_matches_scipy_inside():
+    d = np.random.default_rng(3).random((5, 6, 7))
+    reference = np.max([np.abs(ndimage.sobel(d, axis=a, mode="nearest")) for a in range(3)],
+                       axis=0) / 16.0  # 16: the (1, 2, 1) x (1, 2, 1) weights of one side
+    np.testing.assert_allclose(saliency(d, dims=3)[1:-1, 1:-1, 1:-1],
+                               reference[1:-1, 1:-1, 1:-1], atol=1e-12)
+
+
+# --- S of a partly probed map: what has been perceived, not where ----------------------------
+
+
+def _brute_line_sobel(d, probed, ix, iy):
+    """Eq. (12) at one cell from its definition, by loops: per axis, the (1, 2, 1)-weighted mean
+    of the probed cells of each of the three lines, a missing side replaced by the centre."""
+    nx, ny = d.shape
+    best, compared_any = 0.0, False
+    for axis in (0, 1):
+        means = {}
+        for offset in (-1, 0, 1):
+            num = den = 0.0
+            for along, w in ((-1, 1.0), (0, 2.0), (1, 1.0)):
+                cx, cy = (ix + offset, iy + along) if axis == 0 else (ix + along, iy + offset)
+                if 0 <= cx < nx and 0 <= cy < ny and probed[cx, cy]:
+                    num, den = num + w * d[cx, cy], den + w
+            if den:
+                means[offset] = num / den
+        if len(means) >= 2:
+            hi, lo = means.get(1, means.get(0)), means.get(-1, means.get(0))
+            best, compared_any = max(best, abs(hi - lo)), True
+    if compared_any:
+        return best
+    near = probed[max(ix - 1, 0): ix + 2, max(iy - 1, 0): iy + 2].any()
+    return np.nan if near else 0.0
+
+
+@FAST
+@given(seed=st.integers(0, 2**32 - 1), nx=st.integers(1, 7), ny=st.integers(1, 7),
+       share=st.floats(0.0, 1.0))
+def test_saliency_of_a_partly_probed_map_matches_its_definition(seed, nx, ny, share):
+    rng = np.random.default_rng(seed)
+    d = rng.random((nx, ny))
+    probed = rng.random((nx, ny)) < share
+    s = saliency(d, probed)
+    expected = np.array([[_brute_line_sobel(d, probed, i, j) for j in range(ny)]
+                         for i in range(nx)])
+    np.testing.assert_allclose(s, expected, atol=1e-12)
+
+
+def test_the_frontier_of_what_was_probed_is_not_salient():
+    """Probed cells all perceived as the target (d = 1), the rest at the prior 0.1: the standard
+    Sobel of that map marks the edge of the probed block; the perceived saliency does not."""
+    d = np.full((10, 10), 0.1)
+    probed = np.zeros((10, 10), bool)
+    probed[2:6, 3:7] = True
+    d[probed] = 1.0
+    assert reference_saliency(d).max() == pytest.approx(0.9)  # the frontier, full strength
+    s = saliency(d, probed)
+    assert np.nanmax(s) == 0.0
+    # far from anything probed the map is the uniform prior: no edge there
+    assert s[9, 0] == 0.0 and s[0, 9] == 0.0
+    # next to the block there is nothing to compare across the frontier: not observed
+    assert np.isnan(s[1, 4]) or s[1, 4] == 0.0
+
+
+def test_a_perceived_border_and_its_continuation_are_salient():
+    """Target cells (d = 1) probed at ix = 3 and other cells (d = 0) at ix = 4, rows 0..4: the
+    unprobed cells of row 5 that continue the border are as salient as the border itself."""
+    d = np.full((8, 10), 0.1)
+    probed = np.zeros((8, 10), bool)
+    probed[3:5, 0:5] = True
+    d[3, 0:5], d[4, 0:5] = 1.0, 0.0
+    s = saliency(d, probed)
+    np.testing.assert_allclose(s[3:5, 0:6], 1.0)
+    # beside the probed strip, away from the border, nothing is compared or nothing differs
+    assert np.isnan(s[1, 2]) or s[1, 2] == 0.0
+    assert s[3, 8] == 0.0  # nothing probed around it
 
 
 # --- I, eq. (10) -------------------------------------------------------------------------------
