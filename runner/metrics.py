@@ -38,3 +38,43 @@ def gamma_brute_force(centres: np.ndarray, border: np.ndarray, probed: list[int]
     for b in np.flatnonzero(border.ravel()):
         total += min(float(np.linalg.norm(centres[b] - centres[p])) for p in probed)
     return total
+
+
+def border_band(border: np.ndarray) -> np.ndarray:
+    """The cells within one cell (8-neighbourhood) of a border cell, the border included."""
+    from scipy import ndimage
+
+    return ndimage.maximum_filter(border, size=3, mode="constant")
+
+
+def behaviour(paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
+    """How the walker moved, over runs ``paths`` [runs, K] (flat cells) for a task's ``border``
+    (grid-shaped, bool).
+
+    * ``enrichment``: share of visits within one cell of the border / that band's share of cells
+      (1 for visits spread evenly, higher when they concentrate on the border);
+    * ``reached``: share of runs that probe a border cell; ``reach_step``: median step of the
+      first such probe among them;
+    * ``border_probed``: mean share of the border's cells probed per run;
+    * ``distinct``: mean number of distinct cells probed per run;
+    * ``returns``: share of steps that go back to the cell of two steps before (oscillation).
+
+    >>> border = np.zeros((3, 3), bool); border[1, 1] = True
+    >>> b = behaviour(np.array([[0, 4, 0, 4]]), border)
+    >>> b["reached"], b["reach_step"], b["distinct"], b["returns"]
+    (1.0, 1.0, 2.0, 1.0)
+    """
+    flat_border = border.ravel()
+    band = border_band(border).ravel()
+    on = flat_border[paths]
+    reached = on.any(axis=1)
+    first = np.argmax(on, axis=1)
+    probed_share = [flat_border[np.unique(p)].sum() / max(flat_border.sum(), 1) for p in paths]
+    return {
+        "enrichment": float(band[paths].mean() / band.mean()),
+        "reached": float(reached.mean()),
+        "reach_step": float(np.median(first[reached])) if reached.any() else float("nan"),
+        "border_probed": float(np.mean(probed_share)),
+        "distinct": float(np.mean([len(np.unique(p)) for p in paths])),
+        "returns": float(np.mean(paths[:, 2:] == paths[:, :-2])) if paths.shape[1] > 2 else 0.0,
+    }

@@ -13,6 +13,7 @@ from scipy import stats
 
 from runner.experiment import ExperimentSpec, load_experiment, load_results, mean_sem
 from runner.explorer import CONFIGURATIONS, Explorer
+from runner.metrics import behaviour, border_band
 from runner.scenario import Scenario
 from runner.store import ResultStore, atomic_write
 
@@ -40,7 +41,8 @@ def paired_test(ablated: np.ndarray, full: np.ndarray) -> float:
         return float(stats.wilcoxon(ablated, full).pvalue)
 
 
-def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int]) -> list[dict]:
+def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int],
+                     scenario: Scenario | None = None) -> list[dict]:
     rows = []
     for task in spec.tasks:
         full = results.get(f"{task}/full")
@@ -53,6 +55,8 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
                    "final_mean": float(fm[0]), "final_sem": float(fs[0]),
                    "final_per_border_cell_mm": 1000 * float(fm[0]) / borders[task],
                    "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
+            if scenario is not None:
+                row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task)))
             if full is not None and conf != "full":
                 row["p_final"] = paired_test(final, full["gamma"][:, -1])
                 row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
@@ -184,6 +188,10 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     plt.close(fig)
 
 
+#: The significance level where the paper claims a difference (S, U), and below which a change
+#: counts as significant (I, R).
+ALPHA = 0.01
+
 FINDINGS = [
     ("S", "Removing S degrades the most (the exploration becomes random)."),
     ("U", "Removing U degrades considerably."),
@@ -224,12 +232,15 @@ def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str
         if key == "S":
             worst = [max((c for c in spec.configurations if c != "full"),
                          key=lambda c, t=t: by[(t, c)]["auc_mean"]) for t in tasks]
-            agree = all(w == conf for w in worst)
+            agree = all(w == conf and changes[t] > 0 and ps[t] < ALPHA
+                        for w, t in zip(worst, tasks, strict=True))
             measured += f"; the worst ablation per task: {', '.join(worst)}"
         elif key == "U":
-            agree = all(changes[t] > 0.05 and ps[t] < 0.05 for t in tasks)
-        else:  # I and R: near the full model
-            agree = all(abs(changes[t]) < 0.10 or ps[t] >= 0.05 for t in tasks)
+            agree = all(changes[t] > 0.05 and ps[t] < ALPHA for t in tasks)
+        elif key == "I":  # near the full model
+            agree = all(abs(changes[t]) < 0.10 or ps[t] >= ALPHA for t in tasks)
+        else:  # R: no strong influence, or the full model is better; never a significant loss
+            agree = all(changes[t] > -0.10 or ps[t] >= ALPHA for t in tasks)
         out.append((text, measured, "agrees" if agree else "differs"))
     return out
 
@@ -245,19 +256,46 @@ def build_report(out: Path, gif: bool = True) -> Path:
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
     borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
-    rows = statistics_table(results, spec, borders)
+    rows = statistics_table(results, spec, borders, scenario)
     plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
     plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png")
     task = spec.tasks[0]
-    step = min(40, spec.iterations - 2)
-    plot_decision(experiment, task, "full", 0, step, folder / "fig11_decision.png",
+    run, step = following_step(results[f"{task}/full"]["paths"], scenario.border(task),
+                               spec.iterations)
+    plot_decision(experiment, task, "full", run, step, folder / "fig11_decision.png",
                   folder / "fig11_decision.gif" if gif else None, spec.iterations - 1)
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(rows, indent=1).encode())
-    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"])
+    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, rows, found).encode())
     return folder
+
+
+def following_step(paths: np.ndarray, border: np.ndarray, iterations: int,
+                   stretch: int = 5) -> tuple[int, int]:
+    """A (run, step) at which the walker follows the border: the first run whose last
+    ``stretch`` probes up to that step all lie within one cell of it (step 10 or later);
+    (0, 40) when no run does."""
+    band = border_band(border).ravel()[paths]
+    for run in range(paths.shape[0]):
+        for k in range(max(10, stretch), min(iterations - 1, paths.shape[1])):
+            if band[run, k - stretch + 1 : k + 1].all():
+                return run, k
+    return 0, min(40, iterations - 2)
+
+
+def _behaviour_lines(rows: list[dict]) -> list[str]:
+    lines = ["| task | configuration | enrichment near the border | runs reaching it | median "
+             "step of first reach | border cells probed | distinct cells per run | returns "
+             "to the cell of two steps before |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "enrichment" in r:
+            lines.append(f"| {r['task']} | {r['configuration']} | {r['enrichment']:.2f}x | "
+                         f"{100 * r['reached']:.0f}% | {r['reach_step']:.0f} | "
+                         f"{100 * r['border_probed']:.0f}% | {r['distinct']:.1f} | "
+                         f"{100 * r['returns']:.0f}% |")
+    return lines
 
 
 def _table_lines(rows: list[dict]) -> list[str]:
@@ -273,7 +311,7 @@ def _table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _markdown(spec, rows, found, borders, step, task, digest) -> str:
+def _markdown(spec, rows, found, borders, step, task, digest, run=0) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -284,20 +322,30 @@ def _markdown(spec, rows, found, borders, step, task, digest) -> str:
              "Gamma (eq. 16) sums over the task's border cells the distance to the nearest probed "
              "cell; lower is better. Mean +- SEM over runs.", "",
              "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
-             f"## One decision (paper Fig. 11): task {task}, full model, run 0, step {step}", "",
+             f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
+             "", "A step at which the walker follows the border (its last five probes lie within "
+             "one cell of it).", "",
              "![Decision](fig11_decision.png)", "",
              "The animation over every step of that run is `fig11_decision.gif` (when built).", "",
              "## Final Gamma and area under Gamma(k)", "",
              "Mean +- SEM over runs; p: two-sided Wilcoxon signed-rank test of each ablation "
              "against the full model over the shared start cells.", ""]
     lines += _table_lines(rows)
+    lines += ["", "## Where the visits go", "",
+              "Enrichment: the share of visits within one cell of the task's border divided by "
+              "that band's share of the grid (1 = visits spread evenly). Without U the walker "
+              "can only be kept from a cell by I, which inhibits the last probed cell alone "
+              "(eq. 10): it then goes back and forth between two salient cells, which the last "
+              "column counts.", ""]
+    lines += _behaviour_lines(rows)
     lines += ["", "## The paper's findings (Sec. 6.3) and ours", "",
               "| the paper | measured here | verdict |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in found]
     lines += ["", "Verdicts: *S* agrees when removing S gives the largest area under Gamma of "
-              "the four ablations in every task; *U* when removing U raises it by more than 5% "
-              "with p < 0.05 in every task; *I* and *R* when the change is under 10% or not "
-              "significant (p >= 0.05); *T* compares the final Gamma per border cell.", ""]
+              "the four ablations in every task, with p < 0.01; *U* when removing U raises it by "
+              "more than 5% with p < 0.01 in every task; *I* when the change is under 10% or not "
+              "significant (p >= 0.01); *R* when the change is under 10%, not significant, or "
+              "in the full model's favour; *T* compares the final Gamma per border cell.", ""]
     return "\n".join(lines)
 
 
@@ -320,6 +368,16 @@ def _html(md: str, spec, rows, found) -> str:
                     f"<td>{r['final_mean']:.3f} &plusmn; {r['final_sem']:.3f}</td>"
                     f"<td>{r['auc_mean']:.1f} &plusmn; {r['auc_sem']:.1f}</td>"
                     f"<td>{_p(r, 'p_final')}</td><td>{_p(r, 'p_auc')}</td></tr>")
+    body += ["</table>", "<h2>Where the visits go</h2>",
+             "<table border=1 cellpadding=3><tr><th>task</th><th>configuration</th>"
+             "<th>enrichment</th><th>runs reaching the border</th><th>median first reach</th>"
+             "<th>border cells probed</th><th>distinct cells</th><th>returns</th></tr>"]
+    for r in rows:
+        if "enrichment" in r:
+            body.append(f"<tr><td>{r['task']}</td><td>{r['configuration']}</td>"
+                        f"<td>{r['enrichment']:.2f}x</td><td>{100 * r['reached']:.0f}%</td>"
+                        f"<td>{r['reach_step']:.0f}</td><td>{100 * r['border_probed']:.0f}%</td>"
+                        f"<td>{r['distinct']:.1f}</td><td>{100 * r['returns']:.0f}%</td></tr>")
     body += ["</table>", "<h2>The paper's findings and ours</h2>",
              "<table border=1 cellpadding=3><tr><th>paper</th><th>measured</th>"
              "<th>verdict</th></tr>"]
