@@ -247,11 +247,26 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
     return validate_located(located, Document)
 
 
-def loads(text: str, file: str = "<string>", base_dir: Path | None = None) -> Program:
-    """Load a program from YAML text. Raises :class:`SpecError` listing every problem."""
+def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
+          variables: Mapping[str, Any] | None = None) -> Program:
+    """Load a program from YAML text. Raises :class:`SpecError` listing every problem.
+
+    ``variables`` replaces the declarations of some of the file's variables before the program
+    is checked, as if the file said so (for instance a grid's shape, set by the workspace a
+    program is used in); every check then runs on the result, so a term that no longer fits is
+    reported at its place in the file.
+
+    >>> text = ("{bayesprog: 1, variables: {O: {grid: {shape: [2, 3], cell: 1.0}}}, "
+    ...         "decomposition: [{term: P(O), form: uniform}]}")
+    >>> p = loads(text, variables={"O": {"grid": {"shape": [4, 4], "cell": 0.5}}})
+    >>> p.variables["O"].card
+    16
+    """
     located, problems = load_yaml(text, file)
     if problems and located.data is None:
         raise SpecError(problems)
+    if variables:
+        problems += _replace_variables(located, variables)
     doc, schema_problems = _document(located)
     problems += schema_problems
     if doc is None:
@@ -277,8 +292,23 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None) -> Pr
     return program
 
 
-def load(path: str | Path) -> Program:
-    """Load and check the program file at ``path``."""
+def _replace_variables(located: Located, variables: Mapping[str, Any]) -> list[Diagnostic]:
+    declared = located.data.get("variables") if isinstance(located.data, dict) else None
+    if not isinstance(declared, dict):
+        return []  # the schema check reports the missing or malformed variables
+    problems = []
+    for name, spec in variables.items():
+        if name not in declared:
+            problems.append(located.diagnostic(("variables",), f"no variable {name!r} to "
+                                               f"replace: expected one of {', '.join(declared)}",
+                                               at_key=True))
+        else:
+            declared[name] = copy.deepcopy(dict(spec))
+    return problems
+
+
+def load(path: str | Path, variables: Mapping[str, Any] | None = None) -> Program:
+    """Load and check the program file at ``path`` (``variables``: see :func:`loads`)."""
     path = Path(path)
     text = path.read_text(encoding="utf-8")
-    return loads(text, str(path), path.parent)
+    return loads(text, str(path), path.parent, variables)

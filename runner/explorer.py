@@ -74,8 +74,10 @@ class Explorer:
         self.task = task
         self.runs = runs
         programs = programs or {}
-        self.perception = programs.get("perception") or bayesprog.load(scenario.program_path("perception"))
-        target = programs.get("target") or bayesprog.load(scenario.program_path("target"))
+        self.perception = (programs.get("perception") or scenario.perception
+                           or bayesprog.load(scenario.program_path("perception")))
+        target = (programs.get("target") or scenario.target
+                  or bayesprog.load(scenario.program_path("target")))
         self.target = target.ablate(*ablate) if ablate else target
         self.ablated = tuple(ablate)
         self.target_no_shape = self.target.ablate("P(R | O)")

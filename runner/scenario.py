@@ -102,6 +102,9 @@ class Scenario:
     spec: ScenarioSpec
     path: Path
     materials: tuple[str, ...]
+    #: pi_per and pi_tar as used on this workspace (pi_tar's grid O set by the scenario's grid)
+    perception: bayesprog.Program | None = None
+    target: bayesprog.Program | None = None
 
     @property
     def name(self) -> str:
@@ -175,7 +178,23 @@ def load_scenario(path: str | Path) -> Scenario:
     located, spec = load_document(path, ScenarioSpec)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
+    # the workspace sets pi_tar's grid: one program serves every grid size
+    grid = {"grid": {"shape": list(spec.grid.shape), "cell": spec.grid.cell},
+            "description": "next cell to probe (the scenario's grid)"}
+    target = bayesprog.load((path.parent / spec.programs.target).resolve(), variables={"O": grid})
     diags = []
+    tasks = getattr(target.variables.get("T"), "states", ())
+    for task in spec.tasks:
+        if task not in tasks:
+            diags.append(located.diagnostic(("tasks", task), f"task {task!r} is not a state of "
+                                            f"T in {spec.programs.target}: expected one of "
+                                            f"{', '.join(tasks)}", at_key=True))
+    shapes = tuple(getattr(target.variables.get("R"), "states", ()))
+    if tuple(spec.templates) != shapes:
+        diags.append(located.diagnostic(("templates",), f"templates {', '.join(spec.templates)} "
+                                        f"do not match the shapes R of {spec.programs.target}: "
+                                        f"expected {', '.join(shapes)} in that order",
+                                        at_key=True))
     named = [("background",), *[("objects", i, "material") for i in range(len(spec.objects))],
              *[("tasks", t) for t in spec.tasks]]
     values = [spec.background, *[o.material for o in spec.objects], *spec.tasks.values()]
@@ -190,4 +209,4 @@ def load_scenario(path: str | Path) -> Scenario:
                                             f"{', '.join(spec.templates)}"))
     if diags:
         raise SpecError(diags)
-    return Scenario(spec, path, materials)
+    return Scenario(spec, path, materials, perception, target)

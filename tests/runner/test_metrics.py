@@ -108,7 +108,8 @@ programs:
 grid: {{shape: [6, 5], cell: 0.01}}
 background: wood
 templates:
-  square: [[-0.01, -0.01], [0.01, -0.01], [0.01, 0.01], [-0.01, 0.01]]
+  rectangle: [[-0.01, -0.01], [0.01, -0.01], [0.01, 0.01], [-0.01, 0.01]]
+  triangle: [[-0.01, -0.01], [0.01, -0.01], [0.0, 0.01]]
 objects:
   - {{polygon: {square}, material: silicone}}
 tasks:
