@@ -168,7 +168,7 @@ class Explorer:
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
         d, perceived = self.target_map()
-        s = saliency(d, perceived).reshape(self.runs, -1)
+        s = saliency((d >= 0.5).astype(float), perceived).reshape(self.runs, -1)
         return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
 
     def border_cells(self) -> np.ndarray:

@@ -1,0 +1,90 @@
+"""The behaviour the saliency of the perceived stimulus must produce, on small workspaces.
+
+* A walker started next to a border follows it with the full model and does not without S;
+* the scenario's grid sets pi_tar's grid (no copy of pi_tar per grid size), and a scenario that
+  does not fit pi_tar is refused when it is loaded, at FILE:LINE:COL.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bayesprog
+from runner.experiment import simulate
+from runner.metrics import behaviour
+from runner.scenario import load_scenario
+
+MODELS = (Path(__file__).parents[2] / "models").resolve()
+
+
+def write(tmp_path: Path, grid=(20, 24), tasks="T1: plush\n  T2: silicone\n  T3: wood",
+          templates=None, name="small.yaml") -> Path:
+    templates = templates or (
+        "  rectangle: [[-0.07, -0.05], [0.07, -0.05], [0.07, 0.05], [-0.07, 0.05]]\n"
+        "  triangle: [[-0.09, -0.06], [0.09, -0.06], [0.0, 0.09]]")
+    text = f"""\
+scenario: 1
+name: small
+programs:
+  perception: {MODELS / "pi_per.yaml"}
+  shape: {MODELS / "pi_obj.yaml"}
+  target: {MODELS / "pi_tar.yaml"}
+grid: {{shape: [{grid[0]}, {grid[1]}], cell: 0.01}}
+background: wood
+templates:
+{templates}
+objects:
+  - {{template: rectangle, material: silicone, at: [0.10, 0.12], rotation: 15}}
+tasks:
+  {tasks}
+"""
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_full_model_follows_a_border_that_a_walker_without_s_does_not(tmp_path):
+    """Eight runs started on cells of the silicone border (T2), 40 steps: with S the walker stays
+    near the border and probes a good part of it; without S it wanders off into the wood."""
+    scenario = load_scenario(write(tmp_path))
+    border = scenario.border("T2")
+    cells = np.argwhere(border)
+    starts = cells[np.linspace(0, len(cells) - 1, 8).astype(int)]
+    result = {}
+    for conf in ("full", "without_S"):
+        paths = simulate(scenario, "T2", conf, starts, np.arange(8), seed=3,
+                         iterations=40)["paths"]
+        result[conf] = behaviour(paths, border)
+    full, without_s = result["full"], result["without_S"]
+    assert full["border_probed"] > 0.25, full
+    assert full["border_probed"] > 1.5 * without_s["border_probed"], result
+    assert full["enrichment"] > 1.5 * without_s["enrichment"], result
+
+
+def test_the_scenario_grid_sets_pi_tar_grid(tmp_path):
+    scenario = load_scenario(write(tmp_path, grid=(13, 9)))
+    assert scenario.target.variables["O"].card == 13 * 9
+    assert scenario.shape == (13, 9)
+    paths = simulate(scenario, "T3", "full", np.array([[1, 1], [12, 8]]), np.arange(2), seed=1,
+                     iterations=12)["paths"]
+    assert paths.shape == (2, 12) and paths.min() >= 0 and paths.max() < 13 * 9
+
+
+def test_a_task_that_pi_tar_does_not_know_is_refused_at_load(tmp_path):
+    path = write(tmp_path, tasks="T1: plush\n  T4: silicone")
+    with pytest.raises(bayesprog.SpecError) as err:
+        load_scenario(path)
+    text = str(err.value)
+    line = path.read_text().splitlines().index("  T4: silicone") + 1
+    assert f"{path}:{line}:3: task 'T4' is not a state of T" in text, text
+
+
+def test_templates_that_are_not_pi_tar_shapes_are_refused_at_load(tmp_path):
+    path = write(tmp_path, templates="  square: [[0, 0], [0.02, 0], [0.02, 0.02], [0, 0.02]]")
+    with pytest.raises(bayesprog.SpecError) as err:
+        load_scenario(path)
+    line = path.read_text().splitlines().index("templates:") + 1
+    assert f"{path}:{line}:1: templates square do not match the shapes R" in str(err.value)
