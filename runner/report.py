@@ -151,17 +151,23 @@ _FIELDS = [("I", "inhibition I"), ("S", "saliency S"), ("U", "uncertainty U"),
            ("shape", "shape cue (GMM)"), ("posterior", "P(O | ...)")]
 
 
-def _draw_fields(axes, frame: dict, scenario: Scenario, k: int):
+def _draw_fields(axes, frame: dict, scenario: Scenario, k: int, task: str | None = None):
     nx, ny = scenario.shape
+    bx, by = np.nonzero(scenario.border(task)) if task else (np.array([]), np.array([]))
     extent = (0, nx * scenario.cell, 0, ny * scenario.cell)
     images = []
     path = np.array(frame["path"])
+    import matplotlib
+
+    cmap = matplotlib.colormaps["viridis"].copy()
+    cmap.set_bad("0.55")  # grey: a saliency with nothing perceived to compare (marginalised)
     for ax, (key, title) in zip(axes, _FIELDS, strict=True):
         ax.clear()
         images.append(ax.imshow(frame[key].reshape(nx, ny).T, origin="lower", extent=extent,
-                                cmap="viridis"))
+                                cmap=cmap))
         px, py = (path // ny + 0.5) * scenario.cell, (path % ny + 0.5) * scenario.cell
         ax.plot(px, py, "w-", lw=0.6)
+        ax.scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=0.5, c="c")
         nxt = frame["next"]
         ax.plot((nxt // ny + 0.5) * scenario.cell, (nxt % ny + 0.5) * scenario.cell, "r*", ms=8)
         ax.set_title(f"{title}, k={k}", fontsize=8)
@@ -176,14 +182,14 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     plt = _plt()
     frames = list(replay(experiment, task, configuration, run, steps))
     fig, axes = plt.subplots(1, len(_FIELDS), figsize=(2.2 * len(_FIELDS), 4))
-    _draw_fields(axes, frames[min(step, len(frames) - 1)], experiment.scenario, step)
+    _draw_fields(axes, frames[min(step, len(frames) - 1)], experiment.scenario, step, task)
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
     if out_gif is not None:
         from matplotlib.animation import FuncAnimation, PillowWriter
 
-        anim = FuncAnimation(fig, lambda k: _draw_fields(axes, frames[k], experiment.scenario, k),
-                             frames=len(frames))
+        anim = FuncAnimation(fig, lambda k: _draw_fields(axes, frames[k], experiment.scenario, k,
+                                                         task), frames=len(frames))
         anim.save(out_gif, writer=PillowWriter(fps=8), dpi=60)
     plt.close(fig)
 
@@ -273,7 +279,7 @@ def build_report(out: Path, gif: bool = True) -> Path:
 
 
 def following_step(paths: np.ndarray, border: np.ndarray, iterations: int,
-                   stretch: int = 5) -> tuple[int, int]:
+                   stretch: int = 10) -> tuple[int, int]:
     """A (run, step) at which the walker follows the border: the first run whose last
     ``stretch`` probes up to that step all lie within one cell of it (step 10 or later);
     (0, 40) when no run does."""
@@ -323,8 +329,9 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0) -> str:
              "cell; lower is better. Mean +- SEM over runs.", "",
              "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
              f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
-             "", "A step at which the walker follows the border (its last five probes lie within "
-             "one cell of it).", "",
+             "", "A step at which the walker follows the border (its last ten probes lie within "
+             "one cell of it; the border in cyan; grey in S: nothing perceived to compare, the "
+             "term is marginalised).", "",
              "![Decision](fig11_decision.png)", "",
              "The animation over every step of that run is `fig11_decision.gif` (when built).", "",
              "## Final Gamma and area under Gamma(k)", "",
