@@ -411,7 +411,10 @@ class _Plans:
         self._cache: dict[Any, Any] = {}
 
     def get(self, operands: list[_Factor], output: tuple[str, ...], batched_out: bool):
-        key = (tuple((f.axes, f.batched, f.log.shape) for f in operands), output, batched_out)
+        # the batch size is left out of the key: a plan serves every batch size (opt_einsum
+        # checks ranks, not sizes), so batches that vary from call to call are not replanned
+        key = (tuple((f.axes, f.batched, f.log.shape[f.batched:]) for f in operands), output,
+               batched_out)
         expr = self._cache.get(key)
         if expr is None:
             names = sorted({a for f in operands for a in f.axes} | set(output))

@@ -32,7 +32,7 @@ import numpy as np
 from runner.cues import inhibition, uncertainty
 from runner.experiment import load_experiment, run_experiment, simulate
 from runner.explorer import CONFIGURATIONS, Explorer
-from runner.shape import match
+from runner.shape import MIN_POINTS, match
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "models" / "experiments" / "paper.yaml"
@@ -47,8 +47,12 @@ class NaiveExplorer(Explorer):
         return inhibition(self.centres, last, self.diagonal), s, uncertainty(self.posterior)
 
     def shape_cue(self):
-        return match(self.centres[np.stack(self.path, axis=1)], self.outlines,
-                     self.template_points)
+        border = self.border_cells()
+        counts = border.sum(axis=1)
+        cells = np.argsort(~border, axis=1, kind="stable")[:, :max(int(counts.max()), 1)]
+        registration = match(self.centres[cells], self.outlines, self.template_points,
+                             counts=np.maximum(counts, 1))
+        return registration, counts >= MIN_POINTS
 
 
 def whole(workers: int, repeats: int) -> tuple[float, dict]:

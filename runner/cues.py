@@ -15,10 +15,11 @@ import numpy as np
 from scipy import ndimage
 from scipy.special import xlog1py, xlogy
 
+from runner._kernels import perceived_sobel_2d
+
 SOBEL_NORM = 4.0
 INHIBITION_ALPHA = 1.01
 INHIBITION_BETA = 9.0
-_SMOOTH = np.array([1.0, 2.0, 1.0])
 
 
 def uncertainty(posterior: np.ndarray) -> np.ndarray:
@@ -33,39 +34,56 @@ def sobel(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (ndimage.sobel(d, axis=-2, mode="nearest"), ndimage.sobel(d, axis=-1, mode="nearest"))
 
 
+def _slices(ndim: int, axis: int, part: slice) -> tuple[slice, ...]:
+    index = [slice(None)] * ndim
+    index[axis] = part
+    return tuple(index)
+
+
+def _box_sum(a: np.ndarray, axes: list[int], weights: tuple[float, float, float]) -> np.ndarray:
+    """Along each of ``axes`` (padded by one on both sides), the weighted sum of each cell's
+    three neighbours; those axes lose their padding."""
+    for axis in axes:
+        n = a.shape[axis] - 2
+        a = sum(w * a[_slices(a.ndim, axis, slice(k, k + n))]
+                for k, w in enumerate(weights) if w)
+    return a
+
+
 def _line_means(values: np.ndarray, weights: np.ndarray, axis: int, dims: int):
     """Per cell, the (1, 2, 1)-weighted mean of ``values`` over the weighted cells of each of
     the three lines (offsets -1, 0, +1 along ``axis``) of its 3^dims neighbourhood, and whether
     that line has any weight. Cells outside the grid have no weight."""
-    num, den = values * weights, weights.astype(float)
-    for other in range(-dims, 0):
-        if other != axis:
-            num = ndimage.correlate1d(num, _SMOOTH, axis=other, mode="constant")
-            den = ndimage.correlate1d(den, _SMOOTH, axis=other, mode="constant")
+    pad = [(0, 0)] * (values.ndim - dims) + [(1, 1)] * dims
+    w = np.pad(weights.astype(float), pad)
+    num = np.pad(values * weights, pad)
+    others = [values.ndim + a for a in range(-dims, 0) if a != axis]
+    num, den = _box_sum(num, others, (1.0, 2.0, 1.0)), _box_sum(w, others, (1.0, 2.0, 1.0))
+    axis = values.ndim + axis
+    n = values.shape[axis]
     out = []
-    for offset in (-1, 0, 1):
-        n, w = _shift(num, offset, axis), _shift(den, offset, axis)
-        has = w > 1e-12
-        out.append((np.where(has, n / np.where(has, w, 1.0), 0.0), has))
+    for k in range(3):
+        part = _slices(values.ndim, axis, slice(k, k + n))
+        line_num, line_den = num[part], den[part]
+        has = line_den > 0.5  # weights are whole numbers: a line has weight >= 1 or none
+        out.append((np.divide(line_num, line_den, out=np.zeros_like(line_num), where=has), has))
     return out
 
 
-def _shift(a: np.ndarray, offset: int, axis: int) -> np.ndarray:
-    """``out[..., i, ...] = a[..., i + offset, ...]`` along ``axis``, zero outside."""
-    if offset == 0:
-        return a
-    out = np.zeros_like(a)
-    n = a.shape[axis]
-    src = [slice(None)] * a.ndim
-    dst = [slice(None)] * a.ndim
-    src[axis] = slice(max(offset, 0), n + min(offset, 0))
-    dst[axis] = slice(max(-offset, 0), n - max(offset, 0))
-    out[tuple(dst)] = a[tuple(src)]
-    return out
+def _near(mask: np.ndarray, dims: int) -> np.ndarray:
+    """Cells with a marked cell in their 3^dims neighbourhood."""
+    pad = [(0, 0)] * (mask.ndim - dims) + [(1, 1)] * dims
+    near = np.pad(mask, pad)
+    for axis in range(mask.ndim - dims, mask.ndim):
+        n = near.shape[axis] - 2
+        near = (near[_slices(near.ndim, axis, slice(0, n))]
+                | near[_slices(near.ndim, axis, slice(1, n + 1))]
+                | near[_slices(near.ndim, axis, slice(2, n + 2))])
+    return near
 
 
 def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
-             dims: int = 2) -> np.ndarray:
+             dims: int = 2, kernel: bool = True) -> np.ndarray:
     """Eq. (12): saliency of the perceived stimulus, ``[..., nx, ny(, nz)]`` -> same, in [0, 1].
 
     ``target_map`` is the perceived stimulus for the task's material (d(v) in [0, 1]) and
@@ -83,7 +101,8 @@ def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
 
     Where the neighbourhood holds perceived cells but nothing to compare, the saliency is not
     observed (NaN: the term is marginalised); where it holds no perceived cell, the map there is
-    the uniform prior, whose Sobel response is 0. ``dims`` = 3 adds s_z for a 3-D grid.
+    the uniform prior, whose Sobel response is 0. ``dims`` = 3 adds s_z for a 3-D grid. On 2-D
+    grids a compiled kernel computes the same numbers (``kernel=False``: the array version).
 
     >>> d = np.array([[1.0, 1.0, 0.0, 0.0],
     ...               [1.0, 1.0, 0.0, 0.0],
@@ -98,6 +117,10 @@ def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
     """
     d = np.asarray(target_map, dtype=float)
     mask = np.ones(d.shape, bool) if perceived is None else np.asarray(perceived, bool)
+    if dims == 2 and kernel:
+        flat = (-1, *d.shape[-2:])
+        return perceived_sobel_2d(np.ascontiguousarray(d.reshape(flat)),
+                                  np.ascontiguousarray(mask.reshape(flat))).reshape(d.shape)
     best = np.zeros(d.shape)
     compared_any = np.zeros(d.shape, bool)
     for axis in range(-dims, 0):
@@ -107,8 +130,7 @@ def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
         compared = (has_lo.astype(int) + has_mid + has_hi) >= 2
         np.maximum(best, np.where(compared, np.abs(upper - lower), 0.0), out=best)
         compared_any |= compared
-    size = (1,) * (d.ndim - dims) + (3,) * dims
-    near = ndimage.maximum_filter(mask, size=size, mode="constant")
+    near = _near(mask, dims)
     return np.where(compared_any, np.clip(best, 0.0, 1.0), np.where(near, np.nan, 0.0))
 
 
@@ -118,10 +140,7 @@ def perceived_border(target_probability: np.ndarray, perceived: np.ndarray,
     a probed neighbour (3^dims neighbourhood) perceived as another, or the reverse."""
     mask = np.asarray(perceived, bool)
     target = (np.asarray(target_probability) >= 0.5) & mask
-    size = (1,) * (mask.ndim - dims) + (3,) * dims
-    near_target = ndimage.maximum_filter(target, size=size, mode="constant")
-    near_other = ndimage.maximum_filter(mask & ~target, size=size, mode="constant")
-    return mask & np.where(target, near_other, near_target)
+    return mask & np.where(target, _near(mask & ~target, dims), _near(target, dims))
 
 
 def _log_kernel(d: np.ndarray, alpha: float, beta: float) -> np.ndarray:

@@ -159,8 +159,8 @@ def _draw_fields(axes, frame: dict, scenario: Scenario, k: int, task: str | None
     path = np.array(frame["path"])
     import matplotlib
 
-    cmap = matplotlib.colormaps["viridis"].copy()
-    cmap.set_bad("0.55")  # grey: a saliency with nothing perceived to compare (marginalised)
+    # grey: a saliency with nothing perceived to compare (marginalised)
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.55")
     for ax, (key, title) in zip(axes, _FIELDS, strict=True):
         ax.clear()
         images.append(ax.imshow(frame[key].reshape(nx, ny).T, origin="lower", extent=extent,

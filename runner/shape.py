@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner._icp import icp
+from runner._kernels import icp
 
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
 MIN_POINTS = 3  # fewer probed cells than this: no shape evidence (R uniform)

@@ -1,7 +1,8 @@
-"""The ICP inner loop, compiled with numba (the numpy version spent 90% of an experiment here).
+"""Compiled inner loops of the explorer (numba): the ICP of the shape cue and the saliency of the
+perceived stimulus on 2-D grids (the numpy versions spent most of an experiment here).
 
-For every (run, template, start) independently: transform the path into the template's frame,
-pair each path point with its closest point on the template polygon, and solve the 2-D
+ICP: for every (run, template, start) independently, transform the path into the template's
+frame, pair each path point with its closest point on the template polygon, and solve the 2-D
 Procrustes problem in closed form; repeat. Runs in parallel over (run, template, start).
 """
 
@@ -85,3 +86,51 @@ def icp(path, counts, outlines, nverts, angle, shift, iterations):
         angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1] = a, tx, ty
         dist[r, t, s] = total / k
     return dist
+
+
+@njit(cache=True, parallel=True)
+def perceived_sobel_2d(d, mask):
+    """Saliency of the perceived stimulus on 2-D grids [R, nx, ny] (see runner.cues.saliency):
+    per cell the largest difference of the (1, 2, 1)-weighted means of perceived cells between
+    the lines either side, along x and y; NaN where nothing is compared but a cell is perceived
+    nearby, 0 where nothing is perceived nearby."""
+    runs, nx, ny = d.shape
+    out = np.empty((runs, nx, ny))
+    weights = (1.0, 2.0, 1.0)
+    for job in prange(runs * nx):
+        r = job // nx
+        x = job % nx
+        for y in range(ny):
+            best = 0.0
+            compared = False
+            near = False
+            for axis in range(2):
+                means = np.zeros(3)
+                has = np.zeros(3, np.bool_)
+                for line in range(3):
+                    num = 0.0
+                    den = 0.0
+                    for k in range(3):
+                        if axis == 0:
+                            cx, cy = x + line - 1, y + k - 1
+                        else:
+                            cx, cy = x + k - 1, y + line - 1
+                        if 0 <= cx < nx and 0 <= cy < ny and mask[r, cx, cy]:
+                            num += weights[k] * d[r, cx, cy]
+                            den += weights[k]
+                    if den > 0.0:
+                        means[line] = num / den
+                        has[line] = True
+                        near = True
+                if has[0] + has[1] + has[2] >= 2:
+                    hi = means[2] if has[2] else means[1]
+                    lo = means[0] if has[0] else means[1]
+                    best = max(best, abs(hi - lo))
+                    compared = True
+            if compared:
+                out[r, x, y] = min(best, 1.0)
+            elif near:
+                out[r, x, y] = np.nan
+            else:
+                out[r, x, y] = 0.0
+    return out
