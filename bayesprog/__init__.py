@@ -14,10 +14,11 @@
 [[0.998, 0.002], [0.002, 0.998]]
 """
 
-from bayesprog.engine import MapResult, Posterior
 from bayesprog.errors import BayesprogError, Diagnostic, QuestionError, SpecError, ZeroEvidenceError
+from bayesprog.expressions import Question
 from bayesprog.forms import Form, Param, available_forms, register_form
-from bayesprog.program import Program, Question, load, loads
+from bayesprog.inference import MapResult, Posterior
+from bayesprog.program import Program, load, loads
 
 __version__ = "0.1.0"
 

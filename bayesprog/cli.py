@@ -39,7 +39,7 @@ def _load(path: str):
 
 def _kind_hint(file: str) -> str | None:
     """Why a file is not a program, when it is plainly another kind of file."""
-    from bayesprog.spec.yamlload import load_yaml
+    from bayesprog.language.loader import load_yaml
 
     try:
         located, _ = load_yaml(Path(file).read_text(encoding="utf-8"), file)
@@ -178,7 +178,7 @@ def _runner(name: str | None):
 
 
 def _experiment_runner(path: str) -> str | None:
-    from bayesprog.spec.yamlload import load_yaml
+    from bayesprog.language.loader import load_yaml
 
     try:
         located, _ = load_yaml(Path(path).read_text(encoding="utf-8"), path)
@@ -239,7 +239,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    from bayesprog.spec.schema import json_schema
+    from bayesprog.language.json_schema import json_schema
 
     text = json.dumps(json_schema(), indent=2) + "\n"
     if args.output:

@@ -10,10 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.engine import _Bound, _slice, _term_factor, bind, relevant_terms
 from bayesprog.errors import QuestionError
-from bayesprog.program import Program, Question
-from bayesprog.spec.check import InputRef
+from bayesprog.expressions import Question
+from bayesprog.forms import InputRef
+from bayesprog.inference.binding import Bound, bind
+from bayesprog.inference.factors import relevant_terms, slice_factor, term_factor
+from bayesprog.program import Program
 
 
 def to_bayesian_network(program: Program) -> Any:
@@ -31,14 +33,14 @@ def to_bayesian_network(program: Program) -> Any:
     model = DiscreteBayesianNetwork()
     model.add_nodes_from(program.variables)
     cpds = []
-    bound = _Bound(())  # no evidence, no inputs: the literal tables as they are
+    bound = Bound(())  # no evidence, no inputs: the literal tables as they are
     for term in program.active_terms:
         if term.soft:
             raise QuestionError("soft evidence has no place in a Bayesian network")
         if any(isinstance(v, InputRef) for v in term.params.values()):
             raise QuestionError(f"term {term.label} takes a runtime input: a Bayesian network (and so "
                                 "BIF, XMLBIF or UAI export) needs literal tables")
-        factor = _term_factor(program, term, bound)
+        factor = term_factor(program, term, bound)
         values = np.exp(factor.log)  # axes: child, parents
         child = term.child
         parents = [p.name for p in term.parents]
@@ -77,7 +79,7 @@ def to_factor_graph(
     # multiplied together first.
     merged: dict[frozenset[str], Any] = {}
     for term in relevant_terms(program, q, bound):
-        f = _slice(_term_factor(program, term, bound), bound)
+        f = slice_factor(term_factor(program, term, bound), bound)
         if not f.axes:
             continue
         factor = DiscreteFactor(list(f.axes), list(f.log.shape), np.exp(f.log),

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import networkx as nx
 
-from bayesprog.program import Program, Question
+from bayesprog.expressions import Question
+from bayesprog.program import Program
 from bayesprog.variables import Continuous
 
 

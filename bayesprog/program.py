@@ -4,42 +4,21 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import networkx as nx
 
-from bayesprog.engine import (
-    MapResult,
-    Posterior,
-    _Plans,
-    bind,
-    check_zero,
-    choose_map,
-    compute_posterior,
-)
+from bayesprog import inference
 from bayesprog.errors import Diagnostic, QuestionError, SpecError
+from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
 from bayesprog.forms import get_form
-from bayesprog.spec.check import InputDecl, Term, check_document, question_problem
-from bayesprog.spec.model import Document, validate_located
-from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
-from bayesprog.spec.yamlload import Located, load_yaml
+from bayesprog.inference import MapResult, Posterior
+from bayesprog.language.check import InputDecl, Term, check_document, question_problem
+from bayesprog.language.document import Document, validate_located
+from bayesprog.language.loader import Located, load_yaml
 from bayesprog.variables import Variable
-
-
-@dataclass(frozen=True)
-class Question:
-    """A question ``P(searched | known)`` of kind ``posterior`` or ``map``."""
-
-    expression: Expression
-    kind: str = "posterior"
-    name: str | None = None
-    description: str = ""
-
-    def __str__(self) -> str:
-        return str(self.expression)
 
 
 class Program:
@@ -81,9 +60,7 @@ class Program:
         self.description = description
         self.path = path
         self.ablated = ablated
-        self._plans = _Plans()
-        self._static_factors: dict[int, Any] = {}
-        self._tables: dict[Any, Any] = {}
+        self.inference_cache = inference.InferenceCache()
 
     # structure -------------------------------------------------------------------------------------
     @cached_property
@@ -190,12 +167,7 @@ class Program:
         Posterior with ``probabilities[batch..., states...]``, or MapResult for MAP questions.
         """
         q = self.question(question, kind)
-        bound = bind(self, q, evidence, inputs, soft)
-        posterior = compute_posterior(self, q, bound)
-        if q.kind == "map":
-            return choose_map(posterior, str(q.expression), 0 if rng is None else rng, self.ablated)
-        check_zero(posterior)
-        return posterior
+        return inference.ask(self, q, evidence, inputs, soft, rng)
 
     def posterior(self, question: str | Question, evidence=None, **kw: Any) -> Posterior:
         result = self.ask(question, evidence, kind="posterior", **kw)
@@ -228,9 +200,7 @@ class Program:
         resolved = [str(self.term(n).expression) for n in names]
         new = copy.copy(self)
         new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
-        new._plans = _Plans()
-        new._static_factors = {}
-        new._tables = {}
+        new.inference_cache = inference.InferenceCache()
         new.__dict__.pop("active_terms", None)
         return new
 
@@ -271,7 +241,7 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     problems += schema_problems
     if doc is None:
         raise SpecError(problems)
-    checked = check_document(located, doc, base_dir or Path.cwd())
+    checked = check_document(located, doc, base_dir or Path.cwd(), load)
     problems += checked.problems
     if problems:
         raise SpecError(problems)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bayesprog.engine import MapResult, Posterior
-from bayesprog.forms import ParamValue
+from bayesprog.forms import InputRef, ParamValue
+from bayesprog.inference import MapResult, Posterior
+from bayesprog.language.check import Term
 from bayesprog.program import Program
-from bayesprog.spec.check import InputRef, Term
 from bayesprog.variables import Continuous, Discrete, Variable
 
 

@@ -42,11 +42,11 @@ with warnings.catch_warnings():
     from pgmpy.inference import VariableElimination
 
 import bayesprog
-from bayesprog import engine
+from bayesprog.inference.methods import table as table_method
 from bayesprog.io import dump_document, network_to_document, read_network
 
 EXAMPLES = Path(pgmpy.__file__).parent / "utils" / "example_models"
-TABLE_LIMIT = engine.TABLE_LIMIT
+TABLE_LIMIT = table_method.TABLE_LIMIT
 NETWORKS = ["asia", "alarm", "child", "insurance", "hepar2", "win95pts"]
 BATCHES = [1, 100, 10_000]
 
@@ -97,7 +97,7 @@ def agrum_net(model) -> gum.BayesNet:
 
 
 def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> dict:
-    engine.TABLE_LIMIT = TABLE_LIMIT if tables else 0
+    table_method.TABLE_LIMIT = TABLE_LIMIT if tables else 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         bif = tmp / f"{name}.bif"

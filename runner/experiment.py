@@ -16,7 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from bayesprog.errors import BayesprogError, SpecError
-from bayesprog.spec.model import load_document
+from bayesprog.language.document import load_document
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario

@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 import bayesprog
 from bayesprog.errors import SpecError
-from bayesprog.spec.model import load_document
+from bayesprog.language.document import load_document
 
 
 class _Strict(BaseModel):

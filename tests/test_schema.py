@@ -9,7 +9,7 @@ import jsonschema
 import pytest
 import yaml
 
-from bayesprog.spec.schema import json_schema
+from bayesprog.language.json_schema import json_schema
 
 ROOT = Path(__file__).parents[1]
 PROGRAMS = sorted(p for p in (ROOT / "models").rglob("*.yaml")

@@ -1,10 +1,11 @@
 """Parametric forms: a registry of small classes, each declaring its parameters as data."""
 
-from bayesprog.forms import program as _program  # noqa: F401  (registers the program form)
 from bayesprog.forms import standard as _standard  # noqa: F401  (registers the standard forms)
+from bayesprog.forms import subprogram as _subprogram  # noqa: F401  (registers the program form)
 from bayesprog.forms.base import (
     Constraint,
     Form,
+    InputRef,
     Param,
     ParamValue,
     TermContext,
@@ -21,6 +22,7 @@ from bayesprog.forms.base import (
 __all__ = [
     "Constraint",
     "Form",
+    "InputRef",
     "Param",
     "ParamValue",
     "TermContext",

@@ -18,6 +18,13 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class InputRef:
+    """A parameter given at question time by the runtime input ``name``."""
+
+    name: str
+
+
+@dataclass(frozen=True)
 class Constraint:
     """A constraint on parameter values; ``ok`` tests an array (events on the trailing axis)."""
 

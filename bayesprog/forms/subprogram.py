@@ -9,16 +9,13 @@ the outer program as a likelihood over ``X``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from bayesprog.errors import SpecError
-from bayesprog.forms.base import Form, ParamValue, TermContext, register_form
-from bayesprog.spec.terms import ExpressionError, parse_expression
-
-if TYPE_CHECKING:
-    from bayesprog.program import Program
+from bayesprog.expressions import ExpressionError, parse_expression
+from bayesprog.forms.base import Form, InputRef, ParamValue, TermContext, register_form
 
 
 @register_form
@@ -44,12 +41,13 @@ class ProgramForm(Form):
             checker.error(path, f"{what}: expected 'program: FILE' and 'question: NAME or "
                           "P(X | ...)'")
             return len(checker.problems) - before
-        from bayesprog.program import load
-
         file = Path(raw["program"])
         file = file if file.is_absolute() else checker.base_dir / file
+        if checker.load_program is None:
+            checker.error(path + ("program",), f"{what}: sub-programs cannot be loaded here")
+            return len(checker.problems) - before
         try:
-            sub = load(file)
+            sub = checker.load_program(file)
         except SpecError as exc:
             checker.error(path + ("program",), f"{what} {raw['program']!r} has "
                           f"{len(exc.diagnostics)} problem(s), listed with its own file")
@@ -103,8 +101,6 @@ class ProgramForm(Form):
                     problems.append(f"bind: input {value['input']!r} must not vary over "
                                     "variables")
                 else:
-                    from bayesprog.spec.check import InputRef
-
                     term.params[f"bind:{name}"] = InputRef(value["input"])
             else:
                 term.params[f"bind:{name}"] = ParamValue((), np.asarray(value))
@@ -114,7 +110,7 @@ class ProgramForm(Form):
         return len(checker.problems) - before
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
-        sub: Program = ctx.extra["program"]
+        sub = ctx.extra["program"]  # a Program: asked like any other
         expr = ctx.extra["question"]
         parents = ctx.axes[1:]
         lead = 1 + len(parents)

@@ -7,6 +7,7 @@ user sees all of them at once.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,19 +16,12 @@ import networkx as nx
 import numpy as np
 
 from bayesprog.errors import Diagnostic
-from bayesprog.forms import Form, Param, ParamValue, available_forms, get_form
-from bayesprog.spec.model import Document, InputSpec
-from bayesprog.spec.terms import Expression, ExpressionError, parse_expression
-from bayesprog.spec.yamlload import Located
-from bayesprog.spec.yamlload import Path as YPath
+from bayesprog.expressions import Expression, ExpressionError, parse_expression
+from bayesprog.forms import Form, InputRef, Param, ParamValue, available_forms, get_form
+from bayesprog.language.document import Document, InputSpec
+from bayesprog.language.loader import Located
+from bayesprog.language.loader import Path as YPath
 from bayesprog.variables import Continuous, Discrete, Variable, grid_variable
-
-
-@dataclass(frozen=True)
-class InputRef:
-    """A parameter given at question time by the runtime input ``name``."""
-
-    name: str
 
 
 @dataclass(frozen=True)
@@ -97,10 +91,13 @@ def build_variable(name: str, spec: Any) -> Variable:
 
 
 class _Checker:
-    def __init__(self, located: Located, doc: Document, base_dir: Path):
+    def __init__(self, located: Located, doc: Document, base_dir: Path,
+                 load_program: Callable[[Path], Any] | None = None):
         self.located = located
         self.doc = doc
         self.base_dir = base_dir
+        #: loads another program file (for ``program`` terms); given by the program layer
+        self.load_program = load_program
         self.problems: list[Diagnostic] = []
         self.variables: dict[str, Variable] = {}
         self.inputs: dict[str, InputDecl] = {}
@@ -551,8 +548,11 @@ def _offender(array: np.ndarray, param: Param, event_ndim: int) -> str:
     return str(array.tolist())
 
 
-def check_document(located: Located, doc: Document, base_dir: Path) -> Checked:
-    c = _Checker(located, doc, base_dir)
+def check_document(located: Located, doc: Document, base_dir: Path,
+                   load_program: Callable[[Path], Any] | None = None) -> Checked:
+    """Check a validated document whole; ``load_program`` loads the files that ``program`` terms
+    name (sub-programs), which this layer cannot do itself."""
+    c = _Checker(located, doc, base_dir, load_program)
     c.check_variables()
     c.check_inputs()
     terms = c.check_terms()

@@ -1,4 +1,4 @@
-"""Parsing of the ``P(left | right)`` notation shared by terms, questions and ablations.
+"""The ``P(left | right)`` notation shared by terms, questions and ablations, and questions.
 
 >>> parse_expression("P(A B | C=c1, D=0.3)")
 Expression(left=('A', 'B'), right=('C', 'D'), values={'C': 'c1', 'D': '0.3'})
@@ -82,3 +82,16 @@ def parse_expression(text: str) -> Expression:
     for dup in {n for n in left + right if (left + right).count(n) > 1}:
         raise ExpressionError(f"variable {dup!r} appears twice in {text!r}")
     return Expression(tuple(left), tuple(right), values)
+
+
+@dataclass(frozen=True)
+class Question:
+    """A question ``P(searched | known)`` of kind ``posterior`` or ``map``."""
+
+    expression: Expression
+    kind: str = "posterior"
+    name: str | None = None
+    description: str = ""
+
+    def __str__(self) -> str:
+        return str(self.expression)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from bayesprog.forms import available_forms, get_form
-from bayesprog.spec.model import Document
+from bayesprog.language.document import Document
 
 _PARAM_VALUE: dict[str, Any] = {
     "description": "a number or list, a table keyed by parent states, or {input: NAME}",

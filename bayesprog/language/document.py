@@ -1,7 +1,7 @@
 """The structure of a program file (format version 1), as pydantic models.
 
 Only the shape of the document is checked here; what refers to what (variables in terms,
-states in tables, parameter constraints) is checked by :mod:`bayesprog.spec.check`.
+states in tables, parameter constraints) is checked by :mod:`bayesprog.language.check`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Any, Literal, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from bayesprog.errors import Diagnostic, SpecError, short_repr
-from bayesprog.spec.yamlload import Located, load_yaml
+from bayesprog.language.loader import Located, load_yaml
 
 FORMAT_VERSION = 1
 M = TypeVar("M", bound=BaseModel)

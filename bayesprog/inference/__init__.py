@@ -1,0 +1,67 @@
+"""Answering questions: bind the evidence, plan the question, let the cost model pick a method.
+
+The path of a question: :func:`~bayesprog.inference.binding.bind` checks the evidence, inputs
+and soft evidence and flattens them to one batch axis; a
+:class:`~bayesprog.inference.plan.QuestionPlan` holds the relevant terms;
+:func:`~bayesprog.inference.cost.ranked` orders the methods that apply by estimated cost (the
+ranking is kept per layout of the question: same variables known, any batch size); the cheapest
+answers, or hands over to the next when some rows are beyond it. MAP questions then choose the
+argmax of that posterior (:func:`~bayesprog.inference.answers.choose_map`).
+
+Methods live in :mod:`bayesprog.inference.methods`, one module each: ``table`` (a compiled
+joint table, exact) and ``contraction`` (scaled tensor contraction, exact).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from bayesprog.expressions import Question
+from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
+from bayesprog.inference.binding import Bound, bind
+from bayesprog.inference.core import InferenceCache
+from bayesprog.inference.cost import ranked
+from bayesprog.inference.methods import Cost, Method, register_method, registered_methods
+from bayesprog.inference.plan import QuestionPlan
+from bayesprog.inference.protocol import ProgramLike
+
+__all__ = [
+    "Bound", "Cost", "InferenceCache", "MapResult", "Method", "Posterior", "ProgramLike",
+    "QuestionPlan", "ask", "bind", "compute_posterior", "register_method", "registered_methods",
+]
+
+
+def compute_posterior(program: ProgramLike, question: Question, bound: Bound) -> Posterior:
+    """The posterior of ``question`` for bound evidence, by the cheapest method that answers."""
+    plan = QuestionPlan(program, question, bound)
+    key = (str(question.expression), tuple(sorted(bound.discrete)), tuple(sorted(bound.continuous)),
+           tuple(sorted(bound.inputs)), tuple(sorted(bound.soft)))
+    rankings = program.inference_cache.rankings
+    methods = rankings.get(key)
+    if methods is None:
+        # costs grow with the batch size alike, so the order holds for every batch size
+        methods = rankings[key] = [method for method, _ in ranked(plan)]
+    for method in methods:
+        answer = method.posterior(plan)
+        if answer is not None:
+            return answer
+    raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+
+
+def ask(
+    program: ProgramLike,
+    question: Question,
+    evidence: Mapping[str, Any] | None = None,
+    inputs: Mapping[str, Any] | None = None,
+    soft: Mapping[str, Any] | None = None,
+    rng: Any = None,
+) -> Posterior | MapResult:
+    """Answer ``question`` (posterior or MAP, by its kind) for batched evidence."""
+    bound = bind(program, question, evidence, inputs, soft)
+    posterior = compute_posterior(program, question, bound)
+    if question.kind == "map":
+        return choose_map(posterior, str(question.expression), 0 if rng is None else rng,
+                          program.ablated)
+    check_zero(posterior)
+    return posterior

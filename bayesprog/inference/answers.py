@@ -1,0 +1,132 @@
+"""What a question answers: a posterior, or a MAP assignment chosen from one.
+
+MAP is the joint argmax of the searched variables after summing out the others; ties are broken
+by a seeded generator (one per batch row, when given), never by index order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bayesprog.errors import QuestionError, ZeroEvidenceError
+
+#: Relative tolerance under which two probabilities count as tied for MAP.
+TIE_RTOL = 1e-12
+
+
+@dataclass
+class Posterior:
+    """``P(searched | evidence)``: ``probabilities`` has shape ``batch + cards of variables``."""
+
+    question: str
+    variables: tuple[str, ...]
+    states: dict[str, tuple[str, ...]]
+    probabilities: np.ndarray
+    log_evidence: np.ndarray
+    batch_shape: tuple[int, ...]
+    ablated: tuple[str, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "question": self.question,
+            "variables": list(self.variables),
+            "states": {v: list(s) for v, s in self.states.items()},
+            "probabilities": self.probabilities.tolist(),
+            "ablated": list(self.ablated),
+        }
+
+
+@dataclass
+class MapResult:
+    """The joint argmax of the searched variables (others summed out), ties broken by an RNG.
+
+    ``indices`` has shape ``batch + (len(variables),)``; ``probability`` is the posterior
+    probability of the chosen assignment; ``ties`` counts the assignments that shared the maximum.
+    """
+
+    question: str
+    variables: tuple[str, ...]
+    states: dict[str, tuple[str, ...]]
+    indices: np.ndarray
+    probability: np.ndarray
+    ties: np.ndarray
+    zero_evidence: np.ndarray
+    posterior: Posterior
+    ablated: tuple[str, ...] = ()
+
+    @property
+    def assignment(self) -> dict[str, Any]:
+        """State names of the argmax (arrays of names when batched)."""
+        out = {}
+        for i, var in enumerate(self.variables):
+            names = np.asarray(self.states[var], dtype=object)
+            chosen = names[self.indices[..., i]]
+            out[var] = chosen if self.indices.ndim > 1 else str(chosen)
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        assignment = self.assignment
+        return {
+            "question": self.question,
+            "map": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in assignment.items()},
+            "probability": self.probability.tolist(),
+            "ties": self.ties.tolist(),
+            "zero_evidence": self.zero_evidence.tolist(),
+            "ablated": list(self.ablated),
+        }
+
+
+def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:
+    """Joint argmax per batch row; ties (relative 1e-12) broken uniformly by ``rng``.
+
+    ``rng`` is a ``numpy.random.Generator`` (or a seed) shared by the rows, or a sequence of one
+    generator per row: then a row's choice does not depend on the rest of the batch.
+    """
+    shape = posterior.batch_shape
+    cards = posterior.probabilities.shape[len(shape) :]
+    flat = posterior.probabilities.reshape((-1, int(np.prod(cards))))
+    rows = flat.shape[0]
+    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
+        if len(rng) != rows:
+            raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
+        gens = [r if isinstance(r, np.random.Generator) else np.random.default_rng(r) for r in rng]
+    else:
+        gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        gens = [gen] * rows
+    best = flat.max(axis=1)
+    tied = flat >= (best * (1 - TIE_RTOL))[:, None]
+    counts = tied.sum(axis=1)
+    choice = flat.argmax(axis=1)
+    for row in np.flatnonzero(counts > 1):
+        candidates = np.flatnonzero(tied[row])
+        choice[row] = candidates[gens[row].integers(candidates.size)]
+    indices = np.stack(np.unravel_index(choice, cards), axis=-1).reshape(shape + (len(cards),))
+    zero = ~(posterior.log_evidence > -np.inf)
+    return MapResult(
+        question=question,
+        variables=posterior.variables,
+        states=posterior.states,
+        indices=indices,
+        probability=flat[np.arange(rows), choice].reshape(shape),
+        ties=counts.reshape(shape),
+        zero_evidence=np.asarray(zero).reshape(shape),
+        posterior=posterior,
+        ablated=ablated,
+    )
+
+
+def zero_rows_message(posterior: Posterior) -> str:
+    zero = np.argwhere(~(posterior.log_evidence > -np.inf))
+    where = ", ".join(str(tuple(int(i) for i in row)) for row in zero[:5]) if posterior.batch_shape else ""
+    return (f"the evidence has probability zero under the program for {posterior.question}"
+            + (f" (batch rows {where}{', ...' if len(zero) > 5 else ''})" if where else "")
+            + ": no posterior exists; check the evidence or use a MAP question")
+
+
+def check_zero(posterior: Posterior) -> None:
+    if np.any(~(posterior.log_evidence > -np.inf)):
+        raise ZeroEvidenceError(zero_rows_message(posterior))

@@ -1,0 +1,194 @@
+"""Binding a question's evidence, inputs and soft evidence to arrays with one flat batch axis.
+
+Values arrive with any leading batch shape; they are checked against the variables and inputs
+they are given for (states, supports, declared shapes), broadcast together, and flattened, so
+that every method sees one batch axis of ``Bound.size`` rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bayesprog.errors import QuestionError
+from bayesprog.expressions import Question
+from bayesprog.forms import ParamValue
+from bayesprog.inference.protocol import ProgramLike
+from bayesprog.variables import Continuous, Discrete
+
+
+@dataclass
+class Bound:
+    """Evidence, inputs and soft evidence bound to flat batch arrays."""
+
+    batch_shape: tuple[int, ...]
+    discrete: dict[str, np.ndarray | int] = field(default_factory=dict)
+    continuous: dict[str, ParamValue] = field(default_factory=dict)
+    inputs: dict[str, ParamValue] = field(default_factory=dict)
+    soft: dict[str, ParamValue] = field(default_factory=dict)
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.batch_shape)) if self.batch_shape else 1
+
+
+def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...], trailing: int):
+    """Broadcast ``arr`` (batch ``own`` + trailing dims) to the common batch, flattened to one axis."""
+    if not own:
+        return arr, False
+    tail = arr.shape[arr.ndim - trailing :] if trailing else ()
+    full = np.broadcast_to(arr, batch_shape + tail)
+    return full.reshape((-1,) + tail), True
+
+
+def bind(
+    program: ProgramLike,
+    question: Question,
+    evidence: Mapping[str, Any] | None,
+    inputs: Mapping[str, Any] | None,
+    soft: Mapping[str, Any] | None,
+) -> Bound:
+    expr = question.expression
+    variables = program.variables
+    values: dict[str, Any] = dict(expr.values)
+    for name, value in (evidence or {}).items():
+        if name not in variables:
+            raise QuestionError(f"evidence for unknown variable {name!r} "
+                                f"(declared: {', '.join(variables)})")
+        if name not in expr.right:
+            raise QuestionError(f"evidence for {name!r}, which is not known in {expr}: expected "
+                                f"evidence for {', '.join(expr.right) or 'no variable'}")
+        if name in expr.values:
+            raise QuestionError(f"{name} is fixed to {expr.values[name]!r} by the question "
+                                "and given again as evidence")
+        values[name] = value
+    missing = [n for n in expr.right if n not in values]
+    if missing:
+        raise QuestionError(f"missing evidence for {', '.join(missing)} in {expr}")
+
+    staged: list[tuple[str, str, np.ndarray, tuple[int, ...], int]] = []
+    for name, value in values.items():
+        var = variables[name]
+        if isinstance(var, Discrete):
+            idx = _state_indices(var, value)
+            staged.append(("discrete", name, idx, idx.shape, 0))
+        else:
+            arr = _continuous_values(var, value, variables)
+            trailing = 1 if var.index is not None else 0
+            staged.append(("continuous", name, arr, arr.shape[: arr.ndim - trailing], trailing))
+    for name, value in (inputs or {}).items():
+        decl = program.inputs.get(name)
+        if decl is None:
+            raise QuestionError(f"unknown input {name!r} (declared inputs: "
+                                f"{', '.join(program.inputs) or 'none'})")
+        arr = _input_array(program, decl, value)
+        staged.append(("input", name, arr, arr.shape[: arr.ndim - decl.ndim], decl.ndim))
+    for name, value in (soft or {}).items():
+        var = variables.get(name)
+        if not isinstance(var, Discrete):
+            raise QuestionError(f"soft evidence needs a declared discrete variable, found {name!r}")
+        arr = np.asarray(value, dtype=float)
+        if arr.ndim < 1 or arr.shape[-1] != var.card or np.any(arr < 0) or not np.all(np.isfinite(arr)):
+            raise QuestionError(f"soft evidence on {name}: expected {var.card} non-negative "
+                                f"likelihoods (one per state), found shape {arr.shape}")
+        staged.append(("soft", name, arr, arr.shape[:-1], 1))
+    try:
+        batch_shape = tuple(np.broadcast_shapes(*(s[3] for s in staged))) if staged else ()
+    except ValueError:
+        shapes = ", ".join(f"{s[1]}: {s[3]}" for s in staged)
+        raise QuestionError(f"batch shapes do not broadcast together ({shapes})") from None
+    bound = Bound(batch_shape)
+    for kind, name, arr, own, trailing in staged:
+        flat, batched = _flatten(arr, own, batch_shape, trailing)
+        if kind == "discrete":
+            bound.discrete[name] = flat if batched else int(flat)
+        elif kind == "continuous":
+            var = variables[name]
+            axes = (var.index,) if var.index else ()  # type: ignore[union-attr]
+            bound.continuous[name] = ParamValue(axes, flat, batched)
+        elif kind == "input":
+            bound.inputs[name] = ParamValue(program.inputs[name].axes, flat, batched)
+        else:
+            bound.soft[name] = ParamValue((name,), flat, batched)
+    return bound
+
+
+def _state_indices(var: Discrete, value: Any) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind in "iu":
+        if var.values is not None:
+            lookup = {int(v): i for i, v in enumerate(var.values)}
+            bad = [v for v in np.unique(arr) if int(v) not in lookup]
+            if bad:
+                raise QuestionError(f"unknown value {bad[0]} of {var.name} (expected "
+                                    f"{var.values[0]}..{var.values[-1]})")
+            return np.vectorize(lookup.__getitem__, otypes=[np.intp])(arr) if arr.size else arr
+        if arr.size and (arr.min() < 0 or arr.max() >= var.card):
+            bad = arr[(arr < 0) | (arr >= var.card)].ravel()[0]
+            raise QuestionError(f"state index {bad} of {var.name} is out of range "
+                                f"(0..{var.card - 1})")
+        return arr.astype(np.intp)
+    if arr.dtype.kind in "USO":
+        names, inverse = np.unique(arr.astype(str), return_inverse=True)
+        codes = np.empty(len(names), dtype=np.intp)
+        for i, item in enumerate(names):
+            try:
+                codes[i] = var.index_of(str(item))
+            except KeyError:
+                raise QuestionError(f"unknown state {str(item)!r} of {var.name} (expected one "
+                                    f"of {var.describe_states()})") from None
+        return codes[inverse].reshape(arr.shape)
+    raise QuestionError(f"evidence for {var.name}: expected state names or indices, "
+                        f"found {arr.dtype} values")
+
+
+def _continuous_values(var: Continuous, value: Any, variables: Mapping) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise QuestionError(f"evidence for {var.name}: expected numbers, found {value!r}") from None
+    if var.index is not None:
+        card = variables[var.index].card
+        if arr.ndim < 1 or arr.shape[-1] != card:
+            raise QuestionError(f"evidence for field {var.name}: expected a last dimension of "
+                                f"{card} (one value per state of {var.index}), found shape "
+                                f"{arr.shape}")
+    missing = np.isnan(arr)
+    if missing.any() and var.index is None:
+        raise QuestionError(f"evidence for {var.name}: expected numbers, found NaN (a variable "
+                            "that is not observed is left out of the evidence)")
+    if not np.all(np.isfinite(arr[~missing])) and np.isfinite(var.width):
+        raise QuestionError(f"evidence for {var.name}: expected finite values")
+    with np.errstate(invalid="ignore"):
+        outside = (arr < var.low) | (arr > var.high)
+    if np.any(outside):
+        raise QuestionError(f"evidence {var.name}={arr[outside].ravel()[0]:g} is outside its "
+                            f"support [{var.low:g}, {var.high:g}]")
+    return arr
+
+
+def _input_array(program: ProgramLike, decl: Any, value: Any) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise QuestionError(f"input {decl.name!r}: expected an array of numbers") from None
+    want: list[int | str] = [program.variables[a].card for a in decl.axes] + list(decl.event)
+    declared = list(decl.axes) + list(decl.event)
+    ok = arr.ndim >= len(want)
+    symbols: dict[str, int] = {}
+    if ok:
+        for w, got in zip(want, arr.shape[arr.ndim - len(want) :], strict=False):
+            if isinstance(w, int):
+                ok &= w == got
+            else:
+                ok &= symbols.setdefault(w, got) == got
+    if not ok:
+        raise QuestionError(f"input {decl.name!r}: expected trailing shape {declared} "
+                            f"(= {[w if isinstance(w, int) else '?' for w in want]}), found "
+                            f"{list(arr.shape)}")
+    if not np.all(np.isfinite(arr)):
+        raise QuestionError(f"input {decl.name!r}: expected finite values")
+    return arr

@@ -1,0 +1,18 @@
+"""The cost model: of the methods that apply to a question, the cheapest by estimated
+operations (ties: the first registered)."""
+
+from __future__ import annotations
+
+from bayesprog.inference.methods import Cost, Method, registered_methods
+from bayesprog.inference.plan import QuestionPlan
+
+
+def ranked(plan: QuestionPlan) -> list[tuple[Method, Cost]]:
+    """The methods that apply to ``plan`` with their estimates, cheapest first."""
+    found = []
+    for order, method in enumerate(registered_methods().values()):
+        cost = method.estimate(plan)
+        if cost is not None:
+            found.append((cost.operations, order, method, cost))
+    found.sort(key=lambda item: (item[0], item[1]))
+    return [(method, cost) for _, _, method, cost in found]

@@ -1,0 +1,143 @@
+"""The factors of a question: which terms matter, and each term as a log-factor over the
+question's unobserved discrete variables, for bound evidence (batched or not)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bayesprog.errors import QuestionError
+from bayesprog.expressions import Question
+from bayesprog.forms import InputRef, ParamValue, TermContext
+from bayesprog.inference.binding import Bound
+from bayesprog.inference.core import Factor
+from bayesprog.inference.protocol import ProgramLike
+from bayesprog.language.check import Term
+from bayesprog.variables import Continuous
+
+
+def relevant_terms(program: ProgramLike, question: Question, bound: Bound) -> list[Term]:
+    """The terms that matter: those of ancestors of searched, observed or soft-evidence variables.
+
+    A barren variable (no observed descendant, not searched) sums out to one with its term,
+    unless a term is unnormalised (a potential): those children are always kept.
+    """
+    targets = set(question.expression.left) | set(bound.discrete) | set(bound.continuous)
+    targets |= set(bound.soft)
+    terms = program.active_terms
+    for t in terms:
+        if t.soft or not t.form.is_normalized(t.child):
+            targets.add(t.child.name)
+    keep = set(targets)
+    for name in targets:
+        keep |= program.ancestors(name)
+    for name in keep:
+        var = program.variables[name]
+        if not var.is_discrete and name not in bound.continuous:
+            raise QuestionError(f"continuous variable {name!r} is neither known nor barren in "
+                                f"{question.expression}: give it as evidence")
+    return [t for t in terms if t.child.name in keep]
+
+
+def is_static(term: Term) -> bool:
+    """A term whose factor does not depend on the question's evidence or inputs."""
+    return (
+        term.child.is_discrete
+        and term.form.name != "program"
+        and not any(isinstance(v, InputRef) for v in term.params.values())
+    )
+
+
+def _bound_param(term: Term, key: str, ref: InputRef, bound: Bound) -> ParamValue:
+    """An input bound to a parameter, checked against the parameter's declaration."""
+    if ref.name not in bound.inputs:
+        decl = f" {ref.name!r}"
+        raise QuestionError(f"missing input{decl}, needed by term {term.label}")
+    value = bound.inputs[ref.name]
+    declared = {p.name: p for p in term.form.params}.get(key)
+    if declared is None:
+        return value
+    arr = value.array
+    ndim = term.form.event_ndim(declared, term.child)
+    expected = term.form.event_shape(declared, term.child)
+    if expected is not None and arr.shape[arr.ndim - ndim :] != expected:
+        raise QuestionError(f"input {ref.name!r} for {term.form.name} parameter {key!r} of "
+                            f"{term.label}: expected trailing shape {list(expected)}, found "
+                            f"{list(arr.shape[arr.ndim - ndim:])}")
+    if not declared.constraint.ok(arr):
+        raise QuestionError(f"input {ref.name!r} for {term.form.name} parameter {key!r} of "
+                            f"{term.label}: expected values {declared.constraint}")
+    return value
+
+
+def _observed_part(term: Term, value: ParamValue | None
+                   ) -> tuple[ParamValue | None, ParamValue | None]:
+    """A field's value with its missing (NaN) entries moved into the support, and where they
+    are. A missing entry is marginalised: the term's factor is 1 there, which needs a form that
+    integrates to one over the child."""
+    if value is None or not np.isnan(value.array).any():
+        return value, None
+    child = term.child
+    assert isinstance(child, Continuous)
+    if not term.form.is_normalized(child):
+        raise QuestionError(f"evidence for {child.name}: a missing (NaN) field value needs a "
+                            f"normalised form, but {term.label} is a {term.form.name} potential")
+    missing = np.isnan(value.array)
+    low, high = (b if np.isfinite(b) else None for b in (child.low, child.high))
+    inside = (low + high) / 2 if low is not None and high is not None else (low or high or 0.0)
+    return (ParamValue(value.axes, np.where(missing, inside, value.array), value.batched),
+            ParamValue(value.axes, missing, value.batched))
+
+
+def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
+    static = is_static(term)
+    if static:
+        cached = program.inference_cache.static_factors.get(id(term))
+        if cached is not None:
+            return cached
+    params = {}
+    for key, value in term.params.items():
+        params[key] = _bound_param(term, key, value, bound) if isinstance(value, InputRef) else value
+    value = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
+    value, missing = _observed_part(term, value)
+    axes = term.axes
+    cards = tuple(program.variables[a].card for a in axes)  # type: ignore[union-attr]
+    ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,
+                      term.extra)
+    try:
+        log = np.asarray(term.form.log_factor(ctx), dtype=float)
+        full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
+    except ValueError as exc:
+        raise QuestionError(f"term {term.label}: {exc}") from None
+    batched = full[0] != 1 or any(p.batched for p in params.values()) or bool(
+        value is not None and value.batched
+    )
+    log = np.broadcast_to(log, full)
+    if missing is not None:
+        # a field value that is not observed: the density integrates to one over it
+        log = np.where(missing.aligned(axes, 0), 0.0, log)
+    if not batched:
+        log = log[0]
+    elif log.shape[0] != bound.size:
+        log = np.broadcast_to(log, (bound.size,) + cards)
+    factor = Factor(axes, log, batched)
+    if static:
+        program.inference_cache.static_factors[id(term)] = factor
+    return factor
+
+
+def slice_factor(f: Factor, bound: Bound) -> Factor:
+    observed = [i for i, a in enumerate(f.axes) if a in bound.discrete]
+    if not observed:
+        return f
+    rest = [i for i in range(len(f.axes)) if i not in observed]
+    index = [bound.discrete[f.axes[i]] for i in observed]
+    any_batched = f.batched or any(isinstance(i, np.ndarray) for i in index)
+    if f.batched:
+        arr = f.log.transpose([0] + [1 + i for i in observed] + [1 + i for i in rest])
+        sliced = arr[(np.arange(bound.size),) + tuple(index)]
+    else:
+        arr = f.log.transpose(observed + rest)
+        sliced = arr[tuple(index)]
+        if any_batched and sliced.shape[0] != bound.size:
+            sliced = np.broadcast_to(sliced, (bound.size,) + sliced.shape[1:])
+    return Factor(tuple(f.axes[i] for i in rest), sliced, any_batched)

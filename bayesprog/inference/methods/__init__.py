@@ -1,0 +1,7 @@
+"""Inference methods, one module each; importing this package registers them."""
+
+from bayesprog.inference.methods import contraction as _contraction  # noqa: F401  (registers)
+from bayesprog.inference.methods import table as _table  # noqa: F401  (registers)
+from bayesprog.inference.methods.base import Cost, Method, register_method, registered_methods
+
+__all__ = ["Cost", "Method", "register_method", "registered_methods"]

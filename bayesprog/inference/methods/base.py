@@ -1,0 +1,55 @@
+"""The interface every inference method implements, and the registry the cost model picks from.
+
+A method says whether it applies to a question and at what estimated cost (:meth:`estimate`),
+and answers it (:meth:`posterior`). A new method is one module with one class registered by
+:func:`register_method`, and its tests in one file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from bayesprog.inference.answers import Posterior
+from bayesprog.inference.plan import QuestionPlan
+
+
+@dataclass(frozen=True)
+class Cost:
+    """A method's estimate for one question over its whole batch: arithmetic operations and
+    the largest array it allocates (entries)."""
+
+    operations: float
+    memory: float
+
+
+class Method:
+    """One way of answering questions. Subclasses set ``name`` and implement both methods."""
+
+    name: ClassVar[str] = ""
+    #: whether the answers are exact (else they carry an error estimate)
+    exact: ClassVar[bool] = True
+
+    def estimate(self, plan: QuestionPlan) -> Cost | None:
+        """The cost of answering ``plan``, or None when this method does not apply to it."""
+        raise NotImplementedError
+
+    def posterior(self, plan: QuestionPlan) -> Posterior | None:
+        """The answer, or None when some rows need another method (the next cheapest)."""
+        raise NotImplementedError
+
+
+_METHODS: dict[str, Method] = {}
+
+
+def register_method(cls: type[Method]) -> type[Method]:
+    """Class decorator: make a method available to the cost model under ``cls.name``."""
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} needs a name")
+    _METHODS[cls.name] = cls()
+    return cls
+
+
+def registered_methods() -> dict[str, Method]:
+    """The registered methods by name, in registration order."""
+    return dict(_METHODS)

@@ -1,0 +1,98 @@
+"""Exact, by contraction: the question's factors, each rescaled in log space, contracted by a
+cached opt_einsum expression with a batch axis; rows that underflow are redone exactly in log
+space. Answers every discrete question, with any evidence, inputs and soft evidence."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import logsumexp
+
+from bayesprog.errors import QuestionError
+from bayesprog.inference.answers import Posterior
+from bayesprog.inference.contract import TINY, contract, log_contract
+from bayesprog.inference.core import Factor
+from bayesprog.inference.factors import slice_factor, term_factor
+from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.plan import QuestionPlan
+
+
+@register_method
+class ContractionMethod(Method):
+    """Applies to every question of a program whose unobserved variables are discrete."""
+
+    name = "contraction"
+
+    def estimate(self, plan: QuestionPlan) -> Cost | None:
+        size = plan.bound.size
+        sizes = [plan.free_size(t.axes) for t in plan.terms]
+        sizes += [plan.card(name) for name in plan.bound.soft]
+        out = int(np.prod([plan.card(v) for v in plan.searched]))
+        return Cost(operations=float(size * (sum(sizes) + out)),
+                    memory=float(size * max(sizes + [out])))
+
+    def posterior(self, plan: QuestionPlan) -> Posterior:
+        return contract_question(plan)
+
+
+def contract_question(plan: QuestionPlan) -> Posterior:
+    """The posterior by scaled contraction, with exact log-space rows where it underflows."""
+    program, question, bound = plan.program, plan.question, plan.bound
+    expr = question.expression
+    searched = expr.left
+    factors = []
+    for term in plan.terms:
+        factors.append(slice_factor(term_factor(program, term, bound), bound))
+    for name, pv in bound.soft.items():
+        with np.errstate(divide="ignore"):
+            log = np.log(pv.array)
+        factors.append(slice_factor(Factor((name,), log, pv.batched), bound))
+
+    size = bound.size
+    offset = np.zeros(size)
+    operands: list[Factor] = []
+    for f in factors:
+        red = tuple(range(1 if f.batched else 0, f.log.ndim))
+        with np.errstate(invalid="ignore"):
+            m = np.max(f.log, axis=red, keepdims=True) if red else f.log
+        if np.any(m == np.inf):
+            raise QuestionError(f"an infinite density over {', '.join(f.axes) or 'the evidence'}: "
+                                "a value sits on a singular point of its density")
+        m = np.where(np.isfinite(m), m, 0.0)
+        if not red:
+            offset += np.broadcast_to(f.log, (size,)) if f.batched else f.log
+            continue
+        offset += m.reshape(-1) if f.batched else m.reshape(())
+        operands.append(Factor(f.axes, np.exp(f.log - m), f.batched))
+    batched_out = any(f.batched for f in factors) or bool(bound.batch_shape)
+    table = contract(program, operands, searched, batched_out, size)
+    if not batched_out:
+        table = table[np.newaxis]
+    table = np.broadcast_to(table, (size,) + table.shape[1:])
+    axes = tuple(range(1, table.ndim))
+    z = table.sum(axis=axes)
+    with np.errstate(divide="ignore"):
+        log_z = np.log(z) + offset
+    # a row is bad when its scaled contraction underflowed, or an observed value's own
+    # probability (folded into the offset) is zero: both are redone exactly in log space
+    bad = ~(z > TINY) | ~np.isfinite(z) | ~np.isfinite(offset)
+    probs = np.empty_like(table)
+    good = ~bad
+    probs[good] = table[good] / z[good].reshape((-1,) + (1,) * len(axes))
+    if np.any(bad):
+        for row in np.flatnonzero(bad):
+            logs = [(f.axes, f.log[row] if f.batched else f.log) for f in factors]
+            lt = log_contract(logs, searched)
+            total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
+            log_z[row] = total
+            probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
+    cards = tuple(program.variables[v].card for v in searched)  # type: ignore[union-attr]
+    shape = bound.batch_shape
+    return Posterior(
+        question=str(expr),
+        variables=searched,
+        states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+        probabilities=probs.reshape(shape + cards),
+        log_evidence=log_z.reshape(shape),
+        batch_shape=shape,
+        ablated=program.ablated,
+    )

@@ -1,0 +1,97 @@
+"""Exact, by a compiled table: a discrete question over fixed tables is turned, at its first
+call, into the table ``P(observed, searched)`` (by the same scaled contraction as the
+contraction method); every later evidence set is a lookup in it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bayesprog.inference.answers import Posterior
+from bayesprog.inference.binding import Bound
+from bayesprog.inference.contract import TINY, contract
+from bayesprog.inference.core import Factor
+from bayesprog.inference.factors import is_static, term_factor
+from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.plan import QuestionPlan
+
+#: Largest joint table (entries) that a compiled discrete question keeps.
+TABLE_LIMIT = 1 << 20
+
+
+@dataclass
+class CompiledTable:
+    """A compiled discrete question: the joint table over observed + searched variables."""
+
+    observed: tuple[str, ...]
+    table: np.ndarray
+    log_offset: float
+
+
+def _observed_and_searched(plan: QuestionPlan) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    return tuple(sorted(plan.bound.discrete)), plan.searched
+
+
+def _compile(plan: QuestionPlan) -> CompiledTable:
+    program = plan.program
+    observed, searched = _observed_and_searched(plan)
+    key = (searched, observed)
+    cached = program.inference_cache.tables.get(key)
+    if cached is None:
+        empty = Bound(())
+        offset = 0.0
+        operands = []
+        for t in plan.terms:
+            f = term_factor(program, t, empty)
+            m = float(np.max(f.log)) if f.log.size else 0.0
+            m = m if np.isfinite(m) else 0.0
+            offset += m
+            operands.append(Factor(f.axes, np.exp(f.log - m), False))
+        table = contract(program, operands, observed + searched, False, 1)
+        cached = CompiledTable(observed, np.ascontiguousarray(table), offset)
+        program.inference_cache.tables[key] = cached
+    return cached
+
+
+@register_method
+class TableMethod(Method):
+    """Applies to a question over fixed tables (no continuous evidence, inputs or soft
+    evidence) whose observed and searched variables span at most ``TABLE_LIMIT`` states."""
+
+    name = "table"
+
+    def estimate(self, plan: QuestionPlan) -> Cost | None:
+        bound = plan.bound
+        if bound.continuous or bound.inputs or bound.soft:
+            return None
+        observed, searched = _observed_and_searched(plan)
+        joint = int(np.prod([plan.card(v) for v in observed + searched]))
+        if joint > TABLE_LIMIT or not all(is_static(t) for t in plan.terms):
+            return None
+        lookup = int(np.prod([plan.card(v) for v in searched]))
+        return Cost(operations=float(bound.size * lookup), memory=float(joint))
+
+    def posterior(self, plan: QuestionPlan) -> Posterior | None:
+        compiled = _compile(plan)
+        bound, program, searched = plan.bound, plan.program, plan.searched
+        index = tuple(bound.discrete[v] for v in compiled.observed)
+        rows = compiled.table[index] if index else compiled.table
+        cards = rows.shape[rows.ndim - len(searched) :]
+        rows = rows.reshape((-1,) + cards)
+        if rows.shape[0] != bound.size:
+            rows = np.broadcast_to(rows, (bound.size,) + cards)
+        z = rows.reshape(bound.size, -1).sum(axis=1)
+        if not np.all(z > TINY):
+            return None  # some row needs the exact log-space path
+        probs = rows / z.reshape((-1,) + (1,) * len(cards))
+        shape = bound.batch_shape
+        return Posterior(
+            question=str(plan.question.expression),
+            variables=searched,
+            states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+            probabilities=probs.reshape(shape + cards),
+            log_evidence=(np.log(z) + compiled.log_offset).reshape(shape),
+            batch_shape=shape,
+            ablated=program.ablated,
+        )

@@ -1,0 +1,24 @@
+"""What inference needs of a program (the program layer builds on inference, not the reverse)."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from bayesprog.inference.core import InferenceCache
+from bayesprog.language.check import InputDecl, Term
+from bayesprog.variables import Variable
+
+
+class ProgramLike(Protocol):
+    """A checked program: its variables, inputs, terms (ablations applied) and cache."""
+
+    name: str
+    variables: dict[str, Variable]
+    inputs: dict[str, InputDecl]
+    ablated: tuple[str, ...]
+    inference_cache: InferenceCache
+
+    @property
+    def active_terms(self) -> list[Term]: ...
+
+    def ancestors(self, name: str) -> set[str]: ...

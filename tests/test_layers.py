@@ -1,0 +1,102 @@
+"""The package's layering: no import circle between bayesprog's modules or its layers, and
+bayesprog never imports the haptic application (runner).
+
+Imports are read from the source with ``ast`` (every import statement, wherever it stands:
+module level, inside functions, under ``TYPE_CHECKING``), so a lazy import counts too.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+PACKAGE = Path(__file__).parents[1] / "bayesprog"
+
+#: From the bottom up: a layer may import its own modules and the layers below it only.
+LAYERS = [
+    {"errors", "variables", "expressions"},
+    {"forms"},
+    {"language"},
+    {"inference"},
+    {"program"},
+    {"compile", "draw", "show", "__init__"},
+    {"io"},
+    {"cli"},
+]
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports(path: Path) -> set[str]:
+    """Modules of bayesprog (or runner) that the file at ``path`` imports, fully named."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    here = module_name(path)
+    package = here if path.name == "__init__.py" else here.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1]
+                                + ([base] if base else []))
+            found.add(base)
+            # ``from bayesprog.forms import standard`` imports the module bayesprog.forms.standard
+            found |= {f"{base}.{alias.name}" for alias in node.names}
+    return {name for name in found if name.split(".")[0] in ("bayesprog", "runner")}
+
+
+def graph() -> nx.DiGraph:
+    files = {module_name(p): p for p in PACKAGE.rglob("*.py")}
+    g = nx.DiGraph()
+    for name, path in files.items():
+        g.add_node(name)
+        for target in imports(path):
+            while target not in files and "." in target:
+                target = target.rpartition(".")[0]  # a name imported from a module
+            # a package's own __init__ runs before any of its modules: not an import edge
+            ancestor = name.startswith(target + ".")
+            if target != name and not ancestor and (target in files or target.startswith("runner")):
+                g.add_edge(name, target)
+    return g
+
+
+def layer_of(module: str) -> int:
+    top = module.split(".")[1] if "." in module else "__init__"
+    for i, layer in enumerate(LAYERS):
+        if top in layer:
+            return i
+    raise AssertionError(f"{module} is in no layer: add it to LAYERS")
+
+
+def test_the_graph_sees_the_imports():
+    g = graph()
+    assert g.has_edge("bayesprog.program", "bayesprog.inference")
+    assert g.has_edge("bayesprog.inference.methods", "bayesprog.inference.methods.table")
+    assert g.number_of_edges() > 40
+
+
+def test_no_import_circle_between_modules():
+    cycles = list(nx.simple_cycles(graph()))
+    assert not cycles, f"import circles: {cycles}"
+
+
+def test_bayesprog_never_imports_runner():
+    g = graph()
+    offenders = [(a, b) for a, b in g.edges if b.startswith("runner")]
+    assert not offenders, offenders
+
+
+@pytest.mark.parametrize("module", sorted(graph().nodes - {"bayesprog"}))
+def test_each_module_imports_only_its_layer_and_below(module):
+    g = graph()
+    mine = layer_of(module)
+    above = [t for t in g.successors(module) if t != "bayesprog" and layer_of(t) > mine]
+    assert not above, f"{module} (layer {mine}) imports upper layers: {above}"
