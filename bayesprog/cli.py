@@ -12,10 +12,14 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bayesprog.errors import BayesprogError, SpecError
+
+if TYPE_CHECKING:
+    from bayesprog.program import Program
 
 EXIT_USER_ERROR = 2
 
@@ -24,7 +28,7 @@ class _UserError(Exception):
     pass
 
 
-def _load(path: str):
+def _load(path: str) -> Program:
     from bayesprog.program import load
 
     try:
@@ -163,7 +167,7 @@ def cmd_query(args: argparse.Namespace) -> int:
     return 0
 
 
-def _runner(name: str | None):
+def _runner(name: str | None) -> Any:
     """The runner plugin ``name`` (entry point group ``bayesprog.runners``)."""
     from importlib.metadata import entry_points
 

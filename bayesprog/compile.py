@@ -16,6 +16,7 @@ from bayesprog.forms import InputRef
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.factors import relevant_terms, slice_factor, term_factor
 from bayesprog.program import Program
+from bayesprog.variables import discrete
 
 
 def to_bayesian_network(program: Program) -> Any:
@@ -42,14 +43,15 @@ def to_bayesian_network(program: Program) -> Any:
                                 "BIF, XMLBIF or UAI export) needs literal tables")
         factor = term_factor(program, term, bound)
         values = np.exp(factor.log)  # axes: child, parents
-        child = term.child
+        child = discrete(term.child)
         parents = [p.name for p in term.parents]
-        cards = [program.variables[p].card for p in parents]
+        cards = [discrete(program.variables[p]).card for p in parents]
         model.add_edges_from((p, child.name) for p in parents)
         cpds.append(TabularCPD(
             child.name, child.card, values.reshape(child.card, -1),
             evidence=parents or None, evidence_card=cards or None,
-            state_names={v: list(program.variables[v].states) for v in [child.name] + parents},
+            state_names={v: list(discrete(program.variables[v]).states)
+                         for v in [child.name] + parents},
         ))
     model.add_cpds(*cpds)
     model.check_model()
@@ -83,7 +85,8 @@ def to_factor_graph(
         if not f.axes:
             continue
         factor = DiscreteFactor(list(f.axes), list(f.log.shape), np.exp(f.log),
-                                state_names={a: list(program.variables[a].states) for a in f.axes})
+                                state_names={a: list(discrete(program.variables[a]).states)
+                                             for a in f.axes})
         key = frozenset(f.axes)
         merged[key] = merged[key] * factor if key in merged else factor
     for factor in merged.values():

@@ -56,7 +56,7 @@ def _layers(graph: nx.DiGraph) -> dict[str, tuple[float, float]]:
     by_layer: dict[int, list[str]] = {}
     for node, k in layer.items():
         by_layer.setdefault(k, []).append(node)
-    pos = {}
+    pos: dict[str, tuple[float, float]] = {}
     for k, nodes in by_layer.items():
         for i, node in enumerate(nodes):
             pos[node] = (i - (len(nodes) - 1) / 2, -k)

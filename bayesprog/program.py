@@ -169,12 +169,14 @@ class Program:
         q = self.question(question, kind)
         return inference.ask(self, q, evidence, inputs, soft, rng)
 
-    def posterior(self, question: str | Question, evidence=None, **kw: Any) -> Posterior:
+    def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
+                  **kw: Any) -> Posterior:
         result = self.ask(question, evidence, kind="posterior", **kw)
         assert isinstance(result, Posterior)
         return result
 
-    def map(self, question: str | Question, evidence=None, **kw: Any) -> MapResult:
+    def map(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
+            **kw: Any) -> MapResult:
         result = self.ask(question, evidence, kind="map", **kw)
         assert isinstance(result, MapResult)
         return result

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from bayesprog.forms import InputRef, ParamValue
@@ -52,7 +54,8 @@ def _array(arr: np.ndarray) -> str:
     flat = np.asarray(arr).ravel()
     if flat.size > 8:
         return f"[{', '.join(_fmt(x) for x in flat[:6])}, ... ({flat.size} values)]"
-    text = np.array2string(np.asarray(arr), separator=", ", formatter={"float_kind": _fmt})
+    formatter: Any = {"float_kind": _fmt}
+    text = np.array2string(np.asarray(arr), separator=", ", formatter=formatter)
     return text.replace("\n", "")
 
 

@@ -91,6 +91,13 @@ class Continuous:
 Variable = Discrete | Continuous
 
 
+def discrete(var: Variable) -> Discrete:
+    """``var`` as a discrete variable, for code that has established that it is one."""
+    if not isinstance(var, Discrete):
+        raise TypeError(f"{var.name} is continuous where a discrete variable is expected")
+    return var
+
+
 def _is_int(text: str) -> bool:
     try:
         int(text)

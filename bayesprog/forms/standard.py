@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 from scipy.special import betaln, xlog1py, xlogy
 
@@ -161,7 +164,7 @@ class GaussianMixture(Form):
             ]
         return []
 
-    def check_params(self, params, child: Variable) -> list[tuple[str, str]]:
+    def check_params(self, params: Mapping[str, Any], child: Variable) -> list[tuple[str, str]]:
         means, weights = params.get("means"), params.get("weights")
         floor = params.get("floor")
         if (isinstance(floor, ParamValue) and np.any(floor.array > 0) and not child.is_discrete
@@ -177,7 +180,8 @@ class GaussianMixture(Form):
         return []
 
     @staticmethod
-    def _separable(ctx, grid, gi, coords, means, s, floor) -> np.ndarray | None:
+    def _separable(ctx: TermContext, grid: Any, gi: int, coords: np.ndarray, means: np.ndarray,
+                   s: np.ndarray, floor: np.ndarray) -> np.ndarray | None:
         """A 2-D grid, one sigma per mixture, a floor > 0: the Gaussians factor along the axes,
         so the mixture over all cells is one matrix product of per-axis terms per mixture
         (exact: where the product underflows, the floor dominates to double precision)."""
@@ -203,7 +207,7 @@ class GaussianMixture(Form):
 
     def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:
         keys = [p for p in parents if isinstance(p, Discrete)]
-        return ([child] if isinstance(child, Discrete) else []) + keys  # type: ignore[list-item]
+        return ([child] if isinstance(child, Discrete) else []) + keys
 
     def event_ndim(self, param: Param, child: Variable) -> int:
         return 2 if param.name == "means" and child.is_discrete else param.event_ndim
@@ -248,7 +252,7 @@ class GaussianMixture(Form):
             x = ctx.child_value()[..., None]
             s = sigma[..., None]
             log_comp = -0.5 * ((x - means) / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
-            area = child.width  # type: ignore[union-attr]
+            area = child.width
         k = log_comp.shape[-1]
         if "weights" in ctx.params:
             weights = ctx.param("weights", 1)

@@ -17,7 +17,7 @@ from bayesprog.errors import QuestionError
 from bayesprog.expressions import Question
 from bayesprog.forms import ParamValue
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.variables import Continuous, Discrete
+from bayesprog.variables import Continuous, Discrete, discrete
 
 
 @dataclass
@@ -35,7 +35,8 @@ class Bound:
         return int(np.prod(self.batch_shape)) if self.batch_shape else 1
 
 
-def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...], trailing: int):
+def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...],
+             trailing: int) -> tuple[np.ndarray, bool]:
     """Broadcast ``arr`` (batch ``own`` + trailing dims) to the common batch, flattened to one axis."""
     if not own:
         return arr, False
@@ -87,12 +88,12 @@ def bind(
         arr = _input_array(program, decl, value)
         staged.append(("input", name, arr, arr.shape[: arr.ndim - decl.ndim], decl.ndim))
     for name, value in (soft or {}).items():
-        var = variables.get(name)
-        if not isinstance(var, Discrete):
+        soft_var = variables.get(name)
+        if not isinstance(soft_var, Discrete):
             raise QuestionError(f"soft evidence needs a declared discrete variable, found {name!r}")
         arr = np.asarray(value, dtype=float)
-        if arr.ndim < 1 or arr.shape[-1] != var.card or np.any(arr < 0) or not np.all(np.isfinite(arr)):
-            raise QuestionError(f"soft evidence on {name}: expected {var.card} non-negative "
+        if arr.ndim < 1 or arr.shape[-1] != soft_var.card or np.any(arr < 0) or not np.all(np.isfinite(arr)):
+            raise QuestionError(f"soft evidence on {name}: expected {soft_var.card} non-negative "
                                 f"likelihoods (one per state), found shape {arr.shape}")
         staged.append(("soft", name, arr, arr.shape[:-1], 1))
     try:
@@ -175,7 +176,7 @@ def _input_array(program: ProgramLike, decl: Any, value: Any) -> np.ndarray:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise QuestionError(f"input {decl.name!r}: expected an array of numbers") from None
-    want: list[int | str] = [program.variables[a].card for a in decl.axes] + list(decl.event)
+    want: list[int | str] = [discrete(program.variables[a]).card for a in decl.axes] + list(decl.event)
     declared = list(decl.axes) + list(decl.event)
     ok = arr.ndim >= len(want)
     symbols: dict[str, int] = {}

@@ -11,6 +11,7 @@ from scipy.special import logsumexp
 
 from bayesprog.inference.core import Factor
 from bayesprog.inference.protocol import ProgramLike
+from bayesprog.variables import discrete
 
 #: Below this, a row's normaliser is recomputed in log space (underflow, or subnormal precision).
 TINY = 1e-280
@@ -21,20 +22,21 @@ def contract(program: ProgramLike, operands: list[Factor], searched: tuple[str, 
     """Contract the (rescaled) ``operands`` down to ``searched``, with a batch axis of ``size``
     rows when ``batched_out``; searched variables without a factor are uniform."""
     if not operands:
-        cards = tuple(program.variables[v].card for v in searched)
+        cards = tuple(discrete(program.variables[v]).card for v in searched)
         return np.ones(((size,) if batched_out else ()) + cards)
     present = {a for f in operands for a in f.axes}
     missing = [v for v in searched if v not in present]
     if missing:  # a searched variable with no factor left: uniform over its states
         for v in missing:
-            operands.append(Factor((v,), np.ones(program.variables[v].card), False))
+            operands.append(Factor((v,), np.ones(discrete(program.variables[v]).card), False))
     if batched_out and not any(f.batched for f in operands):
         operands.append(Factor((), np.ones(size), True))
     expr = program.inference_cache.plans.get(operands, searched, batched_out)
     return expr(*(f.log for f in operands))
 
 
-def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tuple[str, ...]):
+def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]],
+                 output: tuple[str, ...]) -> np.ndarray:
     """Exact log-space variable elimination, for rows whose scaled contraction underflowed."""
     pool = [(tuple(a), np.asarray(v, dtype=float)) for a, v in factors]
     names = {a for axes, _ in pool for a in axes} - set(output)
@@ -49,7 +51,8 @@ def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tupl
     return arr
 
 
-def _log_product(factors, order: Sequence[str] | None = None):
+def _log_product(factors: list[tuple[tuple[str, ...], np.ndarray]],
+                 order: Sequence[str] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
     axes = list(order) if order is not None else []
     for f_axes, _ in factors:
         axes += [a for a in f_axes if a not in axes]

@@ -12,7 +12,7 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
-from bayesprog.variables import Continuous
+from bayesprog.variables import Continuous, discrete
 
 
 def relevant_terms(program: ProgramLike, question: Question, bound: Bound) -> list[Term]:
@@ -94,13 +94,14 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
         cached = program.inference_cache.static_factors.get(id(term))
         if cached is not None:
             return cached
-    params = {}
-    for key, value in term.params.items():
-        params[key] = _bound_param(term, key, value, bound) if isinstance(value, InputRef) else value
-    value = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
-    value, missing = _observed_part(term, value)
+    params: dict[str, ParamValue] = {}
+    for key, param in term.params.items():
+        params[key] = _bound_param(term, key, param, bound) if isinstance(param, InputRef) \
+            else param
+    observed = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
+    value, missing = _observed_part(term, observed)
     axes = term.axes
-    cards = tuple(program.variables[a].card for a in axes)  # type: ignore[union-attr]
+    cards = tuple(discrete(program.variables[a]).card for a in axes)
     ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,
                       term.extra)
     try:

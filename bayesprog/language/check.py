@@ -177,27 +177,28 @@ class _Checker:
                     f"variable {name!r} has no term in the decomposition: expected one "
                     f"P({name} | ...)",
                 )
-        for i, spec in enumerate(self.doc.soft_evidence):
+        for i, soft in enumerate(self.doc.soft_evidence):
             path = ("soft_evidence", i)
-            term = self.check_term(path + ("variable",), f"P({spec.variable})", spec.form, spec.parameters, path)
+            term = self.check_term(path + ("variable",), f"P({soft.variable})", soft.form,
+                                   soft.parameters, path)
             if term is not None:
                 if not term.child.is_discrete:
                     self.error(path + ("variable",), f"soft evidence needs a discrete "
-                               f"variable, found continuous {spec.variable!r}")
+                               f"variable, found continuous {soft.variable!r}")
                     continue
                 if term.form.name not in ("categorical", "program"):
                     self.error(path + ("form",), "soft evidence takes form 'categorical' or "
                                f"'program', found {term.form.name!r}")
                     continue
                 term.soft = True
-                term.description = spec.description
+                term.description = soft.description
                 terms.append(term)
         self.check_cycles(terms)
         return terms
 
     def _failed_children(self) -> set[str]:
         """Variables named first in a term, even in a term too broken to parse."""
-        names = set()
+        names: set[str] = set()
         for spec in self.doc.decomposition:
             try:
                 names.update(parse_expression(spec.term).left)
@@ -306,7 +307,8 @@ class _Checker:
             return None
         return ParamValue(axes, array)
 
-    def input_ref(self, term, param, name, path, event_ndim, keyable, what) -> InputRef | None:
+    def input_ref(self, term: Term, param: Param, name: Any, path: YPath, event_ndim: int,
+                  keyable: list, what: str) -> InputRef | None:
         decl = self.inputs.get(name) if isinstance(name, str) else None
         if decl is None:
             self.error(path, f"{what}: unknown input {name!r} (declared inputs: "
@@ -324,7 +326,8 @@ class _Checker:
             return None
         return InputRef(name)
 
-    def _literal(self, raw: Any, spec: _LiteralSpec, keyable: list, path: YPath):
+    def _literal(self, raw: Any, spec: _LiteralSpec, keyable: list,
+                 path: YPath) -> tuple[tuple[str, ...], np.ndarray]:
         """(axes, array) of a literal parameter; every row is checked where it is written."""
         child, what = spec.child, spec.what
         if isinstance(raw, dict):
@@ -392,7 +395,7 @@ class _Checker:
 
     # questions and ablations --------------------------------------------------------------------
     def check_questions(self) -> dict[str, tuple[Expression, str, str]]:
-        out = {}
+        out: dict[str, tuple[Expression, str, str]] = {}
         for name in self.doc.questions:
             spec = self.doc.question(name)
             raw = self.doc.questions[name]

@@ -17,7 +17,7 @@ import yaml
 
 from bayesprog.errors import Diagnostic
 
-Path = tuple[str | int, ...]
+Path = tuple[str | int | float, ...]
 
 _INT = re.compile(r"^[-+]?[0-9]+$")
 _FLOAT = re.compile(r"^[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?$")

@@ -77,7 +77,7 @@ class TableMethod(Method):
         bound, program, searched = plan.bound, plan.program, plan.searched
         index = tuple(bound.discrete[v] for v in compiled.observed)
         rows = compiled.table[index] if index else compiled.table
-        cards = rows.shape[rows.ndim - len(searched) :]
+        cards: tuple[int, ...] = tuple(rows.shape[rows.ndim - len(searched) :])
         rows = rows.reshape((-1,) + cards)
         if rows.shape[0] != bound.size:
             rows = np.broadcast_to(rows, (bound.size,) + cards)
