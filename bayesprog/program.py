@@ -61,6 +61,7 @@ class Program:
         self.path = path
         self.ablated = ablated
         self.inference_cache = inference.InferenceCache()
+        self._parsed: dict[str, Question] = {}  # question texts asked before, parsed
 
     # structure -------------------------------------------------------------------------------------
     @cached_property
@@ -122,6 +123,8 @@ class Program:
             q = Question(question)
         elif question in self.questions:
             q = self.questions[question]
+        elif question in self._parsed:
+            q = self._parsed[question]
         else:
             try:
                 expr = parse_expression(question)
@@ -132,6 +135,8 @@ class Program:
             if problem:
                 raise QuestionError(problem)
             q = Question(expr)
+            if len(self._parsed) < 1024:  # a question asked again is parsed once
+                self._parsed[question] = q
         if kind is not None and kind != q.kind:
             if kind not in ("posterior", "map"):
                 raise QuestionError(f"kind must be 'posterior' or 'map', got {kind!r}")

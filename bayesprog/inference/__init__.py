@@ -35,8 +35,9 @@ __all__ = [
 def compute_posterior(program: ProgramLike, question: Question, bound: Bound) -> Posterior:
     """The posterior of ``question`` for bound evidence, by the cheapest method that answers."""
     plan = QuestionPlan(program, question, bound)
-    key = (str(question.expression), tuple(sorted(bound.discrete)), tuple(sorted(bound.continuous)),
-           tuple(sorted(bound.inputs)), tuple(sorted(bound.soft)))
+    # the ranking depends on which variables are searched and known, not on their values
+    key = (question.expression.left, *(tuple(sorted(part)) for part in (
+        bound.discrete, bound.continuous, bound.inputs, bound.soft)))
     rankings = program.inference_cache.rankings
     methods = rankings.get(key)
     if methods is None:
