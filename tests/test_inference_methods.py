@@ -1,0 +1,125 @@
+"""The inference layer's methods, one by one, and the cost model that picks among them.
+
+Each method is forced on the same questions and checked against brute-force enumeration of the
+joint distribution; the cost model is checked to pick the compiled table where it applies, the
+contraction otherwise, and to use a newly registered method when it is the cheapest.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import bayesprog
+from bayesprog.inference import QuestionPlan, bind, registered_methods
+from bayesprog.inference.cost import ranked
+from bayesprog.inference.methods import base as methods_base
+from bayesprog.inference.methods.base import Cost, Method, register_method
+
+
+def chain(seed: int) -> tuple[bayesprog.Program, dict[str, np.ndarray]]:
+    """A -> B -> C and A -> C, with random tables (A: 2, B: 3, C: 2 states)."""
+    rng = np.random.default_rng(seed)
+    pa = rng.dirichlet(np.ones(2))
+    pb = rng.dirichlet(np.ones(3), size=2)  # [a, b]
+    pc = rng.dirichlet(np.ones(2), size=(2, 3))  # [a, b, c]
+
+    def rows(arr: np.ndarray) -> str:
+        return "[" + ", ".join(f"{x:.17g}" for x in arr) + "]"
+
+    text = f"""
+bayesprog: 1
+variables:
+  A: {{states: [a0, a1]}}
+  B: {{states: [b0, b1, b2]}}
+  C: {{states: [c0, c1]}}
+decomposition:
+  - {{term: P(A), form: table, table: {rows(pa)}}}
+  - term: P(B | A)
+    form: table
+    table: {{a0: {rows(pb[0])}, a1: {rows(pb[1])}}}
+  - term: P(C | A, B)
+    form: table
+    table: {{{", ".join(f"a{i}: {{" + ", ".join(f"b{j}: {rows(pc[i, j])}" for j in range(3)) + "}"
+                       for i in range(2))}}}
+"""
+    joint = pa[:, None, None] * pb[:, :, None] * pc
+    return bayesprog.loads(text), {"joint": joint}
+
+
+def brute(joint: np.ndarray, searched: str, known: dict[str, int]) -> np.ndarray:
+    axes = "ABC"
+    out = np.zeros(joint.shape[axes.index(searched)])
+    for index in itertools.product(*map(range, joint.shape)):
+        if all(index[axes.index(k)] == v for k, v in known.items()):
+            out[index[axes.index(searched)]] += joint[index]
+    return out / out.sum()
+
+
+@pytest.mark.parametrize("method", ["table", "contraction"])
+@pytest.mark.parametrize("seed", range(5))
+def test_each_method_matches_brute_force(method, seed):
+    program, tables = chain(seed)
+    for searched, known in [("A", {"C": 1}), ("B", {"A": 0, "C": 0}), ("C", {}), ("A", {"B": 2})]:
+        question = program.question(f"P({searched} | {', '.join(known)})" if known
+                                    else f"P({searched})")
+        plan = QuestionPlan(program, question, bind(program, question, known, None, None))
+        answer = registered_methods()[method].posterior(plan)
+        assert answer is not None
+        np.testing.assert_allclose(answer.probabilities, brute(tables["joint"], searched, known),
+                                   rtol=1e-12)
+
+
+def test_the_methods_agree_on_a_batch():
+    program, tables = chain(7)
+    question = program.question("P(A | B, C)")
+    evidence = {"B": np.array([0, 1, 2, 0]), "C": np.array([1, 1, 0, 0])}
+    plan = QuestionPlan(program, question, bind(program, question, evidence, None, None))
+    answers = [registered_methods()[m].posterior(plan) for m in ("table", "contraction")]
+    np.testing.assert_allclose(answers[0].probabilities, answers[1].probabilities, rtol=1e-12)
+    for row, (b, c) in enumerate(zip(evidence["B"], evidence["C"], strict=True)):
+        np.testing.assert_allclose(answers[0].probabilities[row],
+                                   brute(tables["joint"], "A", {"B": b, "C": c}), rtol=1e-12)
+
+
+def test_cost_model_picks_the_table_where_it_applies():
+    program, _ = chain(1)
+    question = program.question("P(A | C)")
+    plan = QuestionPlan(program, question, bind(program, question, {"C": 0}, None, None))
+    order = [method.name for method, _ in ranked(plan)]
+    assert order == ["table", "contraction"]
+
+
+def test_cost_model_skips_the_table_with_continuous_evidence():
+    program = bayesprog.load("models/pi_per.yaml")
+    question = program.question("P(M | E, C)")
+    plan = QuestionPlan(program, question, bind(program, question, {"E": 0.5, "C": 0.1}, None,
+                                                None))
+    assert [method.name for method, _ in ranked(plan)] == ["contraction"]
+
+
+def test_a_registered_method_is_used_when_it_is_the_cheapest(monkeypatch):
+    monkeypatch.setattr(methods_base, "_METHODS", dict(methods_base._METHODS))
+    calls = []
+
+    @register_method
+    class Uniform(Method):
+        """Answers every posterior with a uniform, at no cost: only to see it chosen."""
+
+        name = "uniform-for-test"
+        exact = False
+
+        def estimate(self, plan):
+            return Cost(operations=0.0, memory=0.0)
+
+        def posterior(self, plan):
+            calls.append(plan.question)
+            contraction = registered_methods()["contraction"].posterior(plan)
+            contraction.probabilities[...] = 1.0 / contraction.probabilities.shape[-1]
+            return contraction
+
+    program, _ = chain(2)  # a new program: no ranking cached yet
+    answer = program.ask("P(B | A)", {"A": "a1"})
+    assert calls and answer.probabilities.tolist() == pytest.approx([1 / 3] * 3)
