@@ -12,12 +12,10 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 from scipy.special import xlog1py, xlogy
 
 from runner._kernels import perceived_sobel_2d
 
-SOBEL_NORM = 4.0
 INHIBITION_ALPHA = 1.01
 INHIBITION_BETA = 9.0
 
@@ -27,11 +25,6 @@ def uncertainty(posterior: np.ndarray) -> np.ndarray:
     k = posterior.shape[-1]
     h = -xlogy(posterior, posterior).sum(axis=-1)
     return np.clip(h / np.log(k), 0.0, 1.0)
-
-
-def sobel(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """3x3 Sobel responses (s_x along axis -2, s_y along axis -1), edges replicated."""
-    return (ndimage.sobel(d, axis=-2, mode="nearest"), ndimage.sobel(d, axis=-1, mode="nearest"))
 
 
 def _slices(ndim: int, axis: int, part: slice) -> tuple[slice, ...]:
@@ -56,7 +49,7 @@ def _line_means(values: np.ndarray, weights: np.ndarray, axis: int, dims: int):
     that line has any weight. Cells outside the grid have no weight."""
     pad = [(0, 0)] * (values.ndim - dims) + [(1, 1)] * dims
     w = np.pad(weights.astype(float), pad)
-    num = np.pad(values * weights, pad)
+    num = np.pad(np.where(weights, values, 0.0), pad)
     others = [values.ndim + a for a in range(-dims, 0) if a != axis]
     num, den = _box_sum(num, others, (1.0, 2.0, 1.0)), _box_sum(w, others, (1.0, 2.0, 1.0))
     axis = values.ndim + axis
@@ -116,8 +109,11 @@ def saliency(target_map: np.ndarray, perceived: np.ndarray | None = None,
            [nan, nan,  0.,  0.]])
     """
     d = np.asarray(target_map, dtype=float)
-    mask = np.ones(d.shape, bool) if perceived is None else np.asarray(perceived, bool)
-    if dims == 2 and kernel:
+    mask = np.ones(d.shape, bool) if perceived is None else \
+        np.broadcast_to(np.asarray(perceived, bool), d.shape)
+    if np.isnan(d[mask]).any():
+        raise ValueError("saliency: the map is NaN at a perceived cell")
+    if dims == 2 and kernel and d.size:
         flat = (-1, *d.shape[-2:])
         return perceived_sobel_2d(np.ascontiguousarray(d.reshape(flat)),
                                   np.ascontiguousarray(mask.reshape(flat))).reshape(d.shape)

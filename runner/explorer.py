@@ -169,6 +169,10 @@ class Explorer:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
         d, perceived = self.target_map()
         s = saliency((d >= 0.5).astype(float), perceived).reshape(self.runs, -1)
+        # a run where no cell has any saliency (nothing left to compare: the probed region is
+        # homogeneous and has no unprobed tip) learns nothing from S: it is not observed there
+        vetoed = ~np.any(np.isnan(s) | (s > 0), axis=1)
+        s[vetoed] = np.nan
         return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
 
     def border_cells(self) -> np.ndarray:

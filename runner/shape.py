@@ -91,7 +91,7 @@ def match(
     moves = np.tile(_OFFSETS, (rotations, 1))[None] * radius[:, None, None]  # [T, S, 2]
     angle = np.broadcast_to(angles, (runs, n_t, angles.size)).copy()
     used = np.arange(k)[None, :] < counts[:, None]
-    centroid = (path * used[..., None]).sum(axis=1) / counts[:, None]
+    centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
     shift = centroid[:, None, None, :] + moves[None]
     if rotations == 0 and warm is None:
         raise ValueError("match needs rotations > 0 or a warm start")
@@ -175,7 +175,6 @@ class ShapeTracker:
             limit = state.distance[warm_runs] * self.worse + self.slack
             worse = (reg.distance > limit).any(axis=1)
             self._store(warm_runs[~worse], reg, ~worse)
-            full = full.copy()
             todo_full = np.concatenate([todo[full], warm_runs[worse]])
             if worse.any():
                 # start the search from the warm result too

@@ -103,6 +103,9 @@ def test_cost_model_skips_the_table_with_continuous_evidence():
 def test_a_registered_method_is_used_when_it_is_the_cheapest(monkeypatch):
     monkeypatch.setattr(methods_base, "_METHODS", dict(methods_base._METHODS))
     calls = []
+    program, _ = chain(2)
+    before = program.ask("P(B | A)", {"A": "a1"}).probabilities  # ranked before registration
+    assert before.tolist() != pytest.approx([1 / 3] * 3)
 
     @register_method
     class Uniform(Method):
@@ -120,6 +123,5 @@ def test_a_registered_method_is_used_when_it_is_the_cheapest(monkeypatch):
             contraction.probabilities[...] = 1.0 / contraction.probabilities.shape[-1]
             return contraction
 
-    program, _ = chain(2)  # a new program: no ranking cached yet
     answer = program.ask("P(B | A)", {"A": "a1"})
     assert calls and answer.probabilities.tolist() == pytest.approx([1 / 3] * 3)

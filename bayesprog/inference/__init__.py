@@ -22,7 +22,13 @@ from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.core import InferenceCache
 from bayesprog.inference.cost import ranked
-from bayesprog.inference.methods import Cost, Method, register_method, registered_methods
+from bayesprog.inference.methods import (
+    Cost,
+    Method,
+    register_method,
+    registered_methods,
+    registry_version,
+)
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 
@@ -35,13 +41,14 @@ __all__ = [
 def compute_posterior(program: ProgramLike, question: Question, bound: Bound) -> Posterior:
     """The posterior of ``question`` for bound evidence, by the cheapest method that answers."""
     plan = QuestionPlan(program, question, bound)
-    # the ranking depends on which variables are searched and known, not on their values
-    key = (question.expression.left, *(tuple(sorted(part)) for part in (
-        bound.discrete, bound.continuous, bound.inputs, bound.soft)))
+    # the ranking depends on which variables are searched and known, not on their values, and
+    # on the batch size only through its order of magnitude
+    key = (registry_version(), bound.size.bit_length(), question.expression.left,
+           *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
+                                               bound.soft)))
     rankings = program.inference_cache.rankings
     methods = rankings.get(key)
     if methods is None:
-        # costs grow with the batch size alike, so the order holds for every batch size
         methods = rankings[key] = [method for method, _ in ranked(plan)]
     for method in methods:
         answer = method.posterior(plan)

@@ -1,5 +1,5 @@
 """The cost model: of the methods that apply to a question, the cheapest by estimated
-operations (ties: the first registered)."""
+operations (ties: the smaller memory, then the first registered)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,6 @@ def ranked(plan: QuestionPlan) -> list[tuple[Method, Cost]]:
     for order, method in enumerate(registered_methods().values()):
         cost = method.estimate(plan)
         if cost is not None:
-            found.append((cost.operations, order, method, cost))
-    found.sort(key=lambda item: (item[0], item[1]))
-    return [(method, cost) for _, _, method, cost in found]
+            found.append((cost.operations, cost.memory, order, method, cost))
+    found.sort(key=lambda item: item[:3])
+    return [(method, cost) for *_, method, cost in found]

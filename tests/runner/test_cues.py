@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy import ndimage, optimize, stats
 
-from runner.cues import inhibition, saliency, sobel, uncertainty
+from runner.cues import inhibition, saliency, uncertainty
 
 MATERIALS = 10
 ALPHA, BETA = 1.01, 9.0  # design.md section 4
@@ -75,16 +75,6 @@ def reference_saliency(d: np.ndarray) -> np.ndarray:
     sx = ndimage.sobel(d, axis=0, mode="nearest")
     sy = ndimage.sobel(d, axis=1, mode="nearest")
     return np.maximum(np.abs(sx), np.abs(sy)) / 4.0
-
-
-def test_sobel_axes_and_edge_mode_match_scipy():
-    rng = np.random.default_rng(0)
-    d = rng.random((7, 5))
-    sx, sy = sobel(d)
-    np.testing.assert_allclose(sx, ndimage.sobel(d, axis=0, mode="nearest"), atol=1e-12)
-    np.testing.assert_allclose(sy, ndimage.sobel(d, axis=1, mode="nearest"), atol=1e-12)
-    # the edge mode matters at the border: zero padding would give different values there
-    assert not np.allclose(sx, ndimage.sobel(d, axis=0, mode="constant"))
 
 
 def test_saliency_step_along_x():
@@ -293,3 +283,25 @@ def test_inhibition_random_points_match_reference(seed, runs, n):
     i = inhibition(centres, last, diagonal)
     assert np.all((i >= 0.0) & (i <= 1.0))
     np.testing.assert_allclose(i, reference_inhibition(centres, last, diagonal), atol=1e-9)
+
+
+def test_a_perceived_map_smaller_than_the_batch_is_broadcast():
+    """One mask for every run: the compiled kernel and the array version read it alike."""
+    rng = np.random.default_rng(5)
+    d = (rng.random((3, 6, 7)) < 0.5).astype(float)
+    probed = rng.random((6, 7)) < 0.5
+    expected = np.stack([saliency(d[r], probed) for r in range(3)])
+    np.testing.assert_allclose(saliency(d, probed), expected, atol=1e-12)
+    np.testing.assert_allclose(saliency(d, probed, kernel=False), expected, atol=1e-12)
+
+
+def test_nan_at_a_perceived_cell_is_refused_and_ignored_elsewhere():
+    d = np.zeros((4, 4))
+    probed = np.zeros((4, 4), bool)
+    probed[1, 1:3] = True
+    d[0, 0] = np.nan  # not perceived: never read
+    for kernel in (True, False):
+        assert not np.isnan(saliency(d, probed, kernel=kernel)[1, 1])
+    d[1, 1] = np.nan
+    with pytest.raises(ValueError, match="perceived"):
+        saliency(d, probed)

@@ -2,6 +2,12 @@
 
 from bayesprog.inference.methods import contraction as _contraction  # noqa: F401  (registers)
 from bayesprog.inference.methods import table as _table  # noqa: F401  (registers)
-from bayesprog.inference.methods.base import Cost, Method, register_method, registered_methods
+from bayesprog.inference.methods.base import (
+    Cost,
+    Method,
+    register_method,
+    registered_methods,
+    registry_version,
+)
 
-__all__ = ["Cost", "Method", "register_method", "registered_methods"]
+__all__ = ["Cost", "Method", "register_method", "registered_methods", "registry_version"]

@@ -40,6 +40,7 @@ class Method:
 
 
 _METHODS: dict[str, Method] = {}
+_VERSION = [0]
 
 
 def register_method(cls: type[Method]) -> type[Method]:
@@ -47,7 +48,13 @@ def register_method(cls: type[Method]) -> type[Method]:
     if not cls.name:
         raise ValueError(f"{cls.__name__} needs a name")
     _METHODS[cls.name] = cls()
+    _VERSION[0] += 1
     return cls
+
+
+def registry_version() -> int:
+    """A number that changes whenever a method is registered (rankings kept before are stale)."""
+    return _VERSION[0]
 
 
 def registered_methods() -> dict[str, Method]:
