@@ -88,3 +88,25 @@ def test_templates_that_are_not_pi_tar_shapes_are_refused_at_load(tmp_path):
         load_scenario(path)
     line = path.read_text().splitlines().index("templates:") + 1
     assert f"{path}:{line}:1: templates square do not match the shapes R" in str(err.value)
+
+
+def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):
+    """A small grid of wood probed everywhere (task T2, silicone): no cell has any saliency,
+    so S is unobserved for every cell, and I and U choose. One cell read as silicone instead
+    brings saliency back."""
+    from runner.explorer import Explorer
+
+    scenario = load_scenario(write(tmp_path, grid=(4, 4)))
+    readings = {"wood": (0.52, 0.08), "silicone": (0.12, 0.35)}  # texture, compliance in pi_per
+    fields = []
+    for odd in (None, (3, 3)):
+        explorer = Explorer(scenario, "T2")
+        explorer.reset(start=(0, 0), seed=1)
+        for ix in range(4):
+            for iy in range(4):
+                texture, compliance = readings["silicone" if (ix, iy) == odd else "wood"]
+                explorer.perceive(explorer.flat(np.array([[ix, iy]])), np.array([texture]),
+                                  np.array([compliance]))
+        fields.append(explorer.cue_fields()[1][0])
+    assert np.isnan(fields[0]).all()
+    assert not np.isnan(fields[1]).all() and np.nanmax(fields[1]) > 0.5
