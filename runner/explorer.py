@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 import bayesprog
 from bayesprog import Program
@@ -176,9 +177,21 @@ class Explorer:
         return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
 
     def border_cells(self) -> np.ndarray:
-        """The probed cells on the perceived border of the task's material, [runs, cells]."""
+        """The probed cells of the perceived border that the walker follows, [runs, cells]: of
+        the perceived border of the task's material, the connected part (8-neighbours) that
+        holds the last probed border cell."""
         d, perceived = self.target_map()
-        return perceived_border(d, perceived).reshape(self.runs, -1)
+        border = perceived_border(d, perceived)
+        structure = np.zeros((3, 3, 3), bool)
+        structure[1] = True  # connected within a run's grid, never across runs
+        labels, _ = ndimage.label(border, structure=structure)
+        labels = labels.reshape(self.runs, -1)
+        path = np.stack(self.path, axis=1)  # [runs, k]
+        on = np.take_along_axis(labels, path, axis=1) > 0
+        last = path.shape[1] - 1 - np.argmax(on[:, ::-1], axis=1)
+        followed = np.where(on.any(axis=1), labels[np.arange(self.runs), path[np.arange(self.runs),
+                                                                                 last]], -1)
+        return labels == followed[:, None]
 
     def shape_cue(self) -> tuple[Registration, np.ndarray]:
         """The templates registered onto the part of every run's path that lies on the perceived

@@ -19,7 +19,7 @@ import numpy as np
 from runner._kernels import icp
 
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
-MIN_POINTS = 3  # fewer probed cells than this: no shape evidence (R uniform)
+MIN_POINTS = 10  # fewer probed cells than this on the perceived border: no shape evidence (R uniform)
 _OFFSETS = np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
 
 
