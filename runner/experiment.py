@@ -8,6 +8,7 @@ numbers whatever the batching, and the configurations are compared on paired run
 
 from __future__ import annotations
 
+import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -135,9 +136,18 @@ def manifest(experiment: Experiment) -> dict:
     }
 
 
-def compute_unit(experiment_path: str, unit: Unit) -> dict[str, np.ndarray]:
-    """One unit of work, from the experiment file alone (so that any process can do it)."""
-    experiment = load_experiment(experiment_path)
+@functools.lru_cache(maxsize=4)
+def _loaded(experiment_path: str, digest: str | None) -> Experiment:
+    return load_experiment(experiment_path)
+
+
+def compute_unit(experiment_path: str, unit: Unit, digest: str | None = None
+                 ) -> dict[str, np.ndarray]:
+    """One unit of work, from the experiment file alone (so that any process can do it).
+    ``digest``, the configuration's hash (every file it resolved), lets a process load the
+    experiment once for all the units of that configuration it computes."""
+    experiment = load_experiment(experiment_path) if digest is None else \
+        _loaded(experiment_path, digest)
     starts = experiment.start_cells()[list(unit.runs)]
     spec = experiment.spec
     return simulate(experiment.scenario, unit.task, unit.configuration, starts,
@@ -162,9 +172,10 @@ def run_experiment(
     total = len(units(experiment.spec))
     bar = _progress(total, total - len(todo), progress)
     path = str(experiment.path.resolve())
+    digest = store.manifest()["hash"]
     try:
         if scheduler is not None:
-            _run_dask(scheduler, path, todo, store, bar)
+            _run_dask(scheduler, path, digest, todo, store, bar)
         elif workers > 1:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -174,7 +185,7 @@ def run_experiment(
             context = multiprocessing.get_context("spawn")
             pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                        initializer=_worker_init)
-            futures = {pool.submit(compute_unit, path, u): u for u in todo}
+            futures = {pool.submit(compute_unit, path, u, digest): u for u in todo}
             try:
                 for future in as_completed(futures):
                     store.save(futures[future], future.result())
@@ -189,7 +200,7 @@ def run_experiment(
             pool.shutdown()
         else:
             for unit in todo:
-                store.save(unit, compute_unit(path, unit))
+                store.save(unit, compute_unit(path, unit, digest))
                 bar.update(1)
     finally:
         bar.close()
@@ -206,7 +217,8 @@ def _worker_init() -> None:
     numba.set_num_threads(1)
 
 
-def _run_dask(address: str, path: str, todo: list[Unit], store: ResultStore, bar) -> None:
+def _run_dask(address: str, path: str, digest: str, todo: list[Unit], store: ResultStore,
+              bar) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -217,7 +229,7 @@ def _run_dask(address: str, path: str, todo: list[Unit], store: ResultStore, bar
         raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
             from None
     with client:
-        futures = {client.submit(compute_unit, path, u, pure=False): u for u in todo}
+        futures = {client.submit(compute_unit, path, u, digest, pure=False): u for u in todo}
         for future in as_completed(futures):
             store.save(futures[future], future.result())
             bar.update(1)

@@ -84,11 +84,11 @@ def test_interruption_loses_only_the_chunk_in_flight_and_resume_completes(refere
     calls = []
     real = experiment_module.compute_unit
 
-    def interrupted(experiment_path, unit):
+    def interrupted(experiment_path, unit, *rest):
         calls.append(unit)
         if len(calls) == 4:
             raise KeyboardInterrupt  # Ctrl-C while the 4th chunk is computed
-        return real(experiment_path, unit)
+        return real(experiment_path, unit, *rest)
 
     monkeypatch.setattr(experiment_module, "compute_unit", interrupted)
     with pytest.raises(KeyboardInterrupt):
