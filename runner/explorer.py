@@ -186,11 +186,19 @@ class Explorer:
         structure[1] = True  # connected within a run's grid, never across runs
         labels, _ = ndimage.label(border, structure=structure)
         labels = labels.reshape(self.runs, -1)
-        path = np.stack(self.path, axis=1)  # [runs, k]
-        on = np.take_along_axis(labels, path, axis=1) > 0
-        last = path.shape[1] - 1 - np.argmax(on[:, ::-1], axis=1)
-        followed = np.where(on.any(axis=1), labels[np.arange(self.runs), path[np.arange(self.runs),
-                                                                                 last]], -1)
+        rows = np.arange(self.runs)
+        followed = np.full(self.runs, -1)
+        # the last probed border cell: the recent probes first (a long session's path is long)
+        for window in (16, len(self.path)):
+            todo = followed < 0
+            path = np.stack(self.path[-window:], axis=1)[todo]  # [runs left, window]
+            on = np.take_along_axis(labels[todo], path, axis=1) > 0
+            last = path.shape[1] - 1 - np.argmax(on[:, ::-1], axis=1)
+            found = on.any(axis=1)
+            followed[rows[todo][found]] = labels[rows[todo][found],
+                                                 path[np.arange(len(path)), last][found]]
+            if window >= len(self.path) or (followed >= 0).all():
+                break
         return labels == followed[:, None]
 
     def shape_cue(self) -> tuple[Registration, np.ndarray]:
