@@ -47,10 +47,8 @@ class NaiveExplorer(Explorer):
         return inhibition(self.centres, last, self.diagonal), s, uncertainty(self.posterior)
 
     def shape_cue(self):
-        border = self.border_cells()
-        counts = border.sum(axis=1)
-        cells = np.argsort(~border, axis=1, kind="stable")[:, :max(int(counts.max()), 1)]
-        registration = match(self.centres[cells], self.outlines, self.template_points,
+        points, counts = self.border_points(self.border_cells())
+        registration = match(points, self.outlines, self.template_points,
                              counts=np.maximum(counts, 1))
         return registration, counts >= MIN_POINTS
 

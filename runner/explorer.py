@@ -75,10 +75,8 @@ class Explorer:
         self.task = task
         self.runs = runs
         programs = programs or {}
-        self.perception = (programs.get("perception") or scenario.perception
-                           or bayesprog.load(scenario.program_path("perception")))
-        target = (programs.get("target") or scenario.target
-                  or bayesprog.load(scenario.program_path("target")))
+        self.perception = programs.get("perception") or scenario.perception
+        target = programs.get("target") or scenario.target
         self.target = target.ablate(*ablate) if ablate else target
         self.ablated = tuple(ablate)
         self.target_no_shape = self.target.ablate("P(R | O)")
@@ -160,16 +158,17 @@ class Explorer:
         self.visits[rows, cells] += 1
         self.timings["perception"] += time.perf_counter() - start
 
-    def target_map(self) -> np.ndarray:
-        """d(v) = P(M_v = the task's material) and the probed cells, [runs, nx, ny] each."""
+    def percept(self) -> tuple[np.ndarray, np.ndarray]:
+        """The perceived stimulus of the task: where the task's material is perceived (its
+        posterior P(M_v = material) >= 1/2), and which cells were probed; [runs, nx, ny] each."""
         shape = (self.runs, *self.scenario.shape)
-        d = self.posterior[..., self.target_material].reshape(shape)
-        return d, (self.visits > 0).reshape(shape)
+        target = self.posterior[..., self.target_material].reshape(shape) >= 0.5
+        return target, (self.visits > 0).reshape(shape)
 
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
-        d, perceived = self.target_map()
-        s = saliency((d >= 0.5).astype(float), perceived).reshape(self.runs, -1)
+        target, perceived = self.percept()
+        s = saliency(target.astype(float), perceived).reshape(self.runs, -1)
         # a run where no cell has any saliency (nothing left to compare: the probed region is
         # homogeneous and has no unprobed tip) learns nothing from S: it is not observed there
         vetoed = ~np.any(np.isnan(s) | (s > 0), axis=1)
@@ -180,40 +179,40 @@ class Explorer:
         """The probed cells of the perceived border that the walker follows, [runs, cells]: of
         the perceived border of the task's material, the connected part (8-neighbours) that
         holds the last probed border cell."""
-        d, perceived = self.target_map()
-        border = perceived_border(d, perceived)
+        border = perceived_border(*self.percept())
         structure = np.zeros((3, 3, 3), bool)
         structure[1] = True  # connected within a run's grid, never across runs
         labels, _ = ndimage.label(border, structure=structure)
         labels = labels.reshape(self.runs, -1)
         rows = np.arange(self.runs)
         followed = np.full(self.runs, -1)
-        # the last probed border cell: the recent probes first (a long session's path is long)
-        for window in (16, len(self.path)):
-            todo = followed < 0
-            path = np.stack(self.path[-window:], axis=1)[todo]  # [runs left, window]
-            on = np.take_along_axis(labels[todo], path, axis=1) > 0
-            last = path.shape[1] - 1 - np.argmax(on[:, ::-1], axis=1)
-            found = on.any(axis=1)
-            followed[rows[todo][found]] = labels[rows[todo][found],
-                                                 path[np.arange(len(path)), last][found]]
-            if window >= len(self.path) or (followed >= 0).all():
+        todo = labels.max(axis=1) > 0  # runs with a border: its cells were probed, so on the path
+        for cells in reversed(self.path):  # back from the last probe, usually a step or two
+            if not todo.any():
                 break
+            label = labels[rows, cells]
+            hit = todo & (label > 0)
+            followed[hit] = label[hit]
+            todo &= ~hit
         return labels == followed[:, None]
+
+    def border_points(self, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Cells ``border`` [runs, cells] as points [runs, K, 2] (each run's first ``counts[r]``
+        rows; the rest padding) and their counts [runs]."""
+        counts = border.sum(axis=1)
+        cells = np.argsort(~border, axis=1, kind="stable")[:, :max(int(counts.max()), 1)]
+        return self.centres[cells], counts
 
     def shape_cue(self) -> tuple[Registration, np.ndarray]:
         """The templates registered onto the part of every run's path that lies on the perceived
         border (eq. 6-7), and which runs have enough such cells (``MIN_POINTS``) for a shape cue.
         Runs whose set of border cells did not change keep their registration."""
         border = self.border_cells()
-        counts = border.sum(axis=1)
+        points, counts = self.border_points(border)
         ready = counts >= MIN_POINTS
         changed = ready & np.any(border != self._border, axis=1)
         self._border = border
-        top = max(int(counts.max()), 1)
-        cells = np.argsort(~border, axis=1, kind="stable")[:, :top]  # border cells first
-        registration = self.tracker.update(self.centres[cells], np.maximum(counts, 1),
-                                           np.flatnonzero(changed))
+        registration = self.tracker.update(points, np.maximum(counts, 1), np.flatnonzero(changed))
         return registration, ready
 
     def decide(self) -> np.ndarray:

@@ -103,8 +103,8 @@ class Scenario:
     path: Path
     materials: tuple[str, ...]
     #: pi_per and pi_tar as used on this workspace (pi_tar's grid O set by the scenario's grid)
-    perception: bayesprog.Program | None = None
-    target: bayesprog.Program | None = None
+    perception: bayesprog.Program
+    target: bayesprog.Program
 
     @property
     def name(self) -> str:
