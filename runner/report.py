@@ -278,17 +278,24 @@ def build_report(out: Path, gif: bool = True) -> Path:
     return folder
 
 
-def following_step(paths: np.ndarray, border: np.ndarray, iterations: int,
-                   stretch: int = 10) -> tuple[int, int]:
-    """A (run, step) at which the walker follows the border: the first run whose last
-    ``stretch`` probes up to that step all lie within one cell of it (step 10 or later);
-    (0, 40) when no run does."""
-    band = border_band(border).ravel()[paths]
-    for run in range(paths.shape[0]):
-        for k in range(max(10, stretch), min(iterations - 1, paths.shape[1])):
-            if band[run, k - stretch + 1 : k + 1].all():
-                return run, k
-    return 0, min(40, iterations - 2)
+def following_step(paths: np.ndarray, border: np.ndarray, iterations: int) -> tuple[int, int]:
+    """A (run, step) at which the walker follows the border: the step that ends the longest
+    stretch of consecutive probes within one cell of it, over every run (the first run on a
+    tie); (0, 40) when no probe is near it. Far into a stretch the shape cue is in force too.
+
+    >>> border = np.zeros((1, 6), bool); border[0, 3] = True
+    >>> following_step(np.array([[0, 3, 0, 0], [0, 2, 3, 4]]), border, 4)
+    (1, 2)
+    """
+    band = border_band(border).ravel()[paths[:, : iterations - 1]]
+    best, where = 0, (0, min(40, iterations - 2))
+    for run, row in enumerate(band):
+        length = 0
+        for k, near in enumerate(row):
+            length = length + 1 if near else 0
+            if length > best:
+                best, where = length, (run, k)
+    return where
 
 
 def _behaviour_lines(rows: list[dict]) -> list[str]:
@@ -329,8 +336,8 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0) -> str:
              "cell; lower is better. Mean +- SEM over runs.", "",
              "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
              f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
-             "", "A step at which the walker follows the border (its last ten probes lie within "
-             "one cell of it; the border in cyan; grey in S: nothing perceived to compare, the "
+             "", "The step that ends the longest stretch of probes within one cell of the border, "
+             "over every run (the border in cyan; grey in S: nothing perceived to compare, the "
              "term is marginalised).", "",
              "![Decision](fig11_decision.png)", "",
              "The animation over every step of that run is `fig11_decision.gif` (when built).", "",
