@@ -167,6 +167,25 @@ def cmd_query(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_learn(args: argparse.Namespace) -> int:
+    if args.max_iter < 1:
+        raise _UserError(f"--max-iter: expected at least 1, found {args.max_iter}")
+    program = _load(args.file)
+    if Path(args.output).resolve() == Path(args.data).resolve():
+        raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
+    fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol)
+    out = fit.save(args.output)
+    record = fit.record
+    iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
+    print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "
+          f"rows of {record.data} ({record.method}{iterations}); log-likelihood "
+          f"{record.log_likelihood:.6g}")
+    if not fit.converged:
+        print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
+              "(raise --max-iter)", file=sys.stderr)
+    return 0
+
+
 def _runner(name: str | None) -> Any:
     """The runner plugin ``name`` (entry point group ``bayesprog.runners``)."""
     from importlib.metadata import entry_points
@@ -294,6 +313,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=20, help="rows shown for large tables")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_query)
+
+    p = sub.add_parser("learn", help="learn a program's parameters from data (CSV or Parquet)")
+    p.add_argument("file", metavar="PROGRAM.yaml")
+    p.add_argument("data", metavar="DATA.csv|.parquet",
+                   help="one column per variable; empty cells are missing values")
+    p.add_argument("-o", "--output", required=True, metavar="FITTED.yaml",
+                   help="the fitted program: the input file with learned values and the fit's "
+                   "record")
+    p.add_argument("--freeze", action="append", default=[], metavar="TERM",
+                   help='keep a term as written, e.g. --freeze "P(M)"')
+    p.add_argument("--max-iter", type=int, default=200, help="most EM iterations (default 200)")
+    p.add_argument("--tol", type=float, default=1e-8,
+                   help="EM stops when the log-likelihood gains less than this, relative")
+    p.set_defaults(func=cmd_learn)
 
     p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")
     p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable, Mapping
+import dataclasses
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -13,11 +15,13 @@ import networkx as nx
 from bayesprog import inference
 from bayesprog.errors import Diagnostic, QuestionError, SpecError
 from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
+from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.language.check import InputDecl, Term, check_document, question_problem
-from bayesprog.language.document import Document, validate_located
+from bayesprog.language.document import Document, FitRecord, validate_located
 from bayesprog.language.loader import Located, load_yaml
+from bayesprog.learning import Estimate
 from bayesprog.variables import Variable
 
 
@@ -51,6 +55,7 @@ class Program:
         description: str = "",
         path: Path | None = None,
         ablated: tuple[str, ...] = (),
+        learned: Sequence[FitRecord] = (),
     ):
         self.variables = variables
         self.terms = terms
@@ -60,6 +65,8 @@ class Program:
         self.description = description
         self.path = path
         self.ablated = ablated
+        #: the fits that set the parameters (provenance and statistics), oldest first
+        self.learned = list(learned)
         self.inference_cache = inference.InferenceCache()
         self._parsed: dict[str, Question] = {}  # question texts asked before, parsed
 
@@ -211,10 +218,89 @@ class Program:
         new.__dict__.pop("active_terms", None)
         return new
 
+    # identification --------------------------------------------------------------------------------
+    def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
+            tol: float = 1e-8) -> Fit:
+        """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
+        DataFrame or a mapping of columns; one column per variable, missing values allowed.
+
+        Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
+        values; the others are fitted by maximum likelihood (the posterior mean under the
+        term's Dirichlet pseudo-counts), by EM where discrete values are missing or a variable
+        has no column, and by EM for mixtures. A program fitted before continues from its
+        fit's statistics. Returns a :class:`Fit`; its ``program`` is the fitted program.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {M: {states: [wood, silk]}, E: {continuous: [-.inf, .inf]}}
+        ... decomposition:
+        ...   - {term: P(M), form: table, table: [0.5, 0.5]}
+        ...   - {term: P(E | M), form: normal, mean: 0.0, sigma: 1.0}
+        ... ''')
+        >>> fit = p.fit({"M": ["wood", "wood", "silk", "silk"], "E": [0.4, 0.6, 0.1, 0.3]})
+        >>> fit.program.term("P(E | M)").params["mean"].array.round(3).tolist()
+        [0.5, 0.2]
+        """
+        from bayesprog.learning import fit_terms
+
+        labels = [str(self.term(t).expression) for t in freeze]
+        estimate = fit_terms(self.variables, self.terms, self.learned, data, freeze=labels,
+                             max_iter=max_iter, tol=tol)
+        terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
+                 if t.label in estimate.params else t for t in self.terms]
+        fitted = Program(self.variables, terms, self.questions, self.inputs, name=self.name,
+                         description=self.description, path=self.path, ablated=self.ablated,
+                         learned=[*self.learned, estimate.record])
+        return Fit(fitted, estimate, self.path)
+
     def __repr__(self) -> str:
         extra = f", ablated={list(self.ablated)}" if self.ablated else ""
         return (f"Program({self.name!r}, variables={list(self.variables)}, "
                 f"terms={[str(t.expression) for t in self.terms if not t.soft]}{extra})")
+
+
+@dataclass
+class Fit:
+    """The result of :meth:`Program.fit`: the fitted program, its log-likelihood and the record
+    (data file hash, rows used, method) that :meth:`save` writes into the fitted file."""
+
+    program: Program
+    estimate: Estimate
+    source: Path | None
+
+    @property
+    def log_likelihood(self) -> float:
+        return self.estimate.log_likelihood
+
+    @property
+    def record(self) -> FitRecord:
+        return self.estimate.record
+
+    @property
+    def converged(self) -> bool:
+        return self.estimate.converged
+
+    def text(self, source: str | Path | None = None) -> str:
+        """The fitted program file: ``source`` (by default the file the program was loaded
+        from) with the learned values in place, comments and layout kept, and the fit's record
+        appended under ``learned:``."""
+        from bayesprog.learning import render_fitted
+
+        path = Path(source) if source is not None else self.source
+        if path is None:
+            raise QuestionError("this program was not loaded from a file: give the program "
+                                "file to write the fitted values into (source=...)")
+        text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
+                             self.program.variables, self.record)
+        loads(text, str(path), path.parent)  # the fitted file must load as a program
+        return text
+
+    def save(self, path: str | Path, source: str | Path | None = None) -> Path:
+        """Write the fitted program file to ``path`` at once (never half-written)."""
+        path = Path(path)
+        atomic_write(path, self.text(source).encode("utf-8"))
+        return path
 
 
 def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
@@ -263,6 +349,7 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
         name=doc.name,
         description=doc.description,
         path=Path(file) if file != "<string>" else None,
+        learned=doc.learned,
     )
     if checked.ablate:
         program = program.ablate([str(e) for e in checked.ablate])

@@ -17,10 +17,11 @@ PACKAGE = Path(__file__).parents[1] / "bayesprog"
 
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
-    {"errors", "variables", "expressions"},
+    {"errors", "variables", "expressions", "files"},
     {"forms"},
     {"language"},
     {"inference"},
+    {"learning"},
     {"program"},
     {"compile", "draw", "show", "__init__"},
     {"io"},

@@ -18,7 +18,8 @@ import numpy as np
 from bayesprog.errors import Diagnostic
 from bayesprog.expressions import Expression, ExpressionError, parse_expression
 from bayesprog.forms import Form, InputRef, Param, ParamValue, available_forms, get_form
-from bayesprog.language.document import Document, InputSpec
+from bayesprog.forms.base import nonnegative
+from bayesprog.language.document import Document, InputSpec, LearnSpec
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
 from bayesprog.variables import Continuous, Discrete, Variable, grid_variable
@@ -38,6 +39,17 @@ class InputDecl:
         return len(self.axes) + len(self.event)
 
 
+@dataclass(frozen=True)
+class LearnOptions:
+    """How a term is learned from data: Dirichlet pseudo-counts (tables), the candidate numbers
+    of components (gmm, chosen by BIC when several), and parameters pooled across parent
+    states."""
+
+    pseudo_counts: ParamValue | None = None
+    components: tuple[int, ...] = ()
+    shared: tuple[str, ...] = ()
+
+
 @dataclass
 class Term:
     """A checked term of the decomposition (or a soft-evidence likelihood when ``soft``)."""
@@ -51,6 +63,8 @@ class Term:
     soft: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
     description: str = ""
+    #: how the term is learned from data; None keeps it as written (``learn: false``)
+    learn: LearnOptions | None = field(default_factory=LearnOptions)
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -167,6 +181,7 @@ class _Checker:
             term = self.check_term(path + ("term",), spec.term, spec.form, spec.parameters, path)
             if term is not None:
                 term.description = spec.description
+                term.learn = self.learn_options(term, spec.learn, path + ("learn",))
                 terms.append(term)
         missing = [n for n in self.variables if n not in defined]
         failed_children = self._failed_children()
@@ -195,6 +210,53 @@ class _Checker:
                 terms.append(term)
         self.check_cycles(terms)
         return terms
+
+    def learn_options(self, term: Term, spec: bool | LearnSpec, path: YPath) -> LearnOptions | None:
+        """The term's ``learn:`` entry, checked against its form."""
+        if spec is False:
+            return None
+        if spec is True:
+            return LearnOptions()
+        form, what = term.form.name, f"term {term.label}: learn"
+        pseudo = None
+        if spec.pseudo_counts is not None:
+            if form not in ("table", "categorical"):
+                self.error(path + ("pseudo_counts",), f"{what}: pseudo_counts are for forms "
+                           f"table and categorical, found form {form!r}", at_key=True)
+            elif isinstance(spec.pseudo_counts, (int, float)) and not isinstance(
+                    spec.pseudo_counts, bool):
+                if spec.pseudo_counts < 0:
+                    self.error(path + ("pseudo_counts",), f"{what}: pseudo_counts must be >= 0, "
+                               f"found {spec.pseudo_counts}")
+                else:
+                    pseudo = ParamValue((), np.asarray(float(spec.pseudo_counts)))
+            else:
+                param = Param("pseudo_counts", nonnegative, event_ndim=1,
+                              keyed_by_child_states=True)
+                shape = term.form.event_shape(term.form.params[0], term.child)
+                lit = _LiteralSpec(param, term.child, 1, shape, f"{what} pseudo_counts")
+                try:
+                    pseudo = ParamValue(*self._literal(spec.pseudo_counts, lit,
+                                                       term.form.keyable(term.child, term.parents),
+                                                       path + ("pseudo_counts",)))
+                except _LiteralError as exc:
+                    self.error(exc.path, exc.message)
+        components: tuple[int, ...] = ()
+        if spec.components is not None:
+            components = ((spec.components,) if isinstance(spec.components, int)
+                          else tuple(spec.components))
+            if form != "gmm" or term.child.is_discrete:
+                self.error(path + ("components",), f"{what}: components are for form gmm over "
+                           f"a continuous variable, found form {form!r}", at_key=True)
+            elif not components or min(components) < 1:
+                self.error(path + ("components",), f"{what}: expected numbers of components "
+                           f">= 1, found {list(components)}")
+        names = [p.name for p in term.form.params]
+        for name in spec.shared:
+            if name not in names:
+                self.error(path + ("shared",), f"{what}: shared names {name!r}, expected "
+                           f"parameters of form {form!r} ({', '.join(names) or 'none'})")
+        return LearnOptions(pseudo, components, tuple(spec.shared))
 
     def _failed_children(self) -> set[str]:
         """Variables named first in a term, even in a term too broken to parse."""

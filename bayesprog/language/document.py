@@ -99,12 +99,44 @@ class _WithParameters(BaseModel):
         return dict(self.model_extra or {})
 
 
+class LearnSpec(_Strict):
+    """How a term's parameters are learned from data (``bayesprog learn``, ``Program.fit``)."""
+
+    pseudo_counts: Any = Field(
+        None, description="table and categorical: Dirichlet pseudo-counts, one number or a "
+        "table laid out like the term's (the estimate is the posterior mean)")
+    components: int | list[int] | None = Field(
+        None, description="gmm: the number of components, or several to choose from by BIC")
+    shared: list[str] = Field(
+        default_factory=list, description="parameters kept equal across parent states "
+        "(pooled); the others are learned per parent state")
+
+
 class TermSpec(_WithParameters):
     """``P(X | parents)`` with a form."""
 
     term: str = Field(description="P(X | parents)")
     form: str = Field(description="name of a registered parametric form")
     description: str = ""
+    learn: bool | LearnSpec = Field(
+        True, description="false keeps the term as written when the program is learned; a "
+        "mapping gives learning options")
+
+
+class FitRecord(_Strict):
+    """The provenance of one fit, written into the fitted file; its statistics let a later fit
+    continue with more data."""
+
+    data: str = Field(description="the data file's name")
+    sha256: str = Field(description="SHA-256 of the data file's bytes")
+    rows: int = Field(description="rows in the data file")
+    rows_used: int = Field(description="rows with a value for at least one learned term")
+    log_likelihood: float = Field(description="log-likelihood of the rows used, fitted program")
+    method: str = Field(description="maximum likelihood, or EM when values are missing")
+    iterations: int = 1
+    terms: list[str] = Field(default_factory=list, description="the terms learned")
+    statistics: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="per learned term, its sufficient statistics")
 
 
 class SoftEvidenceSpec(_WithParameters):
@@ -131,6 +163,8 @@ class Document(_Strict):
     soft_evidence: list[SoftEvidenceSpec] = Field(default_factory=list)
     questions: dict[str, QuestionSpec | str] = Field(default_factory=dict)
     ablate: list[str] = Field(default_factory=list)
+    learned: list[FitRecord] = Field(default_factory=list, description="fits that set the "
+                                     "parameters, oldest first")
 
     @field_validator("bayesprog", mode="before")
     @classmethod

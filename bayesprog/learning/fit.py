@@ -1,0 +1,388 @@
+"""Learning a program's parameters from data: maximum likelihood (or the posterior mean under
+Dirichlet pseudo-counts), and EM over the whole program where discrete values are missing or a
+variable is hidden (no column), or a mixture is learned.
+
+Rows are grouped by which discrete variables they miss. For each group the E-step evaluates
+every term of the decomposition on the group's rows over the joint states of the missing
+variables, so the posterior of each learned term's family, and each row's likelihood, are
+exact. The M-step hands the expected statistics to each form's estimator. Statistics add up
+over data sets: a fit continues from a fitted file's statistics with more data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bayesprog.errors import BayesprogError
+from bayesprog.forms import InputRef, ParamValue, TermContext
+from bayesprog.language.check import LearnOptions, Term
+from bayesprog.language.document import FitRecord
+from bayesprog.learning.data import Data, DataError, load_data
+from bayesprog.learning.estimators import (
+    Estimator,
+    FitProblem,
+    Params,
+    Stats,
+    components_of,
+    estimator_for,
+    parent_cards,
+)
+from bayesprog.variables import Continuous, Discrete, Variable
+
+#: Most entries of one chunk's joint table over the missing variables (rows x joint states).
+JOINT_LIMIT = 1 << 23
+
+
+@dataclass
+class Estimate:
+    """Learned parameters by term label, and the fit's record for the fitted file."""
+
+    params: dict[str, Params]
+    record: FitRecord
+    log_likelihood: float
+    iterations: int
+    converged: bool
+
+
+@dataclass
+class _Learned:
+    term: Term
+    estimator: Estimator
+    options: LearnOptions
+    prior: Stats | None
+
+
+class _Group:
+    """Rows that miss the same discrete variables."""
+
+    def __init__(self, rows: np.ndarray, hidden: tuple[str, ...], cards: tuple[int, ...]):
+        self.rows, self.hidden, self.cards = rows, hidden, cards
+
+
+def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
+              learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
+              max_iter: int = 200, tol: float = 1e-8) -> Estimate:
+    """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``."""
+    data = load_data(source, variables)
+    model = [t for t in terms if not t.soft]
+    todo = _learnable(model, freeze, learned)
+    if not todo:
+        raise DataError("nothing to learn: every term is frozen or has no parameters")
+    present = np.zeros(data.rows, bool)
+    for column in list(data.discrete.values()):
+        present |= column >= 0
+    for values in data.continuous.values():
+        present |= ~np.isnan(values)
+    used = np.nonzero(present)[0]
+    if len(used) == 0:
+        raise DataError(f"{data.source}: no row has a value in a column of the program")
+    em = _Em(variables, model, todo, data, used)
+    params = {t.label: {k: v for k, v in t.params.items() if isinstance(v, ParamValue)}
+              for t in model}  # runtime inputs were refused above
+    choices = []
+    for item in todo:
+        label = item.term.label
+        candidates = item.options.components
+        if item.term.form.name == "gmm" and item.prior is not None and "count" in item.prior:
+            candidates = (item.prior["count"].shape[-1],)  # continue with the fitted mixture
+        if not candidates:
+            continue
+        if len(candidates) == 1:
+            params[label] = em.start(item, candidates[0], params[label])
+            continue
+        best = None
+        for k in candidates:  # the number of components with the lowest BIC, others as now
+            trial = dict(params)
+            trial[label] = em.start(item, k, params[label])
+            result = em.run(trial, max_iter, tol)
+            bic = -2 * result[1] + em.free(result[0]) * np.log(len(used))
+            if best is None or bic < best[0]:
+                best = (bic, k, trial[label])
+        assert best is not None
+        params[label] = best[2]
+        choices.append(f"{label}: {best[1]} components by BIC ({best[0]:.6g})")
+    final, ll, iterations, converged, stats = em.run(params, max_iter, tol)
+    iterative = em.iterative
+    method = "EM" if iterative else "maximum likelihood"
+    if any(i.options.pseudo_counts is not None for i in todo):
+        method += ", Dirichlet pseudo-counts"
+    if choices:
+        method += "; " + "; ".join(choices)
+    if learned and any(i.prior is not None for i in todo):
+        method += "; continued from the statistics of the previous fit"
+    record = FitRecord(
+        data=Path(data.source).name if data.source[0] != "<" else data.source,
+        sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
+        log_likelihood=float(ll), method=method, iterations=iterations,
+        terms=[i.term.label for i in todo],
+        statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
+                    for i in todo})
+    out = {i.term.label: {k: v for k, v in final[i.term.label].items()
+                          if k in i.estimator.learned} for i in todo}
+    return Estimate(out, record, float(ll), iterations, converged)
+
+
+def _learnable(model: Sequence[Term], freeze: Sequence[str],
+               learned: Sequence[FitRecord]) -> list[_Learned]:
+    previous = learned[-1].statistics if learned else {}
+    out = []
+    for term in model:
+        if term.learn is None or term.label in freeze or not term.form.params:
+            continue
+        estimator = estimator_for(term)
+        if estimator is None:
+            raise DataError(f"term {term.label} (form {term.form.name}) cannot be learned from "
+                            "data: freeze it (learn: false) or with --freeze")
+        for name, value in term.params.items():
+            if isinstance(value, InputRef):
+                raise DataError(f"term {term.label}: parameter {name!r} is the runtime input "
+                                f"{value.name!r}, which data cannot set: freeze the term "
+                                "(learn: false) or with --freeze")
+        prior = None
+        if term.label in previous:
+            prior = {k: np.asarray(v, float) for k, v in previous[term.label].items()}
+        out.append(_Learned(term, estimator, term.learn, prior))
+    return out
+
+
+class _Em:
+    def __init__(self, variables: Mapping[str, Variable], model: Sequence[Term],
+                 todo: list[_Learned], data: Data, used: np.ndarray):
+        self.variables, self.model, self.todo, self.data, self.used = (
+            variables, model, todo, data.take(used), used)
+        discrete = [n for n, v in variables.items() if isinstance(v, Discrete)]
+        codes = np.stack([self.data.discrete.get(n, np.full(self.data.rows, -1))
+                          for n in discrete], axis=1) if discrete else np.zeros((self.data.rows, 0))
+        self.codes = {n: codes[:, i] for i, n in enumerate(discrete)}
+        for term in model:
+            inputs = [n for n, v in term.params.items() if isinstance(v, InputRef)]
+            if inputs:
+                raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
+                                "input, so the program cannot be evaluated on data rows")
+        patterns, inverse = np.unique(codes < 0, axis=0, return_inverse=True)
+        self.groups = []
+        for g, pattern in enumerate(patterns):
+            hidden = tuple(n for n, miss in zip(discrete, pattern, strict=True) if miss)
+            cards = tuple(variables[n].card for n in hidden)  # type: ignore[union-attr]
+            joint = int(np.prod(cards, dtype=np.int64))
+            if joint > JOINT_LIMIT:
+                raise DataError(
+                    f"{data.source}: rows that miss {', '.join(hidden)} leave {joint:,} joint "
+                    f"states to sum over (more than {JOINT_LIMIT:,}); give values for some of "
+                    "them or freeze the terms they take part in")
+            self.groups.append(_Group(np.nonzero(inverse.ravel() == g)[0], hidden, cards))
+        learns_mixture = any(i.term.form.name == "gmm" for i in todo)
+        self.iterative = learns_mixture or any(g.hidden for g in self.groups)
+
+    def start(self, item: _Learned, k: int, params: Params) -> Params:
+        """Starting values of a mixture with ``k`` components: the file's when it has ``k``."""
+        if "means" in params and isinstance(params["means"], ParamValue) and \
+                components_of(params, item.term) == k:
+            return params
+        x = self.data.continuous.get(item.term.child.name)
+        if x is None:
+            raise DataError(f"{self.data.source}: no column {item.term.child.name!r} to learn "
+                            f"{item.term.label} from")
+        weights = self._known_weights(item.term, x)
+        try:
+            return item.estimator.initial(item.term, np.nan_to_num(x), weights, k, params)
+        except FitProblem as exc:
+            raise DataError(f"{self.data.source}: term {item.term.label}: {exc}") from None
+
+    def _known_weights(self, term: Term, x: np.ndarray) -> np.ndarray:
+        """Rows' weights per parent configuration where the parents are observed (uniform
+        over the configurations where they are not): for starting values only."""
+        cards = parent_cards(term)
+        w = np.ones((len(x),) + cards)
+        for axis, parent in enumerate(p for p in term.parents if p.is_discrete):
+            code = self.codes[parent.name]
+            onehot = np.ones((len(x), parent.card)) / parent.card  # type: ignore[union-attr]
+            onehot[code >= 0] = np.eye(parent.card)[code[code >= 0]]  # type: ignore[union-attr]
+            shape = [len(x)] + [1] * len(cards)
+            shape[axis + 1] = parent.card  # type: ignore[union-attr]
+            w = w * onehot.reshape(shape)
+        w[np.isnan(x)] = 0
+        return w
+
+    def free(self, params: dict[str, Params]) -> int:
+        return sum(i.estimator.free_parameters(i.term, params[i.term.label], i.options)
+                   for i in self.todo)
+
+    def run(self, params: dict[str, Params], max_iter: int, tol: float
+            ) -> tuple[dict[str, Params], float, int, bool, dict[str, Stats]]:
+        """EM from ``params`` (one M-step when nothing is missing and no mixture is learned):
+        (parameters, log-likelihood at them, iterations, converged, statistics at them)."""
+        previous = -np.inf
+        converged = not self.iterative
+        iterations = 0
+        for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
+            ll, stats = self.e_step(params)
+            params = self.m_step(params, stats)
+            if not self.iterative:
+                break
+            if ll - previous <= tol * max(abs(ll), 1.0):
+                converged = True
+                break
+            previous = ll
+        ll, stats = self.e_step(params)
+        total = {i.term.label: self._merged(i, stats[i.term.label]) for i in self.todo}
+        return params, ll, iterations, converged, total
+
+    def _merged(self, item: _Learned, stats: Stats) -> Stats:
+        if item.prior is None:
+            return stats
+        for key, value in stats.items():
+            if key not in item.prior or item.prior[key].shape != value.shape:
+                found = item.prior[key].shape if key in item.prior else "nothing"
+                raise DataError(f"cannot continue the fit of {item.term.label}: the previous "
+                                f"fit's statistic {key!r} has shape {found}, these data give "
+                                f"{value.shape}")
+        return item.estimator.merge(item.prior, stats)
+
+    def m_step(self, params: dict[str, Params], stats: dict[str, Stats]) -> dict[str, Params]:
+        out = dict(params)
+        for item in self.todo:
+            label = item.term.label
+            try:
+                new = item.estimator.estimate(item.term, self._merged(item, stats[label]),
+                                              item.options, params[label])
+            except FitProblem as exc:
+                raise DataError(f"{self.data.source}: term {label}: {exc}") from None
+            out[label] = {**params[label], **new}
+        return out
+
+    # the E-step ---------------------------------------------------------------------------------
+    def e_step(self, params: dict[str, Params]) -> tuple[float, dict[str, Stats]]:
+        total = 0.0
+        stats: dict[str, Stats] = {}
+        for group in self.groups:
+            size = max(1, int(np.prod(group.cards, dtype=np.int64)))
+            step = max(1, JOINT_LIMIT // size)
+            for start in range(0, len(group.rows), step):
+                rows = group.rows[start:start + step]
+                total += self._chunk(rows, group, params, stats)
+        return total, stats
+
+    def _chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
+               stats: dict[str, Stats]) -> float:
+        n, hidden, cards = len(rows), group.hidden, group.cards
+        joint = np.zeros((n,) + cards)
+        for term in self.model:
+            joint = joint + self._gather(self._log_table(term, rows, params[term.label]),
+                                         term, rows, hidden, cards)
+        axes = tuple(range(1, joint.ndim))
+        top = joint.max(axis=axes, keepdims=True) if axes else joint
+        with np.errstate(divide="ignore", invalid="ignore"):
+            row_ll = (np.log(np.exp(joint - top).sum(axis=axes, keepdims=True)) + top) if axes \
+                else joint
+        impossible = ~np.isfinite(row_ll.reshape(n))
+        if np.any(impossible):
+            row = int(self.used[rows[np.argmax(impossible)]])
+            line = f" (line {row + 2})" if self.data.csv else ""
+            raise DataError(f"{self.data.source}: row {row + 1}{line} has probability zero under "
+                            "the program's current parameters (a state its tables rule out); "
+                            "start from tables without zeros, or give pseudo_counts")
+        post = np.exp(joint - row_ll)
+        for item in self.todo:
+            self._accumulate(item, rows, post, hidden, cards, params, stats)
+        return float(row_ll.sum())
+
+    def _log_table(self, term: Term, rows: np.ndarray, params: Params) -> np.ndarray:
+        """The term's log values on these rows: ``[rows or 1, *cards of term.axes]`` (0 where a
+        continuous child has no value: its density integrates to one)."""
+        value = None
+        missing = None
+        if isinstance(term.child, Continuous):
+            column = self.data.continuous.get(term.child.name)
+            if column is None:
+                return np.zeros((1,) * (1 + len(term.axes)))
+            x = column[rows]
+            missing = np.isnan(x)
+            fill = 0.5 * (term.child.low + term.child.high) if np.isfinite(term.child.width) \
+                else 0.0
+            value = ParamValue((), np.where(missing, fill, x), batched=True)
+        axes = term.axes
+        cards = tuple(self.variables[a].card for a in axes)  # type: ignore[union-attr]
+        ctx = TermContext(term.child, term.parents, axes, cards,
+                          params, value, self.variables, term.extra)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log = np.asarray(term.form.log_factor(ctx), float)
+        log = np.broadcast_to(log, np.broadcast_shapes(log.shape, (log.shape[0],) + cards))
+        if missing is not None and np.any(missing):
+            log = np.where(missing.reshape((-1,) + (1,) * len(cards)), 0.0, log)
+        return log
+
+    def _index(self, axes: Sequence[str], rows: np.ndarray, hidden: tuple[str, ...],
+               cards: tuple[int, ...]) -> list[np.ndarray]:
+        """Index arrays, one per axis, broadcasting to ``[rows, *cards of hidden]``."""
+        m = len(hidden)
+        out = []
+        for a in axes:
+            if a in hidden:
+                j = hidden.index(a)
+                shape = [1] * (m + 1)
+                shape[j + 1] = cards[j]
+                out.append(np.arange(cards[j]).reshape(shape))
+            else:
+                out.append(self.codes[a][rows].reshape((len(rows),) + (1,) * m))
+        return out
+
+    def _gather(self, table: np.ndarray, term: Term, rows: np.ndarray,
+                hidden: tuple[str, ...], cards: tuple[int, ...]) -> np.ndarray:
+        m = len(hidden)
+        batch = (np.arange(len(rows)) if table.shape[0] > 1 else np.zeros(len(rows), int))
+        index = [batch.reshape((len(rows),) + (1,) * m)] + self._index(term.axes, rows, hidden, cards)
+        return table[tuple(index)]
+
+    def _accumulate(self, item: _Learned, rows: np.ndarray, post: np.ndarray,
+                    hidden: tuple[str, ...], cards: tuple[int, ...], params: dict[str, Params],
+                    stats: dict[str, Stats]) -> None:
+        term = item.term
+        label = term.label
+        family = term.axes if term.child.is_discrete else tuple(
+            p.name for p in term.parents if p.is_discrete)
+        drop = tuple(j + 1 for j, h in enumerate(hidden) if h not in family)
+        reduced = post.sum(axis=drop, keepdims=True) if drop else post
+        index = self._index(family, rows, hidden, cards)
+        if term.child.is_discrete:
+            counts = np.zeros(tuple(self.variables[a].card for a in family))  # type: ignore[union-attr]
+            shape = np.broadcast_shapes(reduced.shape, *(i.shape for i in index))
+            np.add.at(counts, tuple(np.broadcast_to(i, shape) for i in index),
+                      np.broadcast_to(reduced, shape))
+            new = item.estimator.counts(term, counts)
+        else:
+            column = self.data.continuous.get(term.child.name)
+            if column is None:
+                raise DataError(f"{self.data.source}: no column {term.child.name!r} to learn "
+                                f"{label} from (freeze the term, or add the column)")
+            x = column[rows]
+            n = len(rows)
+            weights = np.zeros((n,) + parent_cards(term))
+            lead = np.arange(n).reshape((n,) + (1,) * len(hidden))
+            shape = np.broadcast_shapes(reduced.shape, lead.shape, *(i.shape for i in index))
+            np.add.at(weights, tuple(np.broadcast_to(i, shape) for i in [lead] + index),
+                      np.broadcast_to(reduced, shape))
+            keep = ~np.isnan(x)
+            try:
+                new = item.estimator.statistics(term, x[keep], weights[keep], params[label])
+            except FitProblem as exc:
+                where = ""
+                if exc.row is not None:
+                    row = int(self.used[rows[np.nonzero(keep)[0][exc.row]]])
+                    where = self.data.where(row, term.child.name) + ": "
+                raise DataError(f"{where or self.data.source + ': '}term {label}: {exc}") from None
+        old = stats.get(label)
+        stats[label] = new if old is None else item.estimator.merge(old, new)
+
+
+def check_fit(estimate: Estimate) -> None:
+    """Raise when a fit produced parameters that are not finite (a safeguard, never expected)."""
+    for label, params in estimate.params.items():
+        for name, value in params.items():
+            if not np.all(np.isfinite(value.array)):
+                raise BayesprogError(f"term {label}: the fit gave a non-finite {name!r}")

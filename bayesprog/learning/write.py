@@ -1,0 +1,142 @@
+"""Writing a fitted program: the input file with its learned parameters replaced in place and
+the fit's record appended, read and written as a round trip so that comments, key order and
+layout stay as the author wrote them."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from ruamel.yaml import YAML
+from ruamel.yaml.comments import CommentedMap, CommentedSeq
+
+from bayesprog.expressions import ExpressionError, parse_expression
+from bayesprog.forms import ParamValue
+from bayesprog.language.document import FitRecord
+from bayesprog.variables import Discrete, Variable
+
+#: significant digits of learned parameters in the file (probabilities then sum to one
+#: within 1e-7, as the file checker asks)
+DIGITS = 8
+
+
+def _yaml() -> YAML:
+    yaml = YAML()
+    yaml.preserve_quotes = True
+    yaml.width = 100
+    yaml.indent(mapping=2, sequence=4, offset=2)
+    return yaml
+
+
+def _number(x: float) -> float | int:
+    return float(f"{x:.{DIGITS}g}")
+
+
+def _flow_seq(values: Sequence[Any]) -> CommentedSeq:
+    seq = CommentedSeq(values)
+    seq.fa.set_flow_style()
+    return seq
+
+
+def _leaf(array: np.ndarray) -> Any:
+    if array.ndim == 0:
+        return _number(float(array))
+    return _flow_seq([_leaf(a) for a in array])
+
+
+def _is_flow(node: Any) -> bool:
+    return bool(getattr(node, "fa", None) is not None and node.fa.flow_style())
+
+
+def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any) -> Any:
+    """The YAML node of a parameter, keyed by the states of its axes; a mapping keeps the flow or
+    block style of the node it replaces."""
+
+    def build(axes: tuple[str, ...], array: np.ndarray, old: Any, depth: int) -> Any:
+        if not axes:
+            return _leaf(array)
+        var = variables[axes[0]]
+        assert isinstance(var, Discrete)
+        out = CommentedMap()
+        for i, state in enumerate(var.states):
+            previous = old.get(state) if isinstance(old, Mapping) else None
+            out[_key(state)] = build(axes[1:], array[i], previous, depth + 1)
+        leaf_level = len(axes) == 1 and array.ndim == 1
+        if _is_flow(old) or (old is None and leaf_level) or (
+                not isinstance(old, Mapping) and leaf_level):
+            out.fa.set_flow_style()
+        return out
+
+    return build(value.axes, np.asarray(value.array, float), old, 0)
+
+
+def _key(state: str) -> Any:
+    try:
+        return int(state)
+    except ValueError:
+        return state
+
+
+def _label(text: Any) -> str | None:
+    try:
+        return str(parse_expression(str(text)))
+    except ExpressionError:
+        return None
+
+
+def _record(record: FitRecord) -> CommentedMap:
+    out = CommentedMap()
+    for key, value in record.model_dump().items():
+        if key == "statistics":
+            stats = CommentedMap()
+            for label, named in value.items():
+                inner = CommentedMap()
+                for name, array in named.items():
+                    inner[name] = _flow_seq(array) if isinstance(array, list) else array
+                    _flow_nested(inner[name])
+                stats[label] = inner
+            out[key] = stats
+        elif key == "terms":
+            out[key] = _flow_seq(value)
+        else:
+            out[key] = value
+    return out
+
+
+def _flow_nested(node: Any) -> None:
+    if isinstance(node, list):
+        for i, item in enumerate(node):
+            if isinstance(item, list):
+                node[i] = _flow_seq(item)
+                _flow_nested(node[i])
+
+
+def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
+                  variables: Mapping[str, Variable], record: FitRecord) -> str:
+    """``text`` (a program file) with the learned ``params`` (by term label) written in place of
+    the old values and ``record`` appended to its ``learned:`` list."""
+    yaml = _yaml()
+    doc = yaml.load(text)
+    done = set()
+    for item in doc.get("decomposition", []):
+        label = _label(item.get("term"))
+        if label is None or label not in params:
+            continue
+        for name, value in params[label].items():
+            item[name] = _node(value, variables, item.get(name))
+        done.add(label)
+    missing = set(params) - done
+    if missing:
+        raise ValueError(f"no term {sorted(missing)[0]} in the program text")
+    learned = doc.get("learned")
+    if learned is None:
+        learned = CommentedSeq()
+        doc["learned"] = learned
+        doc.yaml_set_comment_before_after_key(
+            "learned", before="\nFits that set this program's parameters (bayesprog learn).")
+    learned.append(_record(record))
+    out = io.StringIO()
+    yaml.dump(doc, out)
+    return out.getvalue()

@@ -1,0 +1,389 @@
+"""Identification: parameters learned from data, checked against independent estimators
+(scipy.stats, scikit-learn, pgmpy, a direct maximisation of the observed-data likelihood), the
+fitted file's round trip, continuing a fit, and the errors bad data get."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import optimize, stats
+
+import bayesprog
+from bayesprog.cli import main
+from bayesprog.learning import DataError
+
+NORMAL = """\
+bayesprog: 1
+name: sensor
+# a comment the fitted file must keep
+variables:
+  M: {states: [wood, silk, felt]}
+  E: {continuous: [-.inf, .inf], description: texture}
+decomposition:
+  - term: P(M)
+    form: table
+    table: [0.2, 0.3, 0.5]   # the prior, to be learned
+  - term: P(E | M)
+    form: normal
+    mean: 0.0
+    sigma: 1.0
+"""
+
+
+def normal_data(seed: int, n: int = 300) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    m = rng.choice(["wood", "silk", "felt"], size=n, p=[0.5, 0.3, 0.2])
+    mu = {"wood": 0.2, "silk": 0.5, "felt": 0.9}
+    sd = {"wood": 0.05, "silk": 0.1, "felt": 0.2}
+    e = np.array([rng.normal(mu[k], sd[k]) for k in m])
+    return pd.DataFrame({"M": m, "E": e})
+
+
+def test_tables_and_normals_by_maximum_likelihood_match_pgmpy_and_scipy():
+    program = bayesprog.loads(NORMAL)
+    data = normal_data(0)
+    fit = program.fit(data)
+    table = fit.program.term("P(M)").params["table"].array
+    freq = data["M"].value_counts(normalize=True)
+    np.testing.assert_allclose(table, [freq["wood"], freq["silk"], freq["felt"]], rtol=1e-12)
+    term = fit.program.term("P(E | M)")
+    for i, state in enumerate(["wood", "silk", "felt"]):
+        loc, scale = stats.norm.fit(data.loc[data["M"] == state, "E"])
+        assert term.params["mean"].array[i] == pytest.approx(loc, rel=1e-12)
+        assert term.params["sigma"].array[i] == pytest.approx(scale, rel=1e-10)
+    assert fit.record.method == "maximum likelihood"
+    expected = sum(np.log(table[["wood", "silk", "felt"].index(m)])
+                   + stats.norm.logpdf(e, term.params["mean"].array[["wood", "silk", "felt"].index(m)],
+                                       term.params["sigma"].array[["wood", "silk", "felt"].index(m)])
+                   for m, e in zip(data["M"], data["E"], strict=True))
+    assert fit.log_likelihood == pytest.approx(expected, rel=1e-12)
+
+
+def _pgmpy_network(cpds):
+    from pgmpy.models import DiscreteBayesianNetwork
+
+    model = DiscreteBayesianNetwork([("A", "B"), ("A", "C")])
+    model.add_cpds(*cpds)
+    return model
+
+
+DISCRETE = """\
+bayesprog: 1
+variables:
+  A: {states: [a0, a1]}
+  B: {states: [b0, b1, b2]}
+  C: {states: [c0, c1]}
+decomposition:
+  - {term: P(A), form: table, table: [0.6, 0.4]}
+  - term: P(B | A)
+    form: table
+    table: {a0: [0.5, 0.3, 0.2], a1: [0.1, 0.3, 0.6]}
+  - term: P(C | A)
+    form: table
+    table: {a0: [0.7, 0.3], a1: [0.2, 0.8]}
+"""
+
+
+def discrete_data(seed: int, n: int = 400) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    a = rng.random(n) < 0.35
+    b = np.where(a, rng.choice(3, n, p=[0.1, 0.2, 0.7]), rng.choice(3, n, p=[0.6, 0.3, 0.1]))
+    c = np.where(a, rng.random(n) < 0.9, rng.random(n) < 0.15).astype(int)
+    return pd.DataFrame({"A": np.where(a, "a1", "a0"), "B": [f"b{i}" for i in b],
+                         "C": [f"c{i}" for i in c]})
+
+
+def test_dirichlet_pseudo_counts_match_pgmpy_bayesian_estimator():
+    from pgmpy.estimators import BayesianEstimator
+
+    text = DISCRETE.replace("table: {a0: [0.5, 0.3, 0.2], a1: [0.1, 0.3, 0.6]}",
+                            "table: {a0: [0.5, 0.3, 0.2], a1: [0.1, 0.3, 0.6]}\n"
+                            "    learn: {pseudo_counts: {a0: [1, 2, 3], a1: [0.5, 0.5, 4]}}")
+    data = discrete_data(1, n=60)
+    fit = bayesprog.loads(text).fit(data)
+    model = _pgmpy_network([])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logging.disable(logging.WARNING)
+        try:
+            cpd = BayesianEstimator(model, data).estimate_cpd(
+                "B", prior_type="dirichlet", pseudo_counts=[[1, 0.5], [2, 0.5], [3, 4]])
+        finally:
+            logging.disable(logging.NOTSET)
+    ours = fit.program.term("P(B | A)").params["table"].array  # [A, B]
+    ref = cpd.get_values()  # [B, A] in pgmpy's state order
+    order_b = [cpd.state_names["B"].index(s) for s in ("b0", "b1", "b2")]
+    order_a = [cpd.state_names["A"].index(s) for s in ("a0", "a1")]
+    np.testing.assert_allclose(ours, ref[np.ix_(order_b, order_a)].T, rtol=1e-12)
+
+
+def test_em_with_a_hidden_variable_matches_pgmpy():
+    from pgmpy.estimators import ExpectationMaximization
+    from pgmpy.factors.discrete import TabularCPD
+
+    data = discrete_data(2, n=2000).drop(columns="A")  # A is hidden: no column
+    program = bayesprog.loads(DISCRETE)
+    fit = program.fit(data, max_iter=2000, tol=1e-14)
+    assert fit.record.method == "EM" and fit.converged
+    names = {"A": ["a0", "a1"], "B": ["b0", "b1", "b2"], "C": ["c0", "c1"]}
+    init = {
+        "A": TabularCPD("A", 2, [[0.6], [0.4]], state_names={"A": names["A"]}),
+        "B": TabularCPD("B", 3, [[0.5, 0.1], [0.3, 0.3], [0.2, 0.6]], evidence=["A"],
+                        evidence_card=[2], state_names={"B": names["B"], "A": names["A"]}),
+        "C": TabularCPD("C", 2, [[0.7, 0.2], [0.3, 0.8]], evidence=["A"], evidence_card=[2],
+                        state_names={"C": names["C"], "A": names["A"]}),
+    }
+    model = _pgmpy_network([])
+    model.add_node("A")
+    model.latents = {"A"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logging.disable(logging.WARNING)
+        try:
+            cpds = ExpectationMaximization(model, data).get_parameters(
+                latent_card={"A": 2}, init_cpds=init, max_iter=2000, atol=1e-12,
+                show_progress=False)
+        finally:
+            logging.disable(logging.NOTSET)
+    by = {c.variable: c for c in cpds}
+    ours, theirs = {}, {}
+    for var, term in (("B", "P(B | A)"), ("C", "P(C | A)")):
+        cpd = by[var]
+        ref = cpd.get_values()
+        rows = [cpd.state_names[var].index(s) for s in names[var]]
+        theirs[var] = ref[np.ix_(rows, _latent_order(cpd.state_names["A"]))].T  # [A, var]
+        ours[var] = fit.program.term(term).params["table"].array
+        np.testing.assert_allclose(ours[var], theirs[var], atol=1e-5)
+    theirs["A"] = by["A"].get_values()[_latent_order(by["A"].state_names["A"]), 0]
+    ours["A"] = fit.program.term("P(A)").params["table"].array
+    np.testing.assert_allclose(ours["A"], theirs["A"], atol=1e-5)
+
+    def log_likelihood(p):  # rows of (B, C), A summed out
+        b = data["B"].str[1].astype(int).to_numpy()
+        c = data["C"].str[1].astype(int).to_numpy()
+        return np.log((p["A"][None, :] * p["B"][:, b].T * p["C"][:, c].T).sum(1)).sum()
+
+    assert fit.log_likelihood == pytest.approx(log_likelihood(ours), rel=1e-12)
+    assert fit.log_likelihood >= log_likelihood(theirs) - 1e-9  # at least as far up as pgmpy
+
+
+def _latent_order(states: list) -> list[int]:
+    """pgmpy names a latent variable's states 0, 1, ... in the order of its initial CPD."""
+    return [states.index(s) if s in states else states.index(i) for i, s in enumerate(["a0", "a1"])]
+
+
+def _observed_log_likelihood(theta: np.ndarray, data: pd.DataFrame) -> float:
+    """Log-likelihood of rows that may miss A, for P(A) P(B | A): by enumeration."""
+    pa = np.array([1 - theta[0], theta[0]])
+    pb = np.array([[1 - theta[1], theta[1]], [1 - theta[2], theta[2]]])  # [A, B]
+    total = 0.0
+    for a, b in zip(data["A"], data["B"], strict=True):
+        bi = int(b[1])
+        if isinstance(a, str):
+            total += np.log(pa[int(a[1])] * pb[int(a[1]), bi])
+        else:
+            total += np.log(pa @ pb[:, bi])
+    return total
+
+
+def test_em_with_partly_missing_values_maximises_the_observed_likelihood():
+    text = """\
+bayesprog: 1
+variables: {A: {states: [a0, a1]}, B: {states: [b0, b1]}}
+decomposition:
+  - {term: P(A), form: table, table: [0.5, 0.5]}
+  - {term: P(B | A), form: table, table: [[0.6, 0.4], [0.3, 0.7]]}
+"""
+    rng = np.random.default_rng(3)
+    a = rng.random(200) < 0.3
+    b = np.where(a, rng.random(200) < 0.8, rng.random(200) < 0.2)
+    frame = pd.DataFrame({"A": np.where(a, "a1", "a0"), "B": np.where(b, "b1", "b0")})
+    frame.loc[rng.random(200) < 0.4, "A"] = None
+    fit = bayesprog.loads(text).fit(frame, max_iter=5000, tol=1e-15)
+    theta = np.array([fit.program.term("P(A)").params["table"].array[1],
+                      *fit.program.term("P(B | A)").params["table"].array[:, 1]])
+    best = optimize.minimize(lambda t: -_observed_log_likelihood(t, frame), x0=[0.5, 0.4, 0.6],
+                             bounds=[(1e-6, 1 - 1e-6)] * 3, method="L-BFGS-B",
+                             options={"ftol": 1e-15, "gtol": 1e-10})
+    np.testing.assert_allclose(theta, best.x, atol=2e-4)
+    assert fit.log_likelihood == pytest.approx(_observed_log_likelihood(theta, frame), rel=1e-10)
+    assert fit.log_likelihood >= -best.fun - 1e-8
+
+
+BETA = """\
+bayesprog: 1
+variables: {T: {states: [t1, t2]}, S: {continuous: [0, 1]}}
+decomposition:
+  - {term: P(T), form: table, table: [0.5, 0.5], learn: false}
+  - {term: P(S | T), form: beta, a: 1, b: 1}
+"""
+
+
+def test_beta_by_maximum_likelihood_matches_scipy_fit():
+    rng = np.random.default_rng(4)
+    frame = pd.DataFrame({"T": ["t1"] * 300 + ["t2"] * 200,
+                          "S": np.r_[rng.beta(3, 1, 300), rng.beta(0.7, 2.5, 200)]})
+    fit = bayesprog.loads(BETA).fit(frame)
+    params = fit.program.term("P(S | T)").params
+    for i, state in enumerate(["t1", "t2"]):
+        x = frame.loc[frame["T"] == state, "S"].to_numpy()
+        a, b, _, _ = stats.beta.fit(x, floc=0, fscale=1)
+        ours = params["a"].array[i], params["b"].array[i]
+        assert ours == pytest.approx((a, b), rel=2e-3)
+        assert stats.beta.logpdf(x, *ours).sum() >= stats.beta.logpdf(x, a, b).sum() - 1e-9
+    np.testing.assert_array_equal(fit.program.term("P(T)").params["table"].array, [0.5, 0.5])
+
+
+GMM = """\
+bayesprog: 1
+variables: {X: {continuous: [-.inf, .inf]}}
+decomposition:
+  - term: P(X)
+    form: gmm
+    means: [0.0, 1.0]
+    sigma: 1.0
+    weights: [0.5, 0.5]
+    learn: {components: COMPONENTS}
+"""
+
+
+def gmm_data(seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.r_[rng.normal(-2, 0.5, 300), rng.normal(1, 0.5, 200), rng.normal(3, 0.5, 250)]
+
+
+def test_gmm_by_em_matches_scikit_learn():
+    from sklearn.mixture import GaussianMixture
+
+    x = gmm_data(5)
+    fit = bayesprog.loads(GMM.replace("COMPONENTS", "3")).fit({"X": x}, max_iter=5000, tol=1e-14)
+    params = fit.program.term("P(X)").params
+    # the same deterministic start: means at the quantiles (i + 1/2)/3, sigma spread / 3
+    q = np.quantile(x, [1 / 6, 1 / 2, 5 / 6])
+    ref = GaussianMixture(3, covariance_type="tied", reg_covar=0, tol=1e-14, max_iter=5000,
+                          means_init=q[:, None], weights_init=np.full(3, 1 / 3),
+                          precisions_init=np.array([[9 / x.var()]])).fit(x[:, None])
+    order = np.argsort(ref.means_[:, 0])
+    np.testing.assert_allclose(np.sort(params["means"].array), ref.means_[order, 0], atol=1e-5)
+    np.testing.assert_allclose(params["weights"].array[np.argsort(params["means"].array)],
+                               ref.weights_[order], atol=1e-5)
+    assert float(params["sigma"].array) == pytest.approx(np.sqrt(ref.covariances_[0, 0]), rel=1e-5)
+    assert fit.log_likelihood == pytest.approx(ref.score(x[:, None]) * len(x), rel=1e-8)
+
+
+def test_gmm_components_chosen_by_bic_as_scikit_learn_would():
+    from sklearn.mixture import GaussianMixture
+
+    x = gmm_data(6)
+    fit = bayesprog.loads(GMM.replace("COMPONENTS", "[1, 2, 3, 4]")).fit({"X": x})
+    chosen = len(fit.program.term("P(X)").params["means"].array)
+    bics = [GaussianMixture(k, covariance_type="tied", n_init=3, random_state=0)
+            .fit(x[:, None]).bic(x[:, None]) for k in (1, 2, 3, 4)]
+    assert chosen == 1 + int(np.argmin(bics)) == 3
+    assert "3 components by BIC" in fit.record.method
+
+
+def test_fitted_file_keeps_comments_and_layout_and_records_provenance(tmp_path):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    data = tmp_path / "probes.csv"
+    normal_data(7).to_csv(data, index=False)
+    out = tmp_path / "fitted.yaml"
+    assert main(["learn", str(source), str(data), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "# a comment the fitted file must keep" in text
+    assert "# the prior, to be learned" in text
+    assert text.index("name: sensor") < text.index("variables:") < text.index("decomposition:")
+    fitted = bayesprog.load(out)
+    direct = bayesprog.loads(NORMAL).fit(data)
+    for term in ("P(M)", "P(E | M)"):
+        for name, value in direct.program.term(term).params.items():
+            np.testing.assert_allclose(fitted.term(term).params[name].array, value.array,
+                                       rtol=1e-7)
+    record = fitted.learned[-1]
+    assert record.sha256 == hashlib.sha256(data.read_bytes()).hexdigest()
+    assert record.rows == record.rows_used == 300 and record.data == "probes.csv"
+    assert record.log_likelihood == pytest.approx(direct.log_likelihood, rel=1e-12)
+    assert record.terms == ["P(M)", "P(E | M)"]
+
+
+def test_learning_continues_from_a_fitted_file_with_more_data(tmp_path):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    first, second = normal_data(8, 200), normal_data(9, 150)
+    bayesprog.load(source).fit(first).save(tmp_path / "first.yaml")
+    more = bayesprog.load(tmp_path / "first.yaml").fit(second)
+    both = bayesprog.loads(NORMAL).fit(pd.concat([first, second]))
+    for term in ("P(M)", "P(E | M)"):
+        for name, value in both.program.term(term).params.items():
+            np.testing.assert_allclose(more.program.term(term).params[name].array, value.array,
+                                       rtol=1e-9)
+    assert "continued" in more.record.method
+    more.save(tmp_path / "second.yaml", source=tmp_path / "first.yaml")
+    assert len(bayesprog.load(tmp_path / "second.yaml").learned) == 2
+
+
+def test_frozen_terms_keep_their_values():
+    text = NORMAL.replace("    table: [0.2, 0.3, 0.5]   # the prior, to be learned",
+                          "    table: [0.2, 0.3, 0.5]\n    learn: false")
+    fit = bayesprog.loads(text).fit(normal_data(10))
+    np.testing.assert_array_equal(fit.program.term("P(M)").params["table"].array, [0.2, 0.3, 0.5])
+    fit = bayesprog.loads(NORMAL).fit(normal_data(10), freeze=["P(E|M)"])
+    assert float(fit.program.term("P(E | M)").params["mean"].array) == 0.0
+    assert fit.record.terms == ["P(M)"]
+
+
+def test_missing_continuous_values_leave_their_rows_out_of_that_term_only():
+    frame = normal_data(11)
+    frame.loc[::3, "E"] = np.nan
+    fit = bayesprog.loads(NORMAL).fit(frame)
+    kept = frame.dropna()
+    loc, _ = stats.norm.fit(kept.loc[kept["M"] == "silk", "E"])
+    assert fit.program.term("P(E | M)").params["mean"].array[1] == pytest.approx(loc, rel=1e-12)
+    counts = frame["M"].value_counts(normalize=True)
+    assert fit.program.term("P(M)").params["table"].array[0] == pytest.approx(counts["wood"])
+
+
+def test_parquet_data(tmp_path):
+    path = tmp_path / "probes.parquet"
+    normal_data(12).to_parquet(path)
+    fit = bayesprog.loads(NORMAL).fit(path)
+    assert fit.record.rows == 300 and fit.record.data == "probes.parquet"
+
+
+@pytest.mark.parametrize("csv, message", [
+    ("M,E\nwood,0.1\nwod,0.2\n", "row 2 (line 3), column 'M': unknown state 'wod' of M"),
+    ("M,E\nwood,0.1\nsilk,high\n", "row 2 (line 3), column 'E': expected a number for continuous E"),
+    ("M,E,Z\nwood,0.1,1\n", "column 'Z' (column 3): the program has no variable 'Z'"),
+    ("M,E\nwood,0.1\nwood,0.3\nsilk,0.2\nfelt,0.4\nfelt,0.5\n",
+     "too few rows for P(E | M): (M=silk) has fewer than 2 rows"),
+    ("M,E\nwood,0.1\nwood,0.1\nsilk,0.2\nsilk,0.3\nfelt,0.4\nfelt,0.5\n",
+     "zero variance ((M=wood) has one repeated value)"),
+])
+def test_bad_data_is_refused_with_its_place_and_nothing_written(tmp_path, capsys, csv, message):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    data = tmp_path / "probes.csv"
+    data.write_text(csv)
+    out = tmp_path / "fitted.yaml"
+    assert main(["learn", str(source), str(data), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "probes.csv" in err and "Traceback" not in err
+    assert not out.exists()
+    with pytest.raises(DataError, match="probes.csv"):
+        bayesprog.load(source).fit(data)
+
+
+def test_bad_learn_options_are_refused_at_their_place():
+    text = NORMAL.replace("    sigma: 1.0", "    sigma: 1.0\n    learn: {pseudo_counts: 1, shared: [sd]}")
+    with pytest.raises(bayesprog.SpecError) as err:
+        bayesprog.loads(text, "sensor.yaml")
+    lines = str(err.value).splitlines()
+    assert any(line.startswith("sensor.yaml:15:") and "pseudo_counts are for forms table" in line
+               for line in lines)
+    assert any("shared names 'sd'" in line for line in lines)
