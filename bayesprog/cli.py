@@ -216,7 +216,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise _UserError(f"--workers: expected at least 1, found {args.workers}")
     runner = _runner(_experiment_runner(args.experiment))
     options = {"quiet": args.quiet, "workers": args.workers, "scheduler": args.scheduler,
-               "no_report": args.no_report, "no_gif": args.no_gif}
+               "no_report": args.no_report, "no_gif": args.no_gif, "compare": args.compare}
     return int(runner.run(Path(args.experiment), Path(args.out), options))
 
 
@@ -231,7 +231,8 @@ def cmd_report(args: argparse.Namespace) -> int:
             from None
     except (ValueError, KeyError, AttributeError):
         raise _UserError(f"{manifest}: not a readable experiment manifest") from None
-    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_gif}))
+    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_gif,
+                                                     "compare": args.compare}))
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
@@ -348,11 +349,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="an existing Dask scheduler (install bayesprog[dask])")
     p.add_argument("--no-report", action="store_true", help="do not build the report")
     p.add_argument("--no-gif", action="store_true", help="report without the animation")
+    p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
+                   "findings are set beside these in the report")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
     p.add_argument("out", metavar="DIR")
     p.add_argument("--no-gif", action="store_true", help="report without the animation")
+    p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
+                   "findings are set beside these in the report")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")

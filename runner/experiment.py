@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from bayesprog import Program
 from bayesprog.errors import BayesprogError, SpecError
 from bayesprog.language.document import load_document
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
-from runner.sensor import SyntheticSensor
+from runner.sensor import HapticSensor, ModelSensor, SyntheticSensor
 from runner.store import ResultStore, Unit
 
 
@@ -72,6 +73,16 @@ def load_experiment(path: str | Path) -> Experiment:
     return Experiment(spec, path, scenario)
 
 
+def make_sensor(scenario: Scenario, perception: Program,
+                seeds: list) -> HapticSensor:
+    """The simulated sensor of a scenario: its sensor model when it names one (so perception
+    is misspecified, as on a robot), else the perception program's own Normals."""
+    noise = scenario.spec.sensor.extra_noise
+    if scenario.sensor_model is not None:
+        return ModelSensor(scenario.material_map, scenario.sensor_model, seeds, noise)
+    return SyntheticSensor(scenario.material_map, perception, seeds, noise)
+
+
 def simulate(
     scenario: Scenario,
     task: str,
@@ -86,8 +97,7 @@ def simulate(
     runs = len(run_ids)
     explorer = explorer or Explorer(scenario, task, ablate=CONFIGURATIONS[configuration], runs=runs)
     explorer.reset(starts, seed=[(seed, int(r), 0) for r in run_ids])
-    sensor = SyntheticSensor(scenario.material_map, explorer.perception,
-                             [(seed, int(r), 1) for r in run_ids], scenario.spec.sensor.extra_noise)
+    sensor = make_sensor(scenario, explorer.perception, [(seed, int(r), 1) for r in run_ids])
     gamma = BorderDistance(scenario.centres, scenario.border(task), runs)
     out_gamma = np.empty((runs, iterations))
     out_paths = np.empty((runs, iterations), dtype=np.int64)
@@ -128,6 +138,8 @@ def manifest(experiment: Experiment) -> dict:
     files = {"experiment": experiment.path, "scenario": scenario.path}
     for which in ("perception", "shape", "target"):
         files[which] = scenario.program_path(which)
+    if scenario.sensor_model is not None and scenario.sensor_model.path is not None:
+        files["sensor_model"] = scenario.sensor_model.path
     return {
         "experiment": experiment.spec.model_dump(),
         "start_cells": experiment.start_cells().tolist(),

@@ -33,7 +33,9 @@ def report(out: Path, options: dict) -> int:
     """Rebuild ``out/report`` from the stored results."""
     from runner.report import build_report
 
-    folder = build_report(out, gif=not options.get("no_gif", False))
+    compare = options.get("compare")
+    folder = build_report(out, gif=not options.get("no_gif", False),
+                          compare=Path(compare) if compare else None)
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 

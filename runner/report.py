@@ -11,10 +11,12 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from bayesprog.errors import BayesprogError
 from runner.experiment import ExperimentSpec, load_experiment, load_results, mean_sem
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import behaviour, border_band
 from runner.scenario import Scenario
+from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write
 
 
@@ -251,8 +253,77 @@ def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str
     return out
 
 
-def build_report(out: Path, gif: bool = True) -> Path:
-    """Write ``out/report/`` (figures, table, report.md, report.html) from stored results."""
+#: held-out probes per material for the report's confusion matrix, and their seed
+HELD_OUT, HELD_OUT_SEED = 2000, 7
+
+
+def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> list[str]:
+    """Which materials the perception program recognises from one probe of the scenario's
+    sensor, and whether the least accurately followed task has the least recognised material."""
+    model = scenario.sensor_model or SensorModel.from_program(scenario.perception)
+    noise = scenario.spec.sensor.extra_noise
+    matrix = confusion(scenario.perception, model, HELD_OUT, HELD_OUT_SEED, noise)
+    names = list(scenario.materials)
+    source = (f"the sensor model `{model.spec.name}`" if scenario.sensor_model is not None
+              else "the perception program's own Normals")
+    learned = scenario.perception.learned
+    origin = ("written by hand" if not learned else
+              f"learned from {learned[-1].rows_used} probes of `{learned[-1].data}` "
+              f"({learned[-1].method})")
+    lines = ["## Perception (pi_per)", "",
+             f"pi_per's parameters are {origin}. Probes are simulated from {source}"
+             + (f" plus white noise of sd {noise}" if noise else "") + f". Single-probe "
+             f"recognition on {HELD_OUT} held-out probes per material (seed {HELD_OUT_SEED}): "
+             f"{100 * np.diag(matrix).mean():.1f}% on average over the 10 materials.", "",
+             "| material in the scenario | recognised | most often taken for |", "|---|---|---|"]
+    used = list(dict.fromkeys([scenario.spec.background]
+                              + [o.material for o in scenario.spec.objects]))
+    for m in used:
+        i = names.index(m)
+        others = sorted(((matrix[i, j], names[j]) for j in range(len(names)) if j != i),
+                        reverse=True)
+        taken = ", ".join(f"{n} {100 * v:.1f}%" for v, n in others[:2] if v >= 0.001) or "-"
+        lines.append(f"| {m} | {100 * matrix[i, i]:.1f}% | {taken} |")
+    per = {r["task"]: r["final_per_border_cell_mm"] for r in rows if r["configuration"] == "full"}
+    if set(per) >= set(tasks) and tasks:
+        rate = {t: matrix[scenario.task_material(t), scenario.task_material(t)] for t in tasks}
+        worst_task = max(tasks, key=lambda t: per[t])
+        hardest = min(tasks, key=lambda t: rate[t])
+        lines += ["", ", ".join(f"{t} ({names[scenario.task_material(t)]}): recognised "
+                                f"{100 * rate[t]:.1f}%, final Gamma per border cell "
+                                f"{per[t]:.1f} mm" for t in tasks) + "."]
+        if worst_task == hardest:
+            lines.append(f"The least accurately followed task, {worst_task}, is also the one "
+                         "whose material is least recognised, as the paper explains its T3.")
+        else:
+            lines.append(f"The least accurately followed task is {worst_task}, but the least "
+                         f"recognised material is {hardest}'s: perception alone does not "
+                         "explain the order here (the layout of the border does too).")
+    return lines + [""]
+
+
+def comparison_lines(found: list[tuple[str, str, str]], other: Path, name: str) -> list[str]:
+    """The paper's findings as measured here and in another experiment's stored report."""
+    stats_path = other / "report" / "statistics.json"
+    try:
+        other_rows = json.loads(stats_path.read_text(encoding="utf-8"))
+        other_manifest = ResultStore(other).manifest()
+    except (OSError, ValueError) as exc:
+        raise BayesprogError(f"--compare {other}: expected an experiment's output folder with "
+                             f"its report ({stats_path}): {exc}") from None
+    other_spec = ExperimentSpec.model_validate(other_manifest["experiment"])
+    theirs = {a: (b, c) for a, b, c in findings(other_rows, other_spec)}
+    lines = [f"## The findings beside experiment {other_spec.name}", "",
+             f"| the paper | {name} | {other_spec.name} |", "|---|---|---|"]
+    for text, measured, verdict in found:
+        there = theirs.get(text, ("not measured", ""))
+        lines.append(f"| {text} | {verdict}: {measured} | {there[1]}: {there[0]} |")
+    return lines + [""]
+
+
+def build_report(out: Path, gif: bool = True, compare: Path | None = None) -> Path:
+    """Write ``out/report/`` (figures, table, report.md, report.html) from stored results;
+    ``compare``: another experiment's output folder whose findings are set beside these."""
     store = ResultStore(out)
     manifest = store.manifest()
     experiment = load_experiment(manifest["files"]["experiment"]["path"])
@@ -272,7 +343,10 @@ def build_report(out: Path, gif: bool = True) -> Path:
                   folder / "fig11_decision.gif" if gif else None, spec.iterations - 1)
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(rows, indent=1).encode())
-    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run)
+    extra = perception_lines(scenario, rows, spec.tasks)
+    if compare is not None:
+        extra += comparison_lines(found, compare, spec.name)
+    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, rows, found).encode())
     return folder
@@ -324,7 +398,7 @@ def _table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _markdown(spec, rows, found, borders, step, task, digest, run=0) -> str:
+def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=()) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -360,6 +434,7 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0) -> str:
               "more than 5% with p < 0.01 in every task; *I* when the change is under 10% or not "
               "significant (p >= 0.01); *R* when the change is under 10%, not significant, or "
               "in the full model's favour; *T* compares the final Gamma per border cell.", ""]
+    lines += list(extra)
     return "\n".join(lines)
 
 

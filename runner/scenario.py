@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 import bayesprog
 from bayesprog.errors import SpecError
 from bayesprog.language.document import load_document
+from runner.sensor import SensorModel, load_sensor_model
 
 
 class _Strict(BaseModel):
@@ -50,6 +51,9 @@ class ProgramsSpec(_Strict):
 
 
 class SensorSpec(_Strict):
+    model: str | None = Field(None, description="a sensor model file (relative to the "
+                              "scenario) the simulated probes are drawn from; by default the "
+                              "perception program's own Normals")
     extra_noise: float = Field(0.0, ge=0)
 
 
@@ -105,6 +109,8 @@ class Scenario:
     #: pi_per and pi_tar as used on this workspace (pi_tar's grid O set by the scenario's grid)
     perception: bayesprog.Program
     target: bayesprog.Program
+    #: the model simulated probes are drawn from (None: the perception program's Normals)
+    sensor_model: SensorModel | None = None
 
     @property
     def name(self) -> str:
@@ -207,6 +213,15 @@ def load_scenario(path: str | Path) -> Scenario:
             diags.append(located.diagnostic(("objects", i, "template"), f"unknown template "
                                             f"{obj.template!r}: expected one of "
                                             f"{', '.join(spec.templates)}"))
+    sensor_model = None
+    if spec.sensor.model is not None:
+        model_path = (path.parent / spec.sensor.model).resolve()
+        if not model_path.is_file():
+            diags.append(located.diagnostic(("sensor", "model"), f"no sensor model file "
+                                            f"{spec.sensor.model} (looked for {model_path.name} "
+                                            "beside the scenario)"))
+        else:
+            sensor_model = load_sensor_model(model_path, materials)
     if diags:
         raise SpecError(diags)
-    return Scenario(spec, path, materials, perception, target)
+    return Scenario(spec, path, materials, perception, target, sensor_model)

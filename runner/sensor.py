@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import Program
+from bayesprog import Program, SpecError
 from bayesprog.forms import ParamValue
+from bayesprog.language.document import load_document
 
 
 class HapticSensor(Protocol):
@@ -60,3 +63,181 @@ class SyntheticSensor:
             noise = z[:, 1] * self.extra_noise
             out.append(mean[m] + sigma[m] * z[:, 0] + noise)
         return out[0], out[1]
+
+
+# A haptic sensor model that is not pi_per ---------------------------------------------------------
+class FeatureSpec(BaseModel):
+    """A skew-normal: ``loc + scale * (delta |u0| + sqrt(1 - delta^2) u1)``, delta from ``skew``."""
+
+    model_config = ConfigDict(extra="forbid")
+    loc: float
+    scale: float = Field(gt=0)
+    skew: float = Field(0.0, description="shape of the skew-normal (0: a Normal)")
+
+
+class MaterialSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    texture: FeatureSpec
+    compliance: FeatureSpec
+    correlation: float = Field(0.0, gt=-1, lt=1, description="between the two features' "
+                               "symmetric parts")
+    why: str = ""
+
+
+class SensorModelSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    sensor: int = Field(1, ge=1, le=1)
+    name: str
+    description: str = ""
+    materials: dict[str, MaterialSpec] = Field(min_length=1)
+
+
+class SensorModel:
+    """Texture and compliance of each material, as a sensor reads them: per material a
+    skew-normal for each feature, of its own spread, the two correlated. Draws for any list of
+    materials from standard normals, so a caller controls the random stream."""
+
+    def __init__(self, spec: SensorModelSpec, materials: Sequence[str], path: Path | None = None):
+        self.spec, self.path = spec, path
+        self.materials = tuple(materials)
+        rows = [spec.materials[m] for m in self.materials]
+
+        def column(feature: str, key: str) -> np.ndarray:
+            return np.array([getattr(getattr(r, feature), key) for r in rows], float)
+
+        self.loc = np.stack([column("texture", "loc"), column("compliance", "loc")], 1)
+        self.scale = np.stack([column("texture", "scale"), column("compliance", "scale")], 1)
+        skew = np.stack([column("texture", "skew"), column("compliance", "skew")], 1)
+        self.delta = skew / np.sqrt(1 + skew**2)
+        self.rho = np.array([r.correlation for r in rows])
+
+    def draw(self, materials: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``materials`` [n] indices, ``z`` [n, 4] standard normals -> (texture, compliance)."""
+        m = np.asarray(materials)
+        rho = self.rho[m]
+        sym = np.stack([z[:, 0], rho * z[:, 0] + np.sqrt(1 - rho**2) * z[:, 1]], 1)
+        d = self.delta[m]
+        x = self.loc[m] + self.scale[m] * (d * np.abs(z[:, 2:4]) + np.sqrt(1 - d**2) * sym)
+        return x[:, 0], x[:, 1]
+
+    @classmethod
+    def from_program(cls, perception: Program) -> SensorModel:
+        """The perception program's own Normals as a sensor model (no skew, no correlation)."""
+        normals = material_normals(perception)
+        materials = perception.variables["M"].states  # type: ignore[union-attr]
+        spec = SensorModelSpec(name=f"{perception.name} Normals", materials={
+            m: MaterialSpec(texture=FeatureSpec(loc=normals["E"][0][i], scale=normals["E"][1][i]),
+                            compliance=FeatureSpec(loc=normals["C"][0][i],
+                                                   scale=normals["C"][1][i]))
+            for i, m in enumerate(materials)})
+        return cls(spec, materials)
+
+    def record(self, per_material: int, seed: int, extra_noise: float = 0.0) -> dict[str, list]:
+        """A training set: ``per_material`` probes of each material, each material from its own
+        seeded stream (columns M, E, C), plus optional white noise."""
+        out: dict[str, list] = {"M": [], "E": [], "C": []}
+        for i, name in enumerate(self.materials):
+            rng = np.random.default_rng([seed, i])
+            z = rng.standard_normal((per_material, 4))
+            e, c = self.draw(np.full(per_material, i), z)
+            if extra_noise:
+                noise = rng.standard_normal((per_material, 2)) * extra_noise
+                e, c = e + noise[:, 0], c + noise[:, 1]
+            out["M"] += [name] * per_material
+            out["E"] += [float(f"{v:.6g}") for v in e]
+            out["C"] += [float(f"{v:.6g}") for v in c]
+        return out
+
+
+def load_sensor_model(path: str | Path, materials: Sequence[str]) -> SensorModel:
+    """Load a sensor model file; every material of ``materials`` must be described."""
+    path = Path(path)
+    located, spec = load_document(path, SensorModelSpec)
+    missing = [m for m in materials if m not in spec.materials]
+    if missing:
+        raise SpecError([located.diagnostic(("materials",), f"no model for material(s) "
+                                            f"{', '.join(missing)}: expected every material of "
+                                            "the perception program", at_key=True)])
+    return SensorModel(spec, materials, path)
+
+
+class ModelSensor:
+    """Simulated probes drawn from a sensor model (never from the perception program), plus
+    optional white noise; each run has its own generator."""
+
+    def __init__(self, material_map: np.ndarray, model: SensorModel,
+                 seeds: Sequence[int | np.random.SeedSequence], extra_noise: float = 0.0):
+        self.materials = material_map.ravel()
+        self.model = model
+        self.extra_noise = extra_noise
+        self.rngs = [np.random.default_rng(s) for s in seeds]
+
+    def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        z = np.array([rng.standard_normal(6) for rng in self.rngs])
+        texture, compliance = self.model.draw(self.materials[np.asarray(cells)], z[:, :4])
+        return texture + self.extra_noise * z[:, 4], compliance + self.extra_noise * z[:, 5]
+
+
+def confusion(perception: Program, model: SensorModel, per_material: int, seed: int,
+              extra_noise: float = 0.0) -> np.ndarray:
+    """Single-probe confusion of ``perception`` on held-out probes of ``model``: row = true
+    material, column = the MAP material, each row sums to one."""
+    data = model.record(per_material, seed, extra_noise)
+    post = perception.ask("P(M | E, C)", {"E": np.asarray(data["E"]),
+                                          "C": np.asarray(data["C"])}).probabilities
+    truth = np.repeat(np.arange(len(model.materials)), per_material)
+    k = len(model.materials)
+    out = np.zeros((k, k))
+    np.add.at(out, (truth, post.argmax(-1)), 1.0)
+    return out / per_material
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m runner.sensor MODEL.yaml --per-material N --seed S -o PROBES.csv``: record a
+    training set of probes from a sensor model (for ``bayesprog learn``)."""
+    import argparse
+    import sys
+
+    import pandas as pd
+
+    from bayesprog.errors import BayesprogError
+    from bayesprog.files import atomic_write
+
+    parser = argparse.ArgumentParser(prog="python -m runner.sensor",
+                                     description="record probes of every material from a "
+                                     "sensor model (columns M, E, C)")
+    parser.add_argument("model", metavar="MODEL.yaml")
+    parser.add_argument("--perception", default=None, metavar="PI_PER.yaml",
+                        help="the program whose materials are recorded, in its order (default: "
+                        "the sensor model's order)")
+    parser.add_argument("--per-material", type=int, default=300)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("-o", "--output", required=True, metavar="PROBES.csv")
+    args = parser.parse_args(argv)
+    try:
+        if args.per_material < 1:
+            raise BayesprogError(f"--per-material: expected at least 1, found {args.per_material}")
+        if args.perception:
+            import bayesprog
+
+            materials = bayesprog.load(args.perception).variables["M"].states  # type: ignore[union-attr]
+        else:
+            located, spec = load_document(Path(args.model), SensorModelSpec)
+            materials = tuple(spec.materials)
+        model = load_sensor_model(args.model, materials)
+        frame = pd.DataFrame(model.record(args.per_material, args.seed))
+        atomic_write(Path(args.output), frame.to_csv(index=False).encode())
+    except SpecError as exc:
+        for d in exc.diagnostics:
+            print(d, file=sys.stderr)
+        return 2
+    except (BayesprogError, OSError) as exc:
+        print(f"runner.sensor: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.output}: {args.per_material} probes of each of {len(materials)} materials "
+          f"(seed {args.seed})")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

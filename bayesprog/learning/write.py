@@ -20,12 +20,15 @@ from bayesprog.variables import Discrete, Variable
 #: significant digits of learned parameters in the file (probabilities then sum to one
 #: within 1e-7, as the file checker asks)
 DIGITS = 8
+#: a learned mapping is written on one line ({a: 1, b: 2}) when it is this short, else one entry
+#: per line
+FLOW_WIDTH = 80
 
 
 def _yaml() -> YAML:
     yaml = YAML()
     yaml.preserve_quotes = True
-    yaml.width = 100
+    yaml.width = 4096  # never re-wrap the author's lines
     yaml.indent(mapping=2, sequence=4, offset=2)
     return yaml
 
@@ -63,9 +66,8 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any) -> Any
         for i, state in enumerate(var.states):
             previous = old.get(state) if isinstance(old, Mapping) else None
             out[_key(state)] = build(axes[1:], array[i], previous, depth + 1)
-        leaf_level = len(axes) == 1 and array.ndim == 1
-        if _is_flow(old) or (old is None and leaf_level) or (
-                not isinstance(old, Mapping) and leaf_level):
+        short = len(str(dict(out))) <= FLOW_WIDTH
+        if short and (_is_flow(old) or (len(axes) == 1 and not isinstance(old, Mapping))):
             out.fa.set_flow_style()
         return out
 

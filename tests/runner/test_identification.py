@@ -1,0 +1,107 @@
+"""pi_per identified as in the paper: probes recorded from a sensor model that is not pi_per,
+pi_per learned from them by `bayesprog learn`, the simulator drawing from the sensor model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+import bayesprog
+from bayesprog.cli import main
+from runner.experiment import load_experiment, make_sensor, run_experiment
+from runner.report import build_report
+from runner.scenario import load_scenario
+from runner.sensor import ModelSensor, confusion, load_sensor_model
+from runner.sensor import main as record_main
+
+MODELS = Path(__file__).parents[2] / "models"
+MATERIALS = bayesprog.load(MODELS / "pi_per.yaml").variables["M"].states
+
+
+def test_the_shipped_probes_are_recorded_from_the_sensor_model_with_their_seed(tmp_path):
+    out = tmp_path / "probes.csv"
+    assert record_main([str(MODELS / "sensors" / "biotac_proxy.yaml"), "--perception",
+                        str(MODELS / "pi_per.yaml"), "--per-material", "300", "--seed", "1",
+                        "-o", str(out)]) == 0
+    assert out.read_bytes() == (MODELS / "data" / "probes.csv").read_bytes()
+
+
+def test_the_shipped_identified_pi_per_is_learned_from_the_shipped_probes(tmp_path):
+    out = tmp_path / "fitted.yaml"
+    assert main(["learn", str(MODELS / "pi_per.yaml"), str(MODELS / "data" / "probes.csv"),
+                 "-o", str(out)]) == 0
+    shipped, fitted = bayesprog.load(MODELS / "pi_per_identified.yaml"), bayesprog.load(out)
+    for term in ("P(E | M)", "P(C | M)"):
+        for name in ("mean", "sigma"):
+            np.testing.assert_allclose(shipped.term(term).params[name].array,
+                                       fitted.term(term).params[name].array, rtol=1e-12)
+    assert shipped.learned[-1].sha256 == fitted.learned[-1].sha256
+
+
+def test_the_sensor_model_is_not_a_normal_of_one_spread():
+    data = pd.read_csv(MODELS / "data" / "probes.csv")
+    by = {m: g for m, g in data.groupby("M")}
+    assert stats.skewtest(by["acrylic"]["E"]).pvalue < 1e-6  # skewed
+    assert stats.skewtest(by["feather"]["C"]).statistic < 0  # skewed the other way
+    r = stats.pearsonr(by["damp_sponge"]["E"], by["damp_sponge"]["C"])
+    assert r.statistic > 0.2 and r.pvalue < 1e-4  # correlated features
+    spreads = data.groupby("M")["E"].std()
+    assert spreads.max() / spreads.min() > 2  # unequal spreads
+
+
+def test_the_simulator_draws_from_the_sensor_model_never_from_pi_per():
+    scenario = load_scenario(MODELS / "scenarios" / "paper_identified.yaml")
+    seeds = [(1, r, 1) for r in range(5)]
+    cells = np.arange(5) * 300
+    hand = bayesprog.load(MODELS / "pi_per.yaml")
+    a = make_sensor(scenario, scenario.perception, seeds)
+    b = make_sensor(scenario, hand, seeds)
+    assert isinstance(a, ModelSensor)
+    np.testing.assert_array_equal(a.probe(cells), b.probe(cells))
+    model = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml", MATERIALS)
+    z = np.array([np.random.default_rng(s).standard_normal(6) for s in seeds])
+    expected = model.draw(scenario.material_map.ravel()[cells], z[:, :4])
+    np.testing.assert_allclose(make_sensor(scenario, hand, seeds).probe(cells), expected)
+
+
+def test_wood_is_the_hardest_of_the_scenario_materials_for_the_identified_pi_per():
+    model = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml", MATERIALS)
+    matrix = confusion(bayesprog.load(MODELS / "pi_per_identified.yaml"), model, 1000, 3)
+    np.testing.assert_allclose(matrix.sum(1), 1.0)
+    rate = dict(zip(MATERIALS, np.diag(matrix), strict=True))
+    assert rate["wood"] < min(rate["plush"], rate["silicone"])
+    assert np.diag(matrix).mean() > 0.85
+
+
+def test_a_sensor_model_without_a_material_is_refused_at_its_place(tmp_path):
+    text = (MODELS / "sensors" / "biotac_proxy.yaml").read_text()
+    cut = text[: text.index("  wood:")]
+    path = tmp_path / "partial.yaml"
+    path.write_text(cut)
+    with pytest.raises(bayesprog.SpecError, match=r"partial.yaml:\d+:\d+: no model for material"):
+        load_sensor_model(path, MATERIALS)
+
+
+def test_the_report_sets_the_findings_of_two_experiments_side_by_side(tmp_path):
+    import yaml
+
+    outs = []
+    for name in ("paper", "paper_identified"):
+        spec = {"experiment": 1, "name": name, "runner": "haptic",
+                "scenario": str(MODELS / "scenarios" / f"{name}.yaml"), "tasks": ["T1", "T3"],
+                "configurations": ["full", "without_S", "without_U"], "runs": 3,
+                "iterations": 5, "seed": 3, "chunk": 3}
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(spec))
+        run_experiment(load_experiment(path), tmp_path / name, progress=False)
+        outs.append(tmp_path / name)
+    build_report(outs[0], gif=False)
+    text = (build_report(outs[1], gif=False, compare=outs[0]) / "report.md").read_text()
+    assert "## The findings beside experiment paper" in text
+    assert "| the paper | paper_identified | paper |" in text
+    assert "learned from 3000 probes of `probes.csv`" in text
+    assert "sensor model `biotac_proxy`" in text
