@@ -62,7 +62,7 @@ def blocks(page: Path) -> list[Block]:
         body = "\n".join(lines[start + 1 : end]) + "\n"
         previous = next((lines[k] for k in range(start - 1, -1, -1) if lines[k].strip()), "")
         file = _FILE.match(previous.strip())
-        if info == "yaml" and file:
+        if info in ("yaml", "csv") and file:
             out.append(Block("file", body, start + 1, file.group("name")))
         elif info in ("console", "python"):
             out.append(Block(info, body, start + 1))

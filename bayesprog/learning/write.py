@@ -53,12 +53,19 @@ def _is_flow(node: Any) -> bool:
     return bool(getattr(node, "fa", None) is not None and node.fa.flow_style())
 
 
-def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any) -> Any:
+def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
+          child: Variable | None = None) -> Any:
     """The YAML node of a parameter, keyed by the states of its axes; a mapping keeps the flow or
-    block style of the node it replaces."""
+    block style of the node it replaces, and a row written keyed by the child's states stays so."""
 
     def build(axes: tuple[str, ...], array: np.ndarray, old: Any, depth: int) -> Any:
         if not axes:
+            if (isinstance(child, Discrete) and array.ndim == 1 and isinstance(old, Mapping)
+                    and {str(k) for k in old} == set(child.states)):
+                row = CommentedMap((_key(s), _number(float(v)))
+                                   for s, v in zip(child.states, array, strict=True))
+                row.fa.set_flow_style()
+                return row
             return _leaf(array)
         var = variables[axes[0]]
         assert isinstance(var, Discrete)
@@ -126,8 +133,9 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
         label = _label(item.get("term"))
         if label is None or label not in params:
             continue
+        child = variables.get(parse_expression(label).left[0])
         for name, value in params[label].items():
-            item[name] = _node(value, variables, item.get(name))
+            item[name] = _node(value, variables, item.get(name), child)
         done.add(label)
     missing = set(params) - done
     if missing:
