@@ -119,14 +119,13 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
 
 def replay(experiment, task: str, configuration: str, run: int, steps: int):
     """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
-    from runner.sensor import SyntheticSensor
+    from runner.experiment import make_sensor
 
     spec = experiment.spec
     scenario = experiment.scenario
     explorer = Explorer(scenario, task, ablate=CONFIGURATIONS[configuration])
     explorer.reset(experiment.start_cells()[run : run + 1], seed=[(spec.seed, run, 0)])
-    sensor = SyntheticSensor(scenario.material_map, explorer.perception, [(spec.seed, run, 1)],
-                             scenario.spec.sensor.extra_noise)
+    sensor = make_sensor(scenario, explorer.perception, [(spec.seed, run, 1)])
     shape_only = explorer.target.ablate("P(I | O)", "P(S | O, T)", "P(U | O)")
     cells = explorer.expected
     for _ in range(steps):
@@ -143,7 +142,9 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         else:
             shape_field = np.full(len(scenario.centres), 1.0 / len(scenario.centres))
         posterior = explorer.target_probabilities[0]
-        yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0],
+        belief = np.where(explorer.visits[0] > 0,
+                          explorer.posterior[0, :, explorer.target_material], np.nan)
+        yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0], "belief": belief,
                "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
                "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}
         cells = decision_cells

@@ -12,8 +12,9 @@ from scipy import stats
 
 import bayesprog
 from bayesprog.cli import main
-from runner.experiment import load_experiment, make_sensor, run_experiment
-from runner.report import build_report
+from runner.experiment import load_experiment, load_results, make_sensor, run_experiment
+from runner.report import build_report, replay
+from runner.store import ResultStore
 from runner.scenario import load_scenario
 from runner.sensor import ModelSensor, confusion, load_sensor_model
 from runner.sensor import main as record_main
@@ -94,11 +95,17 @@ def test_the_report_sets_the_findings_of_two_experiments_side_by_side(tmp_path):
         spec = {"experiment": 1, "name": name, "runner": "haptic",
                 "scenario": str(MODELS / "scenarios" / f"{name}.yaml"), "tasks": ["T1", "T3"],
                 "configurations": ["full", "without_S", "without_U"], "runs": 3,
-                "iterations": 5, "seed": 3, "chunk": 3}
+                "iterations": 30, "seed": 3, "chunk": 3}
         path = tmp_path / f"{name}.yaml"
         path.write_text(yaml.safe_dump(spec))
         run_experiment(load_experiment(path), tmp_path / name, progress=False)
         outs.append(tmp_path / name)
+    # Fig. 11 replays a stored run: with a sensor model it must draw the same probes
+    experiment = load_experiment(tmp_path / "paper_identified.yaml")
+    stored = load_results(ResultStore(outs[1]), experiment.spec)["T3/full"]["paths"]
+    for run in range(3):
+        frames = list(replay(experiment, "T3", "full", run, 30))
+        assert [f["cell"] for f in frames] == stored[run].tolist()
     build_report(outs[0], gif=False)
     text = (build_report(outs[1], gif=False, compare=outs[0]) / "report.md").read_text()
     assert "## The findings beside experiment paper" in text
