@@ -14,6 +14,7 @@
 [[0.998, 0.002], [0.002, 0.998]]
 """
 
+from bayesprog.display import show_inference
 from bayesprog.errors import BayesprogError, Diagnostic, QuestionError, SpecError, ZeroEvidenceError
 from bayesprog.expressions import Question
 from bayesprog.forms import Form, Param, available_forms, register_form
@@ -38,4 +39,5 @@ __all__ = [
     "load",
     "loads",
     "register_form",
+    "show_inference",
 ]

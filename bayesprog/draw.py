@@ -7,6 +7,7 @@ their index (``I[O]``); known variables of a question are shaded, as in the pape
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import networkx as nx
 
@@ -68,17 +69,29 @@ def write_graph(program: Program, out: Path, question: Question | None = None) -
     if out.suffix.lower() == ".dot":
         out.write_text(to_dot(program, question), encoding="utf-8")
         return
-    import matplotlib
+    graph_figure(program, question).savefig(out, bbox_inches="tight")
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def graph_figure(program: Program, question: Question | None = None,
+                 panels: dict[str, Any] | None = None) -> Any:
+    """The graph as a matplotlib figure. ``panels`` maps a variable to a function
+    ``draw(ax)`` that fills a small axes under its node (posterior bars, an observed value)."""
+    # a bare Figure, not pyplot: no backend state, nothing shown behind a notebook's back
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
 
     graph = program.graph
     pos = _layers(graph)
+    if panels:  # room for a panel to the right of each node
+        pos = {n: (3.0 * x, 1.15 * y) for n, (x, y) in pos.items()}
     known = set(question.expression.right) if question else set()
-    width = max(4.0, 1.4 * max(sum(1 for p in pos.values() if p[1] == y) for y in {p[1] for p in pos.values()}))
-    height = max(3.0, 1.3 * (1 - min(p[1] for p in pos.values())))
-    fig, ax = plt.subplots(figsize=(width, height))
+    xs = [p[0] for p in pos.values()]
+    ys = [p[1] for p in pos.values()]
+    right = 2.5 if panels else 0.8
+    width = max(4.0, 1.4 * (max(xs) - min(xs) + 0.8 + right))
+    height = max(3.0, 1.3 * (max(ys) - min(ys) + 1.6))
+    fig = Figure(figsize=(width, height))
+    ax = fig.add_subplot()
     ablated_children = {t.child.name for t in program.terms if str(t.expression) in program.ablated}
     for u, v in graph.edges:
         ax.annotate("", xy=pos[v], xytext=pos[u],
@@ -87,18 +100,24 @@ def write_graph(program: Program, out: Path, question: Question | None = None) -
         var = program.variables[name]
         face = "#bbbbbb" if name in known else "white"
         style = "--" if name in ablated_children else "-"
-        shape = plt.Circle((x, y), 0.28, facecolor=face, edgecolor="black", ls=style, lw=1.3)
+        shape = Circle((x, y), 0.28, facecolor=face, edgecolor="black", ls=style, lw=1.3)
         ax.add_patch(shape)
         if not var.is_discrete:
-            ax.add_patch(plt.Circle((x, y), 0.24, facecolor="none", edgecolor="black", lw=0.8))
+            ax.add_patch(Circle((x, y), 0.24, facecolor="none", edgecolor="black", lw=0.8))
         ax.text(x, y, _label(program, name), ha="center", va="center", fontsize=10)
-    xs = [p[0] for p in pos.values()]
-    ys = [p[1] for p in pos.values()]
-    ax.set_xlim(min(xs) - 0.8, max(xs) + 0.8)
+    ax.set_xlim(min(xs) - 0.8, max(xs) + right)
     ax.set_ylim(min(ys) - 0.8, max(ys) + 0.8)
     ax.set_aspect("equal")
     ax.axis("off")
     title = program.name + (f" (ablated: {', '.join(program.ablated)})" if program.ablated else "")
     ax.set_title(title, fontsize=11)
-    fig.savefig(out, bbox_inches="tight")
-    plt.close(fig)
+    if panels:
+        fig.canvas.draw()
+        for name, draw in panels.items():
+            x, y = pos[name]
+            # a small axes under the node, placed in figure coordinates
+            corner = fig.transFigure.inverted().transform(ax.transData.transform((x + 1.2, y - 0.4)))
+            top = fig.transFigure.inverted().transform(ax.transData.transform((x + 2.3, y + 0.4)))
+            inset = fig.add_axes((corner[0], corner[1], top[0] - corner[0], top[1] - corner[1]))
+            draw(inset)
+    return fig

@@ -12,7 +12,7 @@ from typing import Any
 
 import networkx as nx
 
-from bayesprog import inference
+from bayesprog import inference, rich
 from bayesprog.errors import Diagnostic, QuestionError, SpecError
 from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
 from bayesprog.files import atomic_write
@@ -253,6 +253,10 @@ class Program:
                          description=self.description, path=self.path, ablated=self.ablated,
                          learned=[*self.learned, estimate.record])
         return Fit(fitted, estimate, self.path)
+
+    def _repr_html_(self) -> str | None:
+        """In a notebook: the decomposition in Bayesian-programming notation and the graph."""
+        return rich.html("program", self)
 
     def __repr__(self) -> str:
         extra = f", ablated={list(self.ablated)}" if self.ablated else ""

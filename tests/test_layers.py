@@ -17,13 +17,13 @@ PACKAGE = Path(__file__).parents[1] / "bayesprog"
 
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
-    {"errors", "variables", "expressions", "files"},
+    {"errors", "variables", "expressions", "files", "rich"},
     {"forms"},
     {"language"},
     {"inference"},
     {"learning"},
     {"program"},
-    {"compile", "draw", "show", "__init__"},
+    {"compile", "draw", "show", "display", "__init__"},
     {"io"},
     {"cli"},
 ]

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from bayesprog import rich
 from bayesprog.errors import QuestionError, ZeroEvidenceError
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
@@ -29,6 +30,9 @@ class Posterior:
     log_evidence: np.ndarray
     batch_shape: tuple[int, ...]
     ablated: tuple[str, ...] = ()
+
+    def _repr_html_(self) -> str | None:
+        return rich.html("posterior", self)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -67,6 +71,9 @@ class MapResult:
             chosen = names[self.indices[..., i]]
             out[var] = chosen if self.indices.ndim > 1 else str(chosen)
         return out
+
+    def _repr_html_(self) -> str | None:
+        return rich.html("map", self)
 
     def to_json(self) -> dict[str, Any]:
         assignment = self.assignment

@@ -14,10 +14,10 @@ import bayesprog
 from bayesprog.cli import main
 from runner.experiment import load_experiment, load_results, make_sensor, run_experiment
 from runner.report import build_report, replay
-from runner.store import ResultStore
 from runner.scenario import load_scenario
 from runner.sensor import ModelSensor, confusion, load_sensor_model
 from runner.sensor import main as record_main
+from runner.store import ResultStore
 
 MODELS = Path(__file__).parents[2] / "models"
 MATERIALS = bayesprog.load(MODELS / "pi_per.yaml").variables["M"].states
