@@ -173,8 +173,13 @@ def cmd_learn(args: argparse.Namespace) -> int:
     program = _load(args.file)
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
+    if not (args.tol >= 0 and np.isfinite(args.tol)):
+        raise _UserError(f"--tol: expected a number >= 0, found {args.tol}")
     fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol)
-    out = fit.save(args.output)
+    try:
+        out = fit.save(args.output)
+    except OSError as exc:
+        raise _UserError(f"cannot write {args.output}: {exc.strerror or exc}") from None
     record = fit.record
     iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
     print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "

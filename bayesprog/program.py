@@ -244,7 +244,10 @@ class Program:
         """
         from bayesprog.learning import fit_terms
 
-        labels = [str(self.term(t).expression) for t in freeze]
+        try:
+            labels = [str(self.term(t).expression) for t in freeze]
+        except ExpressionError as exc:
+            raise QuestionError(f"freeze: {exc}") from None
         estimate = fit_terms(self.variables, self.terms, self.learned, data, freeze=labels,
                              max_iter=max_iter, tol=tol)
         terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})

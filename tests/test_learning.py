@@ -387,3 +387,162 @@ def test_bad_learn_options_are_refused_at_their_place():
     assert any(line.startswith("sensor.yaml:15:") and "pseudo_counts are for forms table" in line
                for line in lines)
     assert any("shared names 'sd'" in line for line in lines)
+
+
+# --- regressions: each found by trying to break the learner ---------------------------------------
+
+def test_state_names_a_yaml_reader_would_misread_are_written_quoted(tmp_path):
+    source = tmp_path / "switch.yaml"
+    source.write_text("""\
+bayesprog: 1
+variables:
+  R: {states: ["yes", "no"]}
+  S: {states: ["on", "off", "007"]}
+decomposition:
+  - {term: P(R), form: table, table: [0.5, 0.5]}
+  - term: P(S | R)
+    form: table
+    table: [[0.3, 0.3, 0.4], [0.3, 0.3, 0.4]]   # one row per state of R
+""")
+    data = tmp_path / "switch.csv"
+    data.write_text("R,S\nyes,on\nyes,007\nno,off\nno,off\n")
+    out = tmp_path / "fitted.yaml"
+    assert main(["learn", str(source), str(data), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "# one row per state of R" in text  # the nested lists were updated in place
+    fitted = bayesprog.load(out)
+    np.testing.assert_allclose(fitted.term("P(S | R)").params["table"].array,
+                               [[0.5, 0, 0.5], [0, 1, 0]])
+
+
+def test_a_state_named_like_a_missing_value_is_a_state(tmp_path):
+    program = bayesprog.loads("""\
+bayesprog: 1
+variables: {Region: {states: ["NA", "EU", "None"]}}
+decomposition: [{term: P(Region), form: table, table: [0.2, 0.3, 0.5]}]
+""")
+    data = tmp_path / "regions.csv"
+    data.write_text("Region\nNA\nNA\nNA\nEU\nNone\n\n")
+    fit = program.fit(data)
+    np.testing.assert_allclose(fit.program.term("P(Region)").params["table"].array, [0.6, 0.2, 0.2])
+    assert fit.record.rows_used == 5
+
+
+def test_a_row_with_more_fields_than_the_header_is_refused(tmp_path):
+    data = tmp_path / "shifted.csv"
+    data.write_text("M,E\nwood,0.1,7\nwood,0.3\n")
+    with pytest.raises(DataError, match=r"row 1 \(line 2\) has 3 fields, the header 2"):
+        bayesprog.loads(NORMAL).fit(data)
+
+
+def test_shared_sigma_and_a_shared_mean_are_maximum_likelihood():
+    data = normal_data(20)
+    text = NORMAL.replace("    sigma: 1.0", "    sigma: 1.0\n    learn: {shared: [sigma]}")
+    params = bayesprog.loads(text).fit(data).program.term("P(E | M)").params
+    groups = [data.loc[data["M"] == m, "E"].to_numpy() for m in ("wood", "silk", "felt")]
+    pooled = sum(((g - g.mean()) ** 2).sum() for g in groups) / len(data)
+    assert float(params["sigma"].array) == pytest.approx(np.sqrt(pooled), rel=1e-12)
+    text = NORMAL.replace("    sigma: 1.0", "    sigma: 1.0\n    learn: {shared: [mean]}")
+    params = bayesprog.loads(text).fit(data).program.term("P(E | M)").params
+
+    def negative_log_likelihood(theta):  # one mean, a log-sigma per state
+        return -sum(stats.norm.logpdf(g, theta[0], np.exp(t)).sum()
+                    for g, t in zip(groups, theta[1:], strict=True))
+
+    best = optimize.minimize(negative_log_likelihood, [0.5, -2, -2, -2], method="Nelder-Mead",
+                             options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 20000})
+    assert float(params["mean"].array) == pytest.approx(best.x[0], abs=1e-5)
+    np.testing.assert_allclose(params["sigma"].array, np.exp(best.x[1:]), rtol=1e-4)
+
+
+def test_values_far_from_zero_keep_their_precision():
+    rng = np.random.default_rng(21)
+    frame = pd.DataFrame({"M": ["wood"] * 50 + ["silk"] * 50 + ["felt"] * 50,
+                          "E": 1.7e9 + rng.normal(0, 10, 150)})
+    params = bayesprog.loads(NORMAL).fit(frame).program.term("P(E | M)").params
+    for i in range(3):
+        _, scale = stats.norm.fit(frame["E"].to_numpy()[50 * i: 50 * (i + 1)] - 1.7e9)
+        assert params["sigma"].array[i] == pytest.approx(scale, rel=1e-6)
+
+
+def test_complete_data_needs_no_starting_values_and_continuing_after_a_zero_works(tmp_path):
+    source = tmp_path / "d.yaml"
+    source.write_text(DISCRETE.replace("{a0: [0.5, 0.3, 0.2], a1: [0.1, 0.3, 0.6]}",
+                                       "{a0: [1.0, 0.0, 0.0], a1: [0.0, 0.0, 1.0]}"))
+    first = tmp_path / "first.csv"
+    first.write_text("A,B,C\na0,b0,c0\na0,b0,c1\na1,b2,c1\na1,b2,c0\n")
+    assert main(["learn", str(source), str(first), "-o", str(tmp_path / "f1.yaml")]) == 0
+    more = tmp_path / "more.csv"
+    more.write_text("A,B,C\na1,b0,c1\na0,b1,c0\n")  # cases the first fit gave probability 0
+    assert main(["learn", str(tmp_path / "f1.yaml"), str(more), "-o", str(tmp_path / "f2.yaml")]) == 0
+    table = bayesprog.load(tmp_path / "f2.yaml").term("P(B | A)").params["table"].array
+    np.testing.assert_allclose(table, [[2 / 3, 1 / 3, 0], [1 / 3, 0, 2 / 3]])
+    assert main(["learn", str(tmp_path / "f2.yaml"), str(more), "-o", str(tmp_path / "f3.yaml")]) == 2
+
+
+def test_em_with_pseudo_counts_climbs_the_posterior_to_its_fixed_point():
+    text = DISCRETE.replace("    table: {a0: [0.7, 0.3], a1: [0.2, 0.8]}",
+                            "    table: {a0: [0.7, 0.3], a1: [0.2, 0.8]}\n"
+                            "    learn: {pseudo_counts: 1}")
+    data = discrete_data(22, n=300).drop(columns="A")
+    program = bayesprog.loads(text)
+    fit = program.fit(data, max_iter=5000, tol=1e-13)
+    longer = program.fit(data, max_iter=20000, tol=0.0)
+    for term in ("P(A)", "P(B | A)", "P(C | A)"):
+        np.testing.assert_allclose(fit.program.term(term).params["table"].array,
+                                   longer.program.term(term).params["table"].array, atol=1e-5)
+    assert fit.converged and fit.record.iterations > 2
+
+
+def test_variables_unrelated_to_the_data_are_not_enumerated():
+    names = [f"Z{i}" for i in range(30)]  # 2^30 joint states if they were summed over
+    declared = "".join(f"  {n}: {{states: [z0, z1]}}\n" for n in names)
+    terms = "".join(f"  - {{term: P({n}), form: table, table: [0.5, 0.5], learn: false}}\n"
+                    for n in names)
+    text = NORMAL.replace("decomposition:\n", declared + "decomposition:\n") + terms
+    fit = bayesprog.loads(text).fit(normal_data(23))
+    assert fit.record.method == "maximum likelihood"
+    direct = bayesprog.loads(NORMAL).fit(normal_data(23))
+    assert fit.log_likelihood == pytest.approx(direct.log_likelihood, rel=1e-12)
+
+
+def test_components_are_refused_beyond_one_per_value_and_bic_skips_what_cannot_be_fitted():
+    x = gmm_data(24)[:60]
+    with pytest.raises(DataError, match="200000 components for 60 values"):
+        bayesprog.loads(GMM.replace("COMPONENTS", "200000")).fit({"X": x})
+    fit = bayesprog.loads(GMM.replace("COMPONENTS", "[1, 2, 3, 200]")).fit({"X": x})
+    assert "could not be fitted" in fit.record.method
+
+
+def test_the_same_data_twice_is_refused_and_each_term_continues_from_its_own_last_fit(tmp_path):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    parts = [normal_data(s, 120) for s in (25, 26, 27)]
+    files = []
+    for i, part in enumerate(parts):
+        files.append(tmp_path / f"c{i}.csv")
+        part.to_csv(files[-1], index=False)
+    bayesprog.load(source).fit(files[0]).save(tmp_path / "f1.yaml")
+    with pytest.raises(DataError, match="already learned"):
+        bayesprog.load(tmp_path / "f1.yaml").fit(files[0])
+    bayesprog.load(tmp_path / "f1.yaml").fit(files[1], freeze=["P(E | M)"]).save(
+        tmp_path / "f2.yaml")
+    last = bayesprog.load(tmp_path / "f2.yaml").fit(files[2])
+    expected = bayesprog.loads(NORMAL).fit(pd.concat([parts[0], parts[2]]))
+    np.testing.assert_allclose(last.program.term("P(E | M)").params["mean"].array,
+                               expected.program.term("P(E | M)").params["mean"].array, rtol=1e-12)
+
+
+def test_edited_statistics_are_refused_with_a_message(tmp_path):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    bayesprog.load(source).fit(normal_data(28)).save(tmp_path / "f1.yaml")
+    text = (tmp_path / "f1.yaml").read_text()
+    start = text.index("count: [", text.index("P(E | M):\n", text.index("statistics:")))
+    end = text.index("]", start)
+    for bad, message in (("count: abc", "not an array of numbers"),
+                         ("count: [1.0, -2.0, 3.0]", "negative"),
+                         ("count: [1.0, 2.0]", "shape")):
+        (tmp_path / "bad.yaml").write_text(text[:start] + bad + text[end + 1:])
+        with pytest.raises(DataError, match=message):
+            bayesprog.load(tmp_path / "bad.yaml").fit(normal_data(29))

@@ -225,9 +225,9 @@ class _Checker:
                            f"table and categorical, found form {form!r}", at_key=True)
             elif isinstance(spec.pseudo_counts, (int, float)) and not isinstance(
                     spec.pseudo_counts, bool):
-                if spec.pseudo_counts < 0:
-                    self.error(path + ("pseudo_counts",), f"{what}: pseudo_counts must be >= 0, "
-                               f"found {spec.pseudo_counts}")
+                if not np.isfinite(spec.pseudo_counts) or spec.pseudo_counts < 0:
+                    self.error(path + ("pseudo_counts",), f"{what}: pseudo_counts must be a "
+                               f"finite number >= 0, found {spec.pseudo_counts}")
                 else:
                     pseudo = ParamValue((), np.asarray(float(spec.pseudo_counts)))
             else:
@@ -252,6 +252,10 @@ class _Checker:
                 self.error(path + ("components",), f"{what}: expected numbers of components "
                            f">= 1, found {list(components)}")
         names = [p.name for p in term.form.params]
+        if spec.shared and form not in ("normal", "gmm"):
+            self.error(path + ("shared",), f"{what}: shared is for forms normal and gmm, found "
+                       f"form {form!r}", at_key=True)
+            return LearnOptions(pseudo, components, ())
         for name in spec.shared:
             if name not in names:
                 self.error(path + ("shared",), f"{what}: shared names {name!r}, expected "

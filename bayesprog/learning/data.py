@@ -4,7 +4,9 @@ against a program's variables with the file, row and column of every bad value."
 
 from __future__ import annotations
 
+import csv as csvlib
 import hashlib
+import io
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +53,11 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
         hashed = pd.util.hash_pandas_object(source, index=False).to_numpy().tobytes()
         return source, "<data frame>", hashlib.sha256(hashed).hexdigest(), False
     if isinstance(source, Mapping):
-        frame, _, hexdigest, _ = read_frame(pd.DataFrame({k: pd.Series(v) for k, v in source.items()}))
+        lengths = {str(k): len(v) for k, v in source.items()}
+        if len(set(lengths.values())) > 1:
+            raise DataError("columns of different lengths: " + ", ".join(
+                f"{k} {n}" for k, n in lengths.items()) + "; expected one value per row in each")
+        frame, _, hexdigest, _ = read_frame(pd.DataFrame({k: list(v) for k, v in source.items()}))
         return frame, "<columns>", hexdigest, False
     path = Path(source)
     try:
@@ -71,11 +77,29 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
     if suffix not in (".csv", ".txt", ".tsv"):
         raise DataError(f"cannot read data {path}: expected a .csv or .parquet file, found "
                         f"{suffix or 'no suffix'}")
+    sep = "\t" if suffix == ".tsv" else ","
     try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=True,
-                            sep="\t" if suffix == ".tsv" else ",", skipinitialspace=True)
+        lines = list(csvlib.reader(io.StringIO(raw.decode("utf-8-sig")), delimiter=sep))
+    except (UnicodeDecodeError, csvlib.Error) as exc:
+        raise DataError(f"cannot read data {path} as CSV: {exc}") from None
+    if not lines:
+        raise DataError(f"cannot read data {path} as CSV: the file is empty")
+    header = lines[0]
+    for line, fields in enumerate(lines[1:], start=2):
+        if fields and len(fields) != len(header):
+            raise DataError(f"{path}: row {line - 1} (line {line}) has {len(fields)} fields, "
+                            f"the header {len(header)}: expected one value per column")
+    try:
+        # every cell as written: only an empty cell is missing (a state may be named NA or
+        # None); blank lines kept as empty rows, so that row r is line r + 1; no index column
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""],
+                            sep=sep, skipinitialspace=True, skip_blank_lines=False,
+                            index_col=False)
     except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
         raise DataError(f"cannot read data {path} as CSV: {exc}") from None
+    names = [h.strip() for h in header]
+    if len(names) == len(frame.columns):
+        frame.columns = names  # pandas renames a repeated column ("L.1"): keep what was written
     return frame, str(path), hexdigest, True
 
 
@@ -83,14 +107,14 @@ def load_data(source: Any, variables: Mapping[str, Variable]) -> Data:
     """Read ``source`` and code its columns for ``variables``; every problem names its place."""
     frame, name, digest, csv = read_frame(source)
     columns = [str(c) for c in frame.columns]
+    if len(set(columns)) != len(columns):
+        dup = next(c for c in columns if columns.count(c) > 1)
+        raise DataError(f"{name}: column {dup!r} appears twice")
     for i, column in enumerate(columns):
         if column not in variables:
             raise DataError(f"{name}: column {column!r} (column {i + 1}): the program has no "
                             f"variable {column!r}; expected columns among "
                             f"{', '.join(variables)}")
-    if len(set(columns)) != len(columns):
-        dup = next(c for c in columns if columns.count(c) > 1)
-        raise DataError(f"{name}: column {dup!r} appears twice")
     data = Data(name, digest, int(len(frame)), {}, {}, csv)
     for column, var in variables.items():
         if column not in columns:
@@ -107,8 +131,15 @@ def load_data(source: Any, variables: Mapping[str, Variable]) -> Data:
 
 
 def _missing(value: Any) -> bool:
-    return value is None or (isinstance(value, float) and np.isnan(value)) or (
-        isinstance(value, str) and value.strip() == "") or str(value) in ("<NA>", "NaT")
+    """An empty cell (CSV), or a null (Parquet, a DataFrame): never a written word, which may be
+    a state's name."""
+    return value is None or type(value).__name__ in ("NAType", "NaTType") or (
+        isinstance(value, float) and np.isnan(value)) or (
+        isinstance(value, str) and value.strip() == "")
+
+
+#: words a continuous column may hold for a missing value
+_MISSING_NUMBERS = {"na", "nan", "n/a", "null", "none", "-"}
 
 
 def _codes(values: np.ndarray, var: Discrete, data: Data, column: str) -> np.ndarray:
@@ -118,8 +149,17 @@ def _codes(values: np.ndarray, var: Discrete, data: Data, column: str) -> np.nda
         if _missing(value):
             continue
         key = str(value).strip()
-        if isinstance(value, float) and value.is_integer():
+        if isinstance(value, (bool, np.bool_)):
+            key = key if key in lookup else key.lower()
+        elif isinstance(value, float) and value.is_integer():
             key = str(int(value))
+        elif var.kind == "range" and key not in lookup:
+            try:
+                number = float(key)
+            except ValueError:
+                number = np.nan
+            if np.isfinite(number) and number.is_integer():
+                key = str(int(number))  # a range's value written 3.0
         index = lookup.get(key)
         if index is None:
             raise DataError(f"{data.where(row, column)}: unknown state {short_repr(key)} of "
@@ -131,7 +171,7 @@ def _codes(values: np.ndarray, var: Discrete, data: Data, column: str) -> np.nda
 def _numbers(values: np.ndarray, var: Continuous, data: Data, column: str) -> np.ndarray:
     out = np.full(len(values), np.nan)
     for row, value in enumerate(values):
-        if _missing(value):
+        if _missing(value) or (isinstance(value, str) and value.strip().lower() in _MISSING_NUMBERS):
             continue
         try:
             x = float(value)

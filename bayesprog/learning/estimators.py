@@ -77,6 +77,23 @@ class Estimator:
     def free_parameters(self, term: Term, params: Params, options: LearnOptions) -> int:
         raise NotImplementedError
 
+    def log_prior(self, term: Term, params: Params, options: LearnOptions) -> float:
+        """The log prior density EM climbs with the likelihood (pseudo-counts), up to a constant."""
+        return 0.0
+
+    def check_statistics(self, stats: Stats, expected: Stats) -> str | None:
+        """Why ``stats`` (read from a fitted file) cannot be added to ``expected``, or None."""
+        if set(stats) != set(expected):
+            return (f"statistics {sorted(stats)} where this form keeps {sorted(expected)}")
+        for key, value in stats.items():
+            if value.shape != expected[key].shape:
+                return f"{key!r} has shape {value.shape}, expected {expected[key].shape}"
+            if not np.all(np.isfinite(value)):
+                return f"{key!r} holds a value that is not finite"
+            if key in ("count", "counts", "sum_squared_deviations") and np.any(value < 0):
+                return f"{key!r} holds a negative value"
+        return None
+
     def initial(self, term: Term, x: np.ndarray, weights: np.ndarray, components: int,
                 params: Params) -> Params:
         """Starting parameters when the file's cannot serve (gmm with another K)."""
@@ -113,11 +130,45 @@ class TableEstimator(Estimator):
     def free_parameters(self, term: Term, params: Params, options: LearnOptions) -> int:
         return int(np.prod(parent_cards(term), dtype=np.int64)) * (term.child.card - 1)  # type: ignore[union-attr]
 
+    def log_prior(self, term: Term, params: Params, options: LearnOptions) -> float:
+        if options.pseudo_counts is None:
+            return 0.0
+        theta = full(term, params[self.learned[0]], 1)
+        pseudo = options.pseudo_counts
+        alpha = (np.full(theta.shape, float(pseudo.array)) if pseudo.array.ndim == 0
+                 else np.broadcast_to(full(term, pseudo, 1), theta.shape))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(np.where(alpha > 0, alpha * np.log(theta), 0.0).sum())
+
 
 def _weighted(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     w = weights.reshape(len(x), -1)
     n = w.sum(0)
     return n, x @ w, (x * x) @ w
+
+
+def _moments(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted count, mean and sum of squared deviations per column of ``weights`` [n, m]:
+    centred, so that values far from zero keep their precision."""
+    w = weights.reshape(len(x), -1)
+    n = w.sum(0)
+    safe = np.where(n > 0, n, 1.0)
+    mean = (x @ w) / safe
+    m2 = ((x[:, None] - mean) ** 2 * w).sum(0)
+    return n, np.where(n > 0, mean, 0.0), m2
+
+
+def _merge_moments(a: Stats, b: Stats) -> Stats:
+    """Chan's pairwise update of (count, mean, sum of squared deviations)."""
+    na, nb = a["count"], b["count"]
+    n = na + nb
+    safe = np.where(n > 0, n, 1.0)
+    delta = b["mean"] - a["mean"]
+    out = dict(a)
+    out.update(count=n, mean=np.where(n > 0, a["mean"] + delta * nb / safe, 0.0),
+               sum_squared_deviations=a["sum_squared_deviations"] + b["sum_squared_deviations"]
+               + delta**2 * na * nb / safe)
+    return out
 
 
 class NormalEstimator(Estimator):
@@ -126,12 +177,16 @@ class NormalEstimator(Estimator):
     learned = ("mean", "sigma")
 
     def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
-        n, s1, s2 = _weighted(x, weights)
+        n, mean, m2 = _moments(x, weights)
         shape = weights.shape[1:]
-        return {"count": n.reshape(shape), "sum": s1.reshape(shape), "sum_squares": s2.reshape(shape)}
+        return {"count": n.reshape(shape), "mean": mean.reshape(shape),
+                "sum_squared_deviations": m2.reshape(shape)}
+
+    def merge(self, a: Stats, b: Stats) -> Stats:
+        return _merge_moments(a, b)
 
     def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
-        n, s1, s2 = stats["count"], stats["sum"], stats["sum_squares"]
+        n, means, m2 = stats["count"], stats["mean"], stats["sum_squared_deviations"]
         shared = set(options.shared)
         need = 1 if "sigma" in shared else 2
         few = n < need
@@ -141,24 +196,34 @@ class NormalEstimator(Estimator):
             raise FitProblem(f"too few rows for {term.label}: "
                              f"{_configs(term, few)} has fewer than {need} rows (a Normal's "
                              "mean and sigma need two)")
-        if "mean" in shared:
-            mean = np.asarray(s1.sum() / n.sum())
-            sq = s2 - 2 * mean * s1 + mean * mean * n
+        total = n.sum()
+        pooled = (n * means).sum() / total
+        scale = max(float(np.max(np.abs(means))), 1.0)
+        tiny = (1e-12 * scale) ** 2
+        if "mean" in shared and "sigma" in shared:
+            var = np.asarray((m2.sum() + (n * (means - pooled) ** 2).sum()) / total)
+            mean = np.asarray(pooled)
+        elif "mean" in shared:
+            # one mean, a sigma per state: the mean weights each state by its precision
+            mean = np.asarray(pooled)
+            for _ in range(200):
+                var = np.maximum((m2 + n * (means - mean) ** 2) / n, tiny)
+                fresh = (n * means / var).sum() / (n / var).sum()
+                if abs(fresh - mean) <= 1e-15 * scale:
+                    break
+                mean = np.asarray(fresh)
+            var = (m2 + n * (means - mean) ** 2) / n
+        elif "sigma" in shared:
+            mean, var = means, np.asarray(m2.sum() / total)
         else:
-            mean = s1 / n
-            sq = s2 - s1 * mean
-        if "sigma" in shared:
-            var = np.asarray(max(float(sq.sum()), 0.0) / n.sum())
-        else:
-            var = np.maximum(sq, 0.0) / n
-        scale = np.maximum(np.abs(mean), 1.0)
-        flat = np.broadcast_to(var <= (1e-12 * scale) ** 2, np.shape(n) if "sigma" not in shared else ())
+            mean, var = means, m2 / n
+        flat = np.asarray(var <= tiny)
         if np.any(flat):
             where = _configs(term, flat) if flat.ndim else "every row"
             raise FitProblem(f"degenerate fit of {term.label}: zero variance "
                              f"({where} has one repeated value)")
         axes = parent_axes(term)
-        return {"mean": ParamValue(() if "mean" in shared else axes, np.asarray(mean)),
+        return {"mean": ParamValue(() if "mean" in shared else axes, np.asarray(mean, float)),
                 "sigma": ParamValue(() if "sigma" in shared else axes, np.sqrt(var))}
 
     def free_parameters(self, term: Term, params: Params, options: LearnOptions) -> int:
@@ -255,8 +320,8 @@ class GmmEstimator(Estimator):
         sigma = full(term, params["sigma"], 0)
         weights = (full(term, params["weights"], 1) if "weights" in params
                    else np.full(means.shape, 1.0 / k))
-        floor = float(np.max(params["floor"].array)) if "floor" in params else 0.0
-        return means, sigma, weights, np.asarray(floor)
+        floor = full(term, params["floor"], 0) if "floor" in params else np.zeros(sigma.shape)
+        return means, sigma, weights, floor
 
     def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
         means, sigma, mix, floor = self._arrays(term, params)
@@ -264,21 +329,25 @@ class GmmEstimator(Estimator):
         z = (x[:, None, None] - means.reshape(1, -1, means.shape[-1])) / sigma.reshape(1, -1, 1)
         log_comp = (-0.5 * z * z - np.log(sigma.reshape(1, -1, 1)) - 0.5 * np.log(2 * np.pi)
                     + np.log(np.maximum(mix.reshape(1, -1, mix.shape[-1]), 1e-300)))
-        if floor > 0:
-            log_comp = log_comp + np.log1p(-floor)
-        top = log_comp.max(-1, keepdims=True)
-        total = np.log(np.exp(log_comp - top).sum(-1, keepdims=True)) + top
-        if floor > 0:
-            total = np.logaddexp(total, np.log(floor) - np.log(width))
+        f = floor.reshape(1, -1, 1)
+        with np.errstate(divide="ignore"):
+            log_comp = log_comp + np.log1p(-f)
+            top = log_comp.max(-1, keepdims=True)
+            top = np.where(np.isfinite(top), top, 0.0)
+            total = np.log(np.exp(log_comp - top).sum(-1, keepdims=True)) + top
+            if np.any(f > 0):
+                total = np.logaddexp(total, np.log(f) - np.log(width))
         resp = np.exp(log_comp - total) * weights.reshape(len(x), -1, 1)  # [n, configs, K]
         shape = weights.shape[1:] + (means.shape[-1],)
-        n = resp.sum(0)
-        s1 = np.einsum("n,nck->ck", x, resp)
-        s2 = np.einsum("n,nck->ck", x * x, resp)
-        return {"count": n.reshape(shape), "sum": s1.reshape(shape), "sum_squares": s2.reshape(shape)}
+        n, mean, m2 = _moments(x, resp.reshape(len(x), -1))
+        return {"count": n.reshape(shape), "mean": mean.reshape(shape),
+                "sum_squared_deviations": m2.reshape(shape)}
+
+    def merge(self, a: Stats, b: Stats) -> Stats:
+        return _merge_moments(a, b)
 
     def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
-        n, s1, s2 = stats["count"], stats["sum"], stats["sum_squares"]
+        n, mean, m2 = stats["count"], stats["mean"], stats["sum_squared_deviations"]
         if set(options.shared) - {"sigma"}:
             raise FitProblem("form gmm shares only 'sigma' across parent configurations")
         total = n.sum(-1)
@@ -290,8 +359,8 @@ class GmmEstimator(Estimator):
             raise FitProblem(f"degenerate fit of {term.label}: a component of the "
                              f"mixture at {_configs(term, empty.any(-1))} takes no rows; use "
                              "fewer components")
-        means = s1 / n
-        sq = np.maximum(s2 - s1 * means, 0.0).sum(-1)
+        means = mean
+        sq = m2.sum(-1)
         var = np.asarray(sq.sum() / total.sum()) if "sigma" in options.shared else sq / total
         if np.any(var <= 1e-24):
             raise FitProblem(f"degenerate fit of {term.label}: zero variance "

@@ -11,11 +11,13 @@ over data sets: a fit continues from a fitted file's statistics with more data.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import networkx as nx
 import numpy as np
 
 from bayesprog.errors import BayesprogError
@@ -60,15 +62,25 @@ class _Learned:
 class _Group:
     """Rows that miss the same discrete variables."""
 
-    def __init__(self, rows: np.ndarray, hidden: tuple[str, ...], cards: tuple[int, ...]):
-        self.rows, self.hidden, self.cards = rows, hidden, cards
+    def __init__(self, rows: np.ndarray, hidden: tuple[str, ...], cards: tuple[int, ...],
+                 terms: list[Term]):
+        self.rows, self.hidden, self.cards, self.terms = rows, hidden, cards, terms
 
 
 def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
               learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
               max_iter: int = 200, tol: float = 1e-8) -> Estimate:
     """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``."""
+    if not (np.isfinite(tol) and tol >= 0):
+        raise DataError(f"tol: expected a number >= 0, found {tol}")
+    if max_iter < 1:
+        raise DataError(f"max_iter: expected at least 1, found {max_iter}")
     data = load_data(source, variables)
+    seen = [r for r in learned if r.sha256 == data.sha256]
+    if seen:
+        raise DataError(f"{data.source}: these data (SHA-256 {data.sha256[:12]}...) were already "
+                        f"learned into this program (its learned: record of {seen[0].data}); "
+                        "learning them again would count every row twice")
     model = [t for t in terms if not t.soft]
     todo = _learnable(model, freeze, learned)
     if not todo:
@@ -95,17 +107,24 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         if len(candidates) == 1:
             params[label] = em.start(item, candidates[0], params[label])
             continue
-        best = None
+        best, failed = None, []
         for k in candidates:  # the number of components with the lowest BIC, others as now
             trial = dict(params)
-            trial[label] = em.start(item, k, params[label])
-            result = em.run(trial, max_iter, tol)
+            try:
+                trial[label] = em.start(item, k, params[label])
+                result = em.run(trial, max_iter, tol)
+            except DataError as exc:
+                failed.append(f"{k} ({exc})")
+                continue
             bic = -2 * result[1] + em.free(result[0]) * np.log(len(used))
             if best is None or bic < best[0]:
                 best = (bic, k, trial[label])
-        assert best is not None
+        if best is None:
+            raise DataError(f"term {label}: no number of components could be fitted: "
+                            + "; ".join(failed))
         params[label] = best[2]
-        choices.append(f"{label}: {best[1]} components by BIC ({best[0]:.6g})")
+        skipped = f", {len(failed)} candidate(s) could not be fitted" if failed else ""
+        choices.append(f"{label}: {best[1]} components by BIC ({best[0]:.6g}){skipped}")
     final, ll, iterations, converged, stats = em.run(params, max_iter, tol)
     iterative = em.iterative
     method = "EM" if iterative else "maximum likelihood"
@@ -127,9 +146,24 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
     return Estimate(out, record, float(ll), iterations, converged)
 
 
+def _previous(label: str, learned: Sequence[FitRecord]) -> Stats | None:
+    """The statistics of ``label`` in the latest fit that learned it, as arrays."""
+    for record in reversed(learned):
+        if label in record.statistics:
+            stats = {}
+            for key, value in record.statistics[label].items():
+                try:
+                    stats[key] = np.asarray(value, dtype=float)
+                except (TypeError, ValueError):
+                    raise DataError(f"cannot continue the fit of {label}: its statistic {key!r} "
+                                    f"in the learned: record of {record.data} is not an array "
+                                    "of numbers") from None
+            return stats
+    return None
+
+
 def _learnable(model: Sequence[Term], freeze: Sequence[str],
                learned: Sequence[FitRecord]) -> list[_Learned]:
-    previous = learned[-1].statistics if learned else {}
     out = []
     for term in model:
         if term.learn is None or term.label in freeze or not term.form.params:
@@ -143,10 +177,7 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
                 raise DataError(f"term {term.label}: parameter {name!r} is the runtime input "
                                 f"{value.name!r}, which data cannot set: freeze the term "
                                 "(learn: false) or with --freeze")
-        prior = None
-        if term.label in previous:
-            prior = {k: np.asarray(v, float) for k, v in previous[term.label].items()}
-        out.append(_Learned(term, estimator, term.learn, prior))
+        out.append(_Learned(term, estimator, term.learn, _previous(term.label, learned)))
     return out
 
 
@@ -164,20 +195,48 @@ class _Em:
             if inputs:
                 raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
                                 "input, so the program cannot be evaluated on data rows")
+        observed_continuous = {n for n, v in self.data.continuous.items()}
         patterns, inverse = np.unique(codes < 0, axis=0, return_inverse=True)
         self.groups = []
         for g, pattern in enumerate(patterns):
-            hidden = tuple(n for n, miss in zip(discrete, pattern, strict=True) if miss)
+            missing = {n for n, miss in zip(discrete, pattern, strict=True) if miss}
+            rows = np.nonzero(inverse.ravel() == g)[0]
+            seen = {n for n in discrete if n not in missing} | {
+                n for n in observed_continuous if np.any(~np.isnan(self.data.continuous[n][rows]))}
+            needed = self._needed(seen, missing)
+            hidden = tuple(n for n in discrete if n in missing and n in needed)
             cards = tuple(variables[n].card for n in hidden)  # type: ignore[union-attr]
-            joint = int(np.prod(cards, dtype=np.int64))
+            joint = math.prod(cards)
             if joint > JOINT_LIMIT:
                 raise DataError(
                     f"{data.source}: rows that miss {', '.join(hidden)} leave {joint:,} joint "
                     f"states to sum over (more than {JOINT_LIMIT:,}); give values for some of "
-                    "them or freeze the terms they take part in")
-            self.groups.append(_Group(np.nonzero(inverse.ravel() == g)[0], hidden, cards))
+                    "them, or freeze the terms that tie them to the data")
+            terms = [t for t in model if t.child.name in needed or t.child.name in seen]
+            self.groups.append(_Group(rows, hidden, cards, terms))
         learns_mixture = any(i.term.form.name == "gmm" for i in todo)
         self.iterative = learns_mixture or any(g.hidden for g in self.groups)
+
+    def _needed(self, seen: set[str], missing: set[str]) -> set[str]:
+        """The variables a row's likelihood and the learned terms' posteriors depend on: the
+        observed ones, the learned terms' families, and their ancestors. A missing variable
+        outside them sums out of normalised terms to one, so it is not enumerated."""
+        graph = nx.DiGraph()
+        for term in self.model:
+            graph.add_node(term.child.name)
+            for parent in term.parents:
+                graph.add_edge(parent.name, term.child.name)
+        roots = set(seen)
+        for item in self.todo:
+            roots |= {item.term.child.name} | {p.name for p in item.term.parents}
+        for term in self.model:  # potentials do not sum to one: keep their variables
+            if not term.form.is_normalized(term.child):
+                roots |= {term.child.name} | {p.name for p in term.parents}
+        needed = set(roots)
+        for name in roots:
+            if name in graph:
+                needed |= nx.ancestors(graph, name)
+        return needed
 
     def start(self, item: _Learned, k: int, params: Params) -> Params:
         """Starting values of a mixture with ``k`` components: the file's when it has ``k``."""
@@ -188,6 +247,10 @@ class _Em:
         if x is None:
             raise DataError(f"{self.data.source}: no column {item.term.child.name!r} to learn "
                             f"{item.term.label} from")
+        rows = int(np.sum(~np.isnan(x)))
+        if k > rows:
+            raise DataError(f"{self.data.source}: term {item.term.label}: {k} components for "
+                            f"{rows} values; expected at most one component per value")
         weights = self._known_weights(item.term, x)
         try:
             return item.estimator.initial(item.term, np.nan_to_num(x), weights, k, params)
@@ -221,27 +284,31 @@ class _Em:
         converged = not self.iterative
         iterations = 0
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
-            ll, stats = self.e_step(params)
+            # one pass needs no starting values: rows are not checked against them
+            ll, stats = self.e_step(params, strict=self.iterative)
+            objective = ll + self.log_prior(params)
             params = self.m_step(params, stats)
             if not self.iterative:
                 break
-            if ll - previous <= tol * max(abs(ll), 1.0):
+            if abs(objective - previous) <= tol * max(abs(objective), 1.0):
                 converged = True
                 break
-            previous = ll
+            previous = objective
         ll, stats = self.e_step(params)
         total = {i.term.label: self._merged(i, stats[i.term.label]) for i in self.todo}
         return params, ll, iterations, converged, total
 
+    def log_prior(self, params: dict[str, Params]) -> float:
+        return sum(i.estimator.log_prior(i.term, params[i.term.label], i.options)
+                   for i in self.todo)
+
     def _merged(self, item: _Learned, stats: Stats) -> Stats:
         if item.prior is None:
             return stats
-        for key, value in stats.items():
-            if key not in item.prior or item.prior[key].shape != value.shape:
-                found = item.prior[key].shape if key in item.prior else "nothing"
-                raise DataError(f"cannot continue the fit of {item.term.label}: the previous "
-                                f"fit's statistic {key!r} has shape {found}, these data give "
-                                f"{value.shape}")
+        problem = item.estimator.check_statistics(item.prior, stats)
+        if problem:
+            raise DataError(f"cannot continue the fit of {item.term.label}: in the previous "
+                            f"fit's statistics, {problem}")
         return item.estimator.merge(item.prior, stats)
 
     def m_step(self, params: dict[str, Params], stats: dict[str, Stats]) -> dict[str, Params]:
@@ -257,22 +324,33 @@ class _Em:
         return out
 
     # the E-step ---------------------------------------------------------------------------------
-    def e_step(self, params: dict[str, Params]) -> tuple[float, dict[str, Stats]]:
+    def e_step(self, params: dict[str, Params], strict: bool = True
+               ) -> tuple[float, dict[str, Stats]]:
         total = 0.0
         stats: dict[str, Stats] = {}
         for group in self.groups:
-            size = max(1, int(np.prod(group.cards, dtype=np.int64)))
+            size = max(1, math.prod(group.cards), self._row_width(params))
             step = max(1, JOINT_LIMIT // size)
             for start in range(0, len(group.rows), step):
                 rows = group.rows[start:start + step]
-                total += self._chunk(rows, group, params, stats)
+                total += self._chunk(rows, group, params, stats, strict)
         return total, stats
 
+    def _row_width(self, params: dict[str, Params]) -> int:
+        """The most entries one row takes in a term's table (parent states x components)."""
+        widest = 1
+        for term in self.model:
+            width = math.prod(v.card for v in term.parents if isinstance(v, Discrete))
+            if term.form.name == "gmm" and "means" in params[term.label]:
+                width *= components_of(params[term.label], term)
+            widest = max(widest, width)
+        return widest
+
     def _chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
-               stats: dict[str, Stats]) -> float:
+               stats: dict[str, Stats], strict: bool = True) -> float:
         n, hidden, cards = len(rows), group.hidden, group.cards
         joint = np.zeros((n,) + cards)
-        for term in self.model:
+        for term in group.terms:
             joint = joint + self._gather(self._log_table(term, rows, params[term.label]),
                                          term, rows, hidden, cards)
         axes = tuple(range(1, joint.ndim))
@@ -281,12 +359,19 @@ class _Em:
             row_ll = (np.log(np.exp(joint - top).sum(axis=axes, keepdims=True)) + top) if axes \
                 else joint
         impossible = ~np.isfinite(row_ll.reshape(n))
+        if not strict and not hidden:
+            # nothing to infer: each row counts for what it shows, whatever the parameters
+            post = np.ones_like(joint)
+            for item in self.todo:
+                self._accumulate(item, rows, post, hidden, cards, params, stats)
+            return float(np.where(impossible, 0.0, row_ll.reshape(n)).sum())
         if np.any(impossible):
             row = int(self.used[rows[np.argmax(impossible)]])
             line = f" (line {row + 2})" if self.data.csv else ""
             raise DataError(f"{self.data.source}: row {row + 1}{line} has probability zero under "
-                            "the program's current parameters (a state its tables rule out); "
-                            "start from tables without zeros, or give pseudo_counts")
+                            "the program's current parameters (a state a table rules out, or a "
+                            "value a density gives zero); start EM from values without zeros, "
+                            "or give pseudo_counts")
         post = np.exp(joint - row_ll)
         for item in self.todo:
             self._accumulate(item, rows, post, hidden, cards, params, stats)

@@ -5,12 +5,14 @@ layout stay as the author wrote them."""
 from __future__ import annotations
 
 import io
-from collections.abc import Mapping, Sequence
+import re
+from collections.abc import Mapping, MutableMapping, Sequence
 from typing import Any
 
 import numpy as np
 from ruamel.yaml import YAML
 from ruamel.yaml.comments import CommentedMap, CommentedSeq
+from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
 from bayesprog.expressions import ExpressionError, parse_expression
 from bayesprog.forms import ParamValue
@@ -59,10 +61,12 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
     block style of the node it replaces, and a row written keyed by the child's states stays so."""
 
     def build(axes: tuple[str, ...], array: np.ndarray, old: Any, depth: int) -> Any:
+        if isinstance(old, list):  # written as nested lists: stays so
+            return _leaf(array)
         if not axes:
             if (isinstance(child, Discrete) and array.ndim == 1 and isinstance(old, Mapping)
                     and {str(k) for k in old} == set(child.states)):
-                row = CommentedMap((_key(s), _number(float(v)))
+                row = CommentedMap((_key(child, s), _number(float(v)))
                                    for s, v in zip(child.states, array, strict=True))
                 row.fa.set_flow_style()
                 return row
@@ -71,8 +75,9 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
         assert isinstance(var, Discrete)
         out = CommentedMap()
         for i, state in enumerate(var.states):
-            previous = old.get(state) if isinstance(old, Mapping) else None
-            out[_key(state)] = build(axes[1:], array[i], previous, depth + 1)
+            previous = ({str(k): v for k, v in old.items()}.get(state)
+                        if isinstance(old, Mapping) else None)
+            out[_key(var, state)] = build(axes[1:], array[i], previous, depth + 1)
         short = len(str(dict(out))) <= FLOW_WIDTH
         if short and (_is_flow(old) or (len(axes) == 1 and not isinstance(old, Mapping))):
             out.fa.set_flow_style()
@@ -81,11 +86,34 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
     return build(value.axes, np.asarray(value.array, float), old, 0)
 
 
-def _key(state: str) -> Any:
-    try:
+_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+#: words that YAML 1.1 readers take for booleans or null: written quoted
+_AMBIGUOUS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null"}
+
+
+def _key(var: Discrete, state: str) -> Any:
+    """A state as a mapping key: a range's values as numbers, names quoted where a YAML reader
+    would take them for something else."""
+    if var.kind == "range":
         return int(state)
-    except ValueError:
+    if _PLAIN.match(state) and state.lower() not in _AMBIGUOUS:
         return state
+    return DoubleQuotedScalarString(state)
+
+
+def _keep(old: Any, new: Any) -> Any:
+    """``new`` written into ``old`` where they have the same keys or length, so the comments and
+    style attached to ``old`` stay; else ``new``."""
+    if isinstance(old, MutableMapping) and isinstance(new, Mapping) and \
+            [str(k) for k in old] == [str(k) for k in new]:
+        for (key, value), (_, fresh) in zip(list(old.items()), new.items(), strict=True):
+            old[key] = _keep(value, fresh)
+        return old
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        for i, fresh in enumerate(new):
+            old[i] = _keep(old[i], fresh)
+        return old
+    return new
 
 
 def _label(text: Any) -> str | None:
@@ -135,7 +163,7 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
             continue
         child = variables.get(parse_expression(label).left[0])
         for name, value in params[label].items():
-            item[name] = _node(value, variables, item.get(name), child)
+            item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child))
         done.add(label)
     missing = set(params) - done
     if missing:
