@@ -221,7 +221,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise _UserError(f"--workers: expected at least 1, found {args.workers}")
     runner = _runner(_experiment_runner(args.experiment))
     options = {"quiet": args.quiet, "workers": args.workers, "scheduler": args.scheduler,
-               "no_report": args.no_report, "no_gif": args.no_gif, "compare": args.compare}
+               "no_report": args.no_report, "no_gif": args.no_animation, "compare": args.compare}
     return int(runner.run(Path(args.experiment), Path(args.out), options))
 
 
@@ -236,7 +236,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             from None
     except (ValueError, KeyError, AttributeError):
         raise _UserError(f"{manifest}: not a readable experiment manifest") from None
-    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_gif,
+    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_animation,
                                                      "compare": args.compare}))
 
 
@@ -353,14 +353,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="an existing Dask scheduler (install bayesprog[dask])")
     p.add_argument("--no-report", action="store_true", help="do not build the report")
-    p.add_argument("--no-gif", action="store_true", help="report without the animation")
+    p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
+                   help="report without the animation of Fig. 11 (an MP4 video)")
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
                    "findings are set beside these in the report")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
     p.add_argument("out", metavar="DIR")
-    p.add_argument("--no-gif", action="store_true", help="report without the animation")
+    p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
+                   help="report without the animation of Fig. 11 (an MP4 video)")
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
                    "findings are set beside these in the report")
     p.set_defaults(func=cmd_report)

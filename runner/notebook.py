@@ -14,10 +14,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from runner import figures
 from runner.experiment import Experiment, ExperimentSpec, load_experiment
-from runner.report import build_report, findings, replay
+from runner.report import DecisionFigure, build_report, findings, replay
 from runner.store import ResultStore
 
 #: the figures of a report, in the order a reader meets them, with their captions
@@ -38,7 +37,7 @@ class Results:
         self.spec = ExperimentSpec.model_validate(manifest["experiment"])
         stats = self.folder / "report" / "statistics.json"
         if not stats.is_file():
-            build_report(self.folder, gif=False)
+            build_report(self.folder, animation=False)
         self.statistics: list[dict] = json.loads(stats.read_text(encoding="utf-8"))
         self.findings = findings(self.statistics, self.spec)
 
@@ -67,17 +66,11 @@ class Results:
         return f"Results({str(self.folder)!r}, experiment={self.spec.name!r}, findings: {verdicts})"
 
 
-#: the panels of a step: (frame key, title, colour bar label, fixed range or None)
-PANELS = [("belief", "belief: P(M = task material)", "probability", (0, 1)),
-          ("S", "saliency S", "S", (0, 1)), ("U", "uncertainty U", "U", (0, 1)),
-          ("I", "inhibition I", "I", (0, 1)), ("shape", "shape cue R", "P(O | R)", None),
-          ("posterior", "P(O | ...): next target", "P", None)]
-
-
 class StepView:
-    """One run replayed: per step, the material belief map, the cue maps, the shape cue and the
-    posterior over the next target, with the path (white) and the chosen cell (red star).
-    Displays as an inline animation with a slider; ``figure(k)`` draws step ``k`` alone."""
+    """One run replayed: per step, the ground truth, the material belief map, the cue maps, the
+    shape cue and the posterior over the next target, with the path, its start and the chosen
+    cell (Fig. 11 at every step). Displays as a video with a seek bar; ``figure(k)`` draws step
+    ``k`` alone."""
 
     def __init__(self, experiment: Experiment, task: str, configuration: str, run: int,
                  frames: list[dict]):
@@ -85,55 +78,31 @@ class StepView:
                                                                     configuration, run)
         self.frames = frames
 
+    def _figure(self) -> DecisionFigure:
+        return DecisionFigure(self.experiment.scenario, self.task,
+                              f"{self.experiment.spec.name}: task {self.task}, "
+                              f"{self.configuration}, run {self.run}")
+
     def figure(self, k: int) -> Any:
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(2.3 * len(PANELS), 3.6))
-        axes = fig.subplots(1, len(PANELS))
-        self._draw(axes, k, colorbars=True)
-        fig.tight_layout()
-        return fig
-
-    def _draw(self, axes: Any, k: int, colorbars: bool = False) -> None:
-        import matplotlib
-
-        scenario = self.experiment.scenario
-        nx, ny = scenario.shape
-        cell = scenario.cell * 100  # cm
-        frame = self.frames[k]
-        path = np.array(frame["path"])
-        bx, by = np.nonzero(scenario.border(self.task))
-        cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.55")
-        for ax, (key, title, label, limits) in zip(axes, PANELS, strict=True):
-            ax.clear()
-            low, high = limits or (None, None)
-            image = ax.imshow(np.asarray(frame[key], float).reshape(nx, ny).T, origin="lower",
-                              extent=(0, nx * cell, 0, ny * cell), cmap=cmap, vmin=low, vmax=high)
-            ax.scatter((bx + 0.5) * cell, (by + 0.5) * cell, s=0.4, c="c")
-            ax.plot((path // ny + 0.5) * cell, (path % ny + 0.5) * cell, "w-", lw=0.6)
-            ax.plot((path[0] // ny + 0.5) * cell, (path[0] % ny + 0.5) * cell, "wo", ms=3)
-            nxt = frame["next"]
-            ax.plot((nxt // ny + 0.5) * cell, (nxt % ny + 0.5) * cell, "r*", ms=8)
-            ax.set_title(f"{title}\nk = {k}", fontsize=8)
-            ax.tick_params(labelsize=6)
-            ax.set_xlabel("x (cm)", fontsize=7)
-            if colorbars:
-                bar = ax.figure.colorbar(image, ax=ax, fraction=0.05, pad=0.02)
-                bar.set_label(label, fontsize=6)
-                bar.ax.tick_params(labelsize=5)
-        axes[0].set_ylabel("y (cm)", fontsize=7)
+        """Step ``k`` as a matplotlib figure."""
+        figure = self._figure()
+        figure.show(self.frames[k], k)
+        return figure.fig
 
     def _repr_html_(self) -> str:
-        from matplotlib.animation import FuncAnimation
-        from matplotlib.figure import Figure
+        import tempfile
 
-        fig = Figure(figsize=(1.9 * len(PANELS), 3.0), dpi=72)
-        axes = fig.subplots(1, len(PANELS))
-        anim = FuncAnimation(fig, lambda k: self._draw(axes, k), frames=len(self.frames))
+        figure = self._figure()
+        figure.fig.set_dpi(80)
+        with tempfile.TemporaryDirectory() as folder:
+            video = Path(folder) / "run.mp4"
+            figure.video(self.frames, video, fps=4)
+            data = base64.b64encode(video.read_bytes()).decode()
+        figures.plt().close(figure.fig)
         title = (f"<p><b>{html.escape(self.experiment.spec.name)}</b>: task {self.task}, "
-                 f"{self.configuration}, run {self.run}, {len(self.frames)} steps (path white, "
-                 "start white dot, chosen cell red star, border cyan)</p>")
-        return title + anim.to_jshtml(fps=6, default_mode="once")
+                 f"{self.configuration}, run {self.run}, {len(self.frames)} steps</p>")
+        return (f'{title}<video controls loop style="max-width:100%" '
+                f'src="data:video/mp4;base64,{data}"></video>')
 
 
 def step_view(source: str | Path | Experiment, task: str | None = None,

@@ -34,7 +34,7 @@ def report(out: Path, options: dict) -> int:
     from runner.report import build_report
 
     compare = options.get("compare")
-    folder = build_report(out, gif=not options.get("no_gif", False),
+    folder = build_report(out, animation=not options.get("no_gif", False),
                           compare=Path(compare) if compare else None)
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0

@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import html
 import json
+import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import stats
 
 from bayesprog.errors import BayesprogError
+from runner import figures
 from runner.experiment import ExperimentSpec, load_experiment, load_results, mean_sem
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import behaviour, border_band
@@ -20,13 +23,12 @@ from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write
 
 
-def _plt():
-    import matplotlib
+def progress(total: int, what: str) -> Any:
+    """A progress bar on a terminal (silent otherwise) for a step of the report."""
+    from tqdm import tqdm
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return tqdm(total=total, desc=what, unit="step", leave=False,
+                disable=not sys.stderr.isatty())
 
 
 def area_under(gamma: np.ndarray) -> np.ndarray:
@@ -63,13 +65,21 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
                 row["p_final"] = paired_test(final, full["gamma"][:, -1])
                 row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
             rows.append(row)
+    for key in ("p_final", "p_auc"):  # Holm's correction over the experiment's tests
+        tested = [r for r in rows if key in r]
+        if tested:
+            from statsmodels.stats.multitest import multipletests
+
+            adjusted = multipletests([r[key] for r in tested], method="holm")[1]
+            for r, value in zip(tested, adjusted, strict=True):
+                r[f"{key}_holm"] = float(value)
     return rows
 
 
 def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
-    """Fig. 10: Gamma(k) mean +- SEM over runs, five curves per task."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, len(spec.tasks), figsize=(5 * len(spec.tasks), 3.8),
+    """Fig. 10: Gamma(k) mean +- SEM over runs, one curve per configuration, a panel per task."""
+    plt = figures.plt()
+    fig, axes = plt.subplots(1, len(spec.tasks), figsize=(5 * len(spec.tasks), 3.9),
                              squeeze=False)
     for ax, task in zip(axes[0], spec.tasks, strict=True):
         for conf in spec.configurations:
@@ -80,38 +90,42 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
         ax.set_title(f"Task {task}")
         ax.set_xlabel("iteration k")
         ax.grid(alpha=0.3)
-    axes[0, 0].set_ylabel(r"$\Gamma(k)$ [m]")
-    axes[0, -1].legend()
+        ax.legend(fontsize=8, title="mean +- SEM", title_fontsize=7)
+    axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
 
 
-def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path) -> None:
-    """Fig. 9: visits summed over runs, tasks x configurations, beside the ground-truth border."""
-    plt = _plt()
+def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path,
+                  starts: np.ndarray | None = None) -> None:
+    """Fig. 9: per task, the materials with the task's border and the start cells, then the
+    visits per run of each configuration (each with its colour bar), the border over them."""
+    from matplotlib.lines import Line2D
+
+    plt = figures.plt()
     nx, ny = scenario.shape
     cols = len(spec.configurations) + 1
-    fig, axes = plt.subplots(len(spec.tasks), cols, figsize=(1.9 * cols, 3.6 * len(spec.tasks)),
+    fig, axes = plt.subplots(len(spec.tasks), cols, figsize=(2.6 * cols, 3.9 * len(spec.tasks)),
                              squeeze=False)
-    extent = (0, nx * scenario.cell, 0, ny * scenario.cell)
     for r, task in enumerate(spec.tasks):
-        border = scenario.border(task)
-        bx, by = np.nonzero(border)
         ax = axes[r, 0]
-        ax.imshow(scenario.material_map.T, origin="lower", extent=extent, cmap="Pastel1")
-        ax.scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=2, c="k")
-        ax.set_title(f"{task}: border", fontsize=8)
+        extra = [Line2D([], [], color="black", lw=1.2, label=f"{task} border")]
+        if starts is not None:
+            sx, sy = figures.centre_cm(scenario, starts[:, 0] * ny + starts[:, 1])
+            ax.plot(sx, sy, "x", color="0.25", ms=3, mew=0.8)
+            extra.append(Line2D([], [], ls="", marker="x", color="0.25", ms=4,
+                                label="start cells"))
+        figures.draw_materials(ax, scenario, extra=extra)
+        figures.draw_border(ax, scenario, task, colour="black", width=1.2)
+        ax.set_title(f"{task}: ground truth", fontsize=8)
         for c, conf in enumerate(spec.configurations, 1):
             paths = results[f"{task}/{conf}"]["paths"]
-            counts = np.bincount(paths.ravel(), minlength=nx * ny).reshape(nx, ny)
-            axes[r, c].imshow(counts.T, origin="lower", extent=extent, cmap="hot")
-            axes[r, c].scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=0.4,
-                               c="c")
-            axes[r, c].set_title(f"{task} {conf.replace('_', ' ')}", fontsize=8)
-    for ax in axes.ravel():
-        ax.set_xticks([])
-        ax.set_yticks([])
+            counts = np.bincount(paths.ravel(), minlength=nx * ny) / paths.shape[0]
+            figures.draw_map(axes[r, c], counts, scenario, cmap="hot", vmin=0,
+                             label="visits per run", title=f"{task} {conf.replace('_', ' ')}")
+            figures.draw_border(axes[r, c], scenario, task, width=0.6)
+    figures.axes_in_cm(axes)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
@@ -150,51 +164,124 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         cells = decision_cells
 
 
-_FIELDS = [("I", "inhibition I"), ("S", "saliency S"), ("U", "uncertainty U"),
-           ("shape", "shape cue (GMM)"), ("posterior", "P(O | ...)")]
+class DecisionFigure:
+    """Fig. 11: the fields behind one decision of pi_tar, with the ground truth. Built once;
+    ``show(frame, k)`` draws a step (the animation redraws only what changes)."""
 
+    #: (frame key, title, colour bar label, fixed range)
+    PANELS = [("belief", "belief P(M = task material)", "probability (grey: not probed)", (0, 1)),
+              ("S", "saliency S (eq. 12)", "S (grey: not observed)", (0, 1)),
+              ("U", "uncertainty U (eq. 11)", "U: normalised entropy", (0, 1)),
+              ("I", "inhibition I (eq. 10)", "I", (0, 1)),
+              ("shape", "shape cue P(O | R)", "probability per cell", None),
+              ("posterior", "P(O | t, i, s, u, R) (eq. 13)", "probability per cell", None)]
 
-def _draw_fields(axes, frame: dict, scenario: Scenario, k: int, task: str | None = None):
-    nx, ny = scenario.shape
-    bx, by = np.nonzero(scenario.border(task)) if task else (np.array([]), np.array([]))
-    extent = (0, nx * scenario.cell, 0, ny * scenario.cell)
-    images = []
-    path = np.array(frame["path"])
-    import matplotlib
+    def __init__(self, scenario: Scenario, task: str, title: str = ""):
+        plt = figures.plt()
+        self.scenario, self.task = scenario, task
+        self.fig, axes = plt.subplots(2, 4, figsize=(13, 9.6))
+        self.axes = axes
+        flat = list(axes.ravel())
+        nan = np.full(scenario.shape[0] * scenario.shape[1], np.nan)
+        truth = flat[0]
+        figures.draw_materials(truth, scenario)
+        figures.draw_border(truth, scenario, task, colour="black", width=1.2)
+        truth.set_title(f"ground truth, {task} border", fontsize=8)
+        self.images = {}
+        for ax, (key, name, label, limits) in zip(flat[1:7], self.PANELS, strict=True):
+            low, high = limits or (0, 1)
+            self.images[key] = figures.draw_map(ax, nan, scenario, vmin=low, vmax=high,
+                                                label=label, title=name)
+            figures.draw_border(ax, scenario, task, width=0.6)
+        self.path_axes = [flat[0], *flat[1:7]]
+        self.lines: list = []
+        self.fixed = False
+        flat[7].axis("off")
+        self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8, wrap=True,
+                                    transform=flat[7].transAxes)
+        figures.axes_in_cm(axes)
+        self.fig.suptitle(title, fontsize=10)
+        self.fig.tight_layout()
 
-    # grey: a saliency with nothing perceived to compare (marginalised)
-    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.55")
-    for ax, (key, title) in zip(axes, _FIELDS, strict=True):
-        ax.clear()
-        images.append(ax.imshow(frame[key].reshape(nx, ny).T, origin="lower", extent=extent,
-                                cmap=cmap))
-        px, py = (path // ny + 0.5) * scenario.cell, (path % ny + 0.5) * scenario.cell
-        ax.plot(px, py, "w-", lw=0.6)
-        ax.scatter((bx + 0.5) * scenario.cell, (by + 0.5) * scenario.cell, s=0.5, c="c")
-        nxt = frame["next"]
-        ax.plot((nxt // ny + 0.5) * scenario.cell, (nxt % ny + 0.5) * scenario.cell, "r*", ms=8)
-        ax.set_title(f"{title}, k={k}", fontsize=8)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    return images
+    def video(self, frames: list[dict], out: Path, fps: int = 6) -> None:
+        """Every frame into an MP4 at the figure's resolution. The axes, ticks and colour bars
+        are drawn once; each frame redraws only the maps, borders, path and caption."""
+        import imageio_ffmpeg
+
+        for key, _, _, limits in self.PANELS:  # one colour scale over the whole run
+            if limits is None:
+                top = max((float(np.nanmax(f[key])) for f in frames), default=1.0)
+                self.images[key].set_clim(0, top if top > 0 else 1.0)
+        self.fixed = True
+        dynamic = [*self.images.values(), self.caption]
+        for ax in self.path_axes:
+            dynamic += list(ax.collections)
+        for artist in dynamic:
+            artist.set_animated(True)
+        canvas = self.fig.canvas
+        self.show(frames[0], 0)
+        canvas.draw()
+        background = canvas.copy_from_bbox(self.fig.bbox)
+        width, height = canvas.get_width_height()
+        writer = imageio_ffmpeg.write_frames(
+            str(out), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgba",
+            pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
+            output_params=["-crf", "26"])
+        writer.send(None)
+        bar = progress(len(frames), "Fig. 11 animation")
+        try:
+            for k, frame in enumerate(frames):
+                canvas.restore_region(background)
+                self.show(frame, k)
+                for artist in dynamic + self.lines:
+                    self.fig.draw_artist(artist)
+                writer.send(bytes(canvas.buffer_rgba()))
+                bar.update(1)
+        finally:
+            writer.close()
+            bar.close()
+        for artist in dynamic:
+            artist.set_animated(False)
+        self.fixed = False
+
+    def show(self, frame: dict, k: int) -> None:
+        for line in self.lines:
+            line.remove()
+        self.lines = []
+        for key, _, _, limits in self.PANELS:
+            values = np.asarray(frame[key], float)
+            image = self.images[key]
+            image.set_data(values.reshape(self.scenario.shape).T)
+            if limits is None and not self.fixed:
+                finite = values[np.isfinite(values)]
+                image.set_clim(0, float(finite.max()) if finite.size and finite.max() > 0 else 1)
+        for ax in self.path_axes:
+            before = len(ax.lines)
+            figures.draw_path(ax, self.scenario, frame["path"], frame["next"])
+            self.lines += ax.lines[before:]
+        for line in self.lines:
+            line.set_animated(self.fixed)  # in a video, never part of the static background
+        x, y = figures.centre_cm(self.scenario, [frame["next"]])
+        self.caption.set_text(
+            f"step k = {k}\n\nwhite line: the path so far\nwhite circle: the start cell\n"
+            f"red star: the next cell (MAP of P(O | ...)),\n  at ({x[0]:.1f}, {y[0]:.1f}) cm\n"
+            f"cyan (black in the first panel): the ground-truth border of {self.task}\n\n"
+            "grey: a cell not probed (belief), or a saliency with nothing perceived to "
+            "compare (marginalised)")
 
 
 def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
-                  out_png: Path, out_gif: Path | None, steps: int) -> None:
-    """Fig. 11: the fields behind one decision, and (GIF) over every step of the run."""
-    plt = _plt()
+                  out_png: Path, out_video: Path | None, steps: int) -> None:
+    """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run at the same resolution."""
     frames = list(replay(experiment, task, configuration, run, steps))
-    fig, axes = plt.subplots(1, len(_FIELDS), figsize=(2.2 * len(_FIELDS), 4))
-    _draw_fields(axes, frames[min(step, len(frames) - 1)], experiment.scenario, step, task)
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
-    if out_gif is not None:
-        from matplotlib.animation import FuncAnimation, PillowWriter
-
-        anim = FuncAnimation(fig, lambda k: _draw_fields(axes, frames[k], experiment.scenario, k,
-                                                         task), frames=len(frames))
-        anim.save(out_gif, writer=PillowWriter(fps=8), dpi=60)
-    plt.close(fig)
+    title = (f"{experiment.spec.name}: task {task}, {configuration}, run {run}")
+    figure = DecisionFigure(experiment.scenario, task, title)
+    figure.show(frames[min(step, len(frames) - 1)], step)
+    figure.fig.savefig(out_png, dpi=110)
+    if out_video is not None:
+        figure.fig.set_dpi(110)
+        figure.video(frames, out_video)
+    figures.plt().close(figure.fig)
 
 
 #: The significance level where the paper claims a difference (S, U), and below which a change
@@ -235,9 +322,9 @@ def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str
         if not have(conf):
             continue
         changes = {t: rel(t, conf) for t in tasks}
-        ps = {t: by[(t, conf)]["p_auc"] for t in tasks}
-        measured = "; ".join(f"{t}: {100 * changes[t]:+.0f}% area under Gamma (p={ps[t]:.2g})"
-                             for t in tasks)
+        ps = {t: by[(t, conf)].get("p_auc_holm", by[(t, conf)]["p_auc"]) for t in tasks}
+        measured = "; ".join(f"{t}: {100 * changes[t]:+.0f}% area under Gamma "
+                             f"(Holm-adjusted p={ps[t]:.2g})" for t in tasks)
         if key == "S":
             worst = [max((c for c in spec.configurations if c != "full"),
                          key=lambda c, t=t: by[(t, c)]["auc_mean"]) for t in tasks]
@@ -322,7 +409,7 @@ def comparison_lines(found: list[tuple[str, str, str]], other: Path, name: str) 
     return lines + [""]
 
 
-def build_report(out: Path, gif: bool = True, compare: Path | None = None) -> Path:
+def build_report(out: Path, animation: bool = True, compare: Path | None = None) -> Path:
     """Write ``out/report/`` (figures, table, report.md, report.html) from stored results;
     ``compare``: another experiment's output folder whose findings are set beside these."""
     store = ResultStore(out)
@@ -335,21 +422,28 @@ def build_report(out: Path, gif: bool = True, compare: Path | None = None) -> Pa
     folder.mkdir(parents=True, exist_ok=True)
     borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
     rows = statistics_table(results, spec, borders, scenario)
+    bar = progress(3, "report figures")
     plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
-    plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png")
+    bar.update(1)
+    plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png", experiment.start_cells())
+    bar.update(1)
     task = spec.tasks[0]
     run, step = following_step(results[f"{task}/full"]["paths"], scenario.border(task),
                                spec.iterations)
+    video = "fig11_decision.mp4" if animation else None
+    (folder / "fig11_decision.gif").unlink(missing_ok=True)  # an animation of earlier reports
     plot_decision(experiment, task, "full", run, step, folder / "fig11_decision.png",
-                  folder / "fig11_decision.gif" if gif else None, spec.iterations - 1)
+                  folder / video if video else None, spec.iterations - 1)
+    bar.update(1)
+    bar.close()
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(rows, indent=1).encode())
     extra = perception_lines(scenario, rows, spec.tasks)
     if compare is not None:
         extra += comparison_lines(found, compare, spec.name)
-    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra)
+    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video)
     atomic_write(folder / "report.md", md.encode())
-    atomic_write(folder / "report.html", _html(md, spec, rows, found).encode())
+    atomic_write(folder / "report.html", _html(md, spec, video).encode())
     return folder
 
 
@@ -387,19 +481,19 @@ def _behaviour_lines(rows: list[dict]) -> list[str]:
 
 
 def _table_lines(rows: list[dict]) -> list[str]:
-    lines = ["| task | configuration | final Gamma [m] | per border cell [mm] | area under "
-             "Gamma [m x steps] | p (final) | p (area) |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| task | configuration | final Gamma (m) | per border cell (mm) | area under "
+             "Gamma (m x steps) | p (final) | p (area) | Holm p (final) | Holm p (area) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        p1 = f"{r['p_final']:.3g}" if "p_final" in r else ""
-        p2 = f"{r['p_auc']:.3g}" if "p_auc" in r else ""
+        ps = " | ".join(_p(r, key) for key in ("p_final", "p_auc", "p_final_holm", "p_auc_holm"))
         lines.append(f"| {r['task']} | {r['configuration']} | {r['final_mean']:.3f} +- "
                      f"{r['final_sem']:.3f} | {r['final_per_border_cell_mm']:.1f} | "
-                     f"{r['auc_mean']:.1f} +- {r['auc_sem']:.1f} | {p1} | {p2} |")
+                     f"{r['auc_mean']:.1f} +- {r['auc_sem']:.1f} | {ps} |")
     return lines
 
 
-def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=()) -> str:
+def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
+              animation: str | None = None) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -407,18 +501,27 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=()) -
              f"hash `{digest}`. Border cells per task: "
              + ", ".join(f"{t} {n}" for t, n in borders.items()) + ".", "",
              "## Gamma(k) (paper Fig. 10)", "", "![Gamma](fig10_gamma.png)", "",
-             "Gamma (eq. 16) sums over the task's border cells the distance to the nearest probed "
-             "cell; lower is better. Mean +- SEM over runs.", "",
+             "*Fig. 10. Gamma (eq. 16) sums, over the task's border cells, the distance in metres "
+             "to the nearest probed cell; lower is better. Mean over the runs, shaded +- SEM; "
+             "one panel per task, one curve per configuration of pi_tar.*", "",
              "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
+             "*Fig. 9. First column: the materials, the task's ground-truth border (black) and "
+             "the runs' start cells (crosses). Then, per configuration, the visits per run of "
+             "each cell (each panel with its colour bar), the border in cyan. Axes in cm.*", "",
              f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
-             "", "The step that ends the longest stretch of probes within one cell of the border, "
-             "over every run (the border in cyan; grey in S: nothing perceived to compare, the "
-             "term is marginalised).", "",
-             "![Decision](fig11_decision.png)", "",
-             "The animation over every step of that run is `fig11_decision.gif` (when built).", "",
-             "## Final Gamma and area under Gamma(k)", "",
-             "Mean +- SEM over runs; p: two-sided Wilcoxon signed-rank test of each ablation "
-             "against the full model over the shared start cells.", ""]
+             "", "![Decision](fig11_decision.png)", "",
+             "*Fig. 11. The step that ends the longest stretch of probes within one cell of the "
+             "border over every run: the walker follows the border. The ground truth, the "
+             "belief map P(M = task material) at the probed cells, the cues S, U, I, the shape "
+             "cue and the posterior over the next cell O (eq. 13), each with its colour bar; "
+             "the path, its start and the chosen cell on every panel. Axes in cm.*", ""]
+    if animation:
+        lines += [f"The animation over every step of that run: [{animation}]({animation}).", ""]
+    lines += ["## Final Gamma and area under Gamma(k)", "",
+              "Mean +- SEM over runs; p: two-sided Wilcoxon signed-rank test of each ablation "
+              "against the full model over the shared start cells; Holm p: the same p-values "
+              "adjusted by Holm's method over all the tests of the column (statsmodels' "
+              "multipletests), which the verdicts below use.", ""]
     lines += _table_lines(rows)
     lines += ["", "## Where the visits go", "",
               "Enrichment: the share of visits within one cell of the task's border divided by "
@@ -430,11 +533,12 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=()) -
     lines += ["", "## The paper's findings (Sec. 6.3) and ours", "",
               "| the paper | measured here | verdict |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in found]
-    lines += ["", "Verdicts: *S* agrees when removing S gives the largest area under Gamma of "
-              "the four ablations in every task, with p < 0.01; *U* when removing U raises it by "
-              "more than 5% with p < 0.01 in every task; *I* when the change is under 10% or not "
-              "significant (p >= 0.01); *R* when the change is under 10%, not significant, or "
-              "in the full model's favour; *T* compares the final Gamma per border cell.", ""]
+    lines += ["", "Verdicts (on Holm-adjusted p-values): *S* agrees when removing S gives the "
+              "largest area under Gamma of the four ablations in every task, with p < 0.01; *U* "
+              "when removing U raises it by more than 5% with p < 0.01 in every task; *I* when "
+              "the change is under 10% or not significant (p >= 0.01); *R* when the change is "
+              "under 10%, not significant, or in the full model's favour; *T* compares the "
+              "final Gamma per border cell.", ""]
     lines += list(extra)
     return "\n".join(lines)
 
@@ -443,36 +547,18 @@ def _p(row: dict, key: str) -> str:
     return f"{row[key]:.3g}" if key in row else ""
 
 
-def _html(md: str, spec, rows, found) -> str:
-    body = [f"<h1>Experiment {html.escape(spec.name)}</h1>",
-            f"<p>{html.escape(spec.description)}</p>"]
-    for title, image in [("Gamma(k) (Fig. 10)", "fig10_gamma.png"),
-                         ("Visits (Fig. 9)", "fig9_visits.png"),
-                         ("One decision (Fig. 11)", "fig11_decision.png")]:
-        body += [f"<h2>{title}</h2>", f'<img src="{image}" style="max-width:100%">']
-    body += ["<h2>Statistics</h2>", "<table border=1 cellpadding=3><tr><th>task</th>"
-             "<th>configuration</th><th>final Gamma [m]</th><th>area under Gamma</th>"
-             "<th>p (final)</th><th>p (area)</th></tr>"]
-    for r in rows:
-        body.append(f"<tr><td>{r['task']}</td><td>{r['configuration']}</td>"
-                    f"<td>{r['final_mean']:.3f} &plusmn; {r['final_sem']:.3f}</td>"
-                    f"<td>{r['auc_mean']:.1f} &plusmn; {r['auc_sem']:.1f}</td>"
-                    f"<td>{_p(r, 'p_final')}</td><td>{_p(r, 'p_auc')}</td></tr>")
-    body += ["</table>", "<h2>Where the visits go</h2>",
-             "<table border=1 cellpadding=3><tr><th>task</th><th>configuration</th>"
-             "<th>enrichment</th><th>runs reaching the border</th><th>median first reach</th>"
-             "<th>border cells probed</th><th>distinct cells</th><th>returns</th></tr>"]
-    for r in rows:
-        if "enrichment" in r:
-            body.append(f"<tr><td>{r['task']}</td><td>{r['configuration']}</td>"
-                        f"<td>{r['enrichment']:.2f}x</td><td>{100 * r['reached']:.0f}%</td>"
-                        f"<td>{r['reach_step']:.0f}</td><td>{100 * r['border_probed']:.0f}%</td>"
-                        f"<td>{r['distinct']:.1f}</td><td>{100 * r['returns']:.0f}%</td></tr>")
-    body += ["</table>", "<h2>The paper's findings and ours</h2>",
-             "<table border=1 cellpadding=3><tr><th>paper</th><th>measured</th>"
-             "<th>verdict</th></tr>"]
-    body += [f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td><td>{c}</td></tr>"
-             for a, b, c in found]
-    body.append("</table>")
+def _html(md: str, spec: ExperimentSpec, animation: str | None) -> str:
+    """report.md as HTML (the same text, tables and figures), the animation as a video."""
+    import markdown
+
+    body = markdown.markdown(md, extensions=["tables"])
+    if animation:
+        body = body.replace(
+            f'<a href="{animation}">{animation}</a>',
+            f'<br><video src="{animation}" controls loop style="max-width:100%"></video>')
+    style = ("body{font-family:sans-serif;max-width:1300px;margin:1em auto;padding:0 1em}"
+             "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;"
+             "padding:2px 6px}img{max-width:100%}")
     return ("<!doctype html><html><head><meta charset='utf-8'><title>"
-            f"{html.escape(spec.name)}</title></head><body>" + "\n".join(body) + "</body></html>")
+            f"{html.escape(spec.name)}</title><style>{style}</style></head><body>{body}"
+            "</body></html>")

@@ -144,12 +144,46 @@ def test_report_builds_every_figure(reference, capsys):
     assert main(["report", str(out)]) == 0
     folder = out / "report"
     for name in ("fig9_visits.png", "fig10_gamma.png", "fig11_decision.png",
-                 "fig11_decision.gif", "report.md", "report.html", "statistics.json"):
+                 "fig11_decision.mp4", "report.md", "report.html", "statistics.json"):
         assert (folder / name).stat().st_size > 0, name
     assert (folder / "fig9_visits.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert (folder / "fig11_decision.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    assert (folder / "fig11_decision.mp4").read_bytes()[4:8] == b"ftyp"  # an MP4 container
+    assert (folder / "fig11_decision.mp4").stat().st_size < 5e6
     text = (folder / "report.md").read_text()
     assert "Removing S degrades the most" in text and "| T3 | without_S |" in text
+    page = (folder / "report.html").read_text()
+    # the HTML carries what the Markdown carries: every table row, figure and the video
+    for line in text.splitlines():
+        if line.startswith("| T3 | without_S |"):
+            assert all(cell.strip() in page for cell in line.split("|") if cell.strip())
+    for name in ("fig9_visits.png", "fig10_gamma.png", "fig11_decision.png",
+                 "fig11_decision.mp4"):
+        assert f'src="{name}"' in page
+
+
+def test_report_html_shows_its_figures_in_a_browser(reference, screenshot):
+    assert main(["report", str(reference[0]), "--no-animation"]) == 0
+    pixels = screenshot(reference[0] / "report" / "report.html", 1300, 4000)
+    # the figures are drawn: many coloured pixels (text and tables alone are grey)
+    colourful = (pixels.max(axis=-1) - pixels.min(axis=-1)) > 0.25
+    assert colourful.mean() > 0.05
+    # the heat maps of Fig. 9 ('hot': red with little blue) among them
+    red = (pixels[..., 0] > 0.6) & (pixels[..., 2] < 0.2)
+    assert red.sum() > 2000
+
+
+def test_p_values_are_holm_adjusted_over_the_experiment(reference):
+    from statsmodels.stats.multitest import multipletests
+
+    from runner.report import statistics_table
+
+    results = reference[1]
+    spec = load_experiment(ResultStore(reference[0]).manifest()["files"]["experiment"]["path"]).spec
+    rows = statistics_table(results, spec, {t: 10 for t in spec.tasks})
+    tested = [r for r in rows if "p_auc" in r]
+    expected = multipletests([r["p_auc"] for r in tested], method="holm")[1]
+    np.testing.assert_allclose([r["p_auc_holm"] for r in tested], expected)
+    assert all(r["p_auc_holm"] >= r["p_auc"] for r in tested)
 
 
 def test_report_of_a_folder_without_results(tmp_path, capsys):

@@ -106,8 +106,8 @@ def test_the_report_sets_the_findings_of_two_experiments_side_by_side(tmp_path):
     for run in range(3):
         frames = list(replay(experiment, "T3", "full", run, 30))
         assert [f["cell"] for f in frames] == stored[run].tolist()
-    build_report(outs[0], gif=False)
-    text = (build_report(outs[1], gif=False, compare=outs[0]) / "report.md").read_text()
+    build_report(outs[0], animation=False)
+    text = (build_report(outs[1], animation=False, compare=outs[0]) / "report.md").read_text()
     assert "## The findings beside experiment paper" in text
     assert "| the paper | paper_identified | paper |" in text
     assert "learned from 3000 probes of `probes.csv`" in text

@@ -1,0 +1,125 @@
+"""Drawing the workspace: maps over the grid in centimetres with colour bars, the ground-truth
+border as a line between cells, materials with a legend, the path, its start and the chosen
+cell. Used by the report's figures and the notebook's step view."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from runner.scenario import Scenario
+
+#: the border line, the path, the start and the chosen cell
+BORDER, PATH, START, CHOSEN = "cyan", "white", "white", "red"
+
+
+def plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as pyplot
+
+    return pyplot
+
+
+def extent_cm(scenario: Scenario) -> tuple[float, float, float, float]:
+    nx, ny = scenario.shape
+    return (0.0, nx * scenario.cell * 100, 0.0, ny * scenario.cell * 100)
+
+
+def centre_cm(scenario: Scenario, cells: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) in cm of flat cell indices."""
+    ny = scenario.shape[1]
+    cells = np.asarray(cells)
+    return (cells // ny + 0.5) * scenario.cell * 100, (cells % ny + 0.5) * scenario.cell * 100
+
+
+def border_segments(scenario: Scenario, task: str) -> np.ndarray:
+    """Segments [n, 2, 2] (cm) between a cell of the task's material and a cell of another: the
+    ground-truth discontinuity the task follows."""
+    m = scenario.material_map
+    target = m == scenario.task_material(task)
+    size = scenario.cell * 100
+    out = []
+    # vertical edges between (i, j) and (i + 1, j); horizontal between (i, j) and (i, j + 1)
+    i, j = np.nonzero(target[:-1, :] != target[1:, :])
+    for a, b in zip(i, j, strict=True):
+        x = (a + 1) * size
+        out.append([[x, b * size], [x, (b + 1) * size]])
+    i, j = np.nonzero(target[:, :-1] != target[:, 1:])
+    for a, b in zip(i, j, strict=True):
+        y = (b + 1) * size
+        out.append([[a * size, y], [(a + 1) * size, y]])
+    return np.array(out).reshape(-1, 2, 2)
+
+
+def draw_border(ax: Any, scenario: Scenario, task: str, colour: str = BORDER,
+                width: float = 1.0) -> None:
+    from matplotlib.collections import LineCollection
+
+    ax.add_collection(LineCollection(border_segments(scenario, task), colors=colour,
+                                     linewidths=width, label=f"{task} border"))
+
+
+def draw_map(ax: Any, values: np.ndarray, scenario: Scenario, *, cmap: str = "viridis",
+             vmin: float | None = None, vmax: float | None = None, label: str | None = None,
+             title: str = "", bad: str = "0.6") -> Any:
+    """A field over the grid (flat or [nx, ny]) in cm, NaN drawn grey, with a labelled colour
+    bar when ``label`` is given."""
+    import matplotlib
+
+    nx, ny = scenario.shape
+    colours = matplotlib.colormaps[cmap].with_extremes(bad=bad)
+    image = ax.imshow(np.asarray(values, float).reshape(nx, ny).T, origin="lower",
+                      extent=extent_cm(scenario), cmap=colours, vmin=vmin, vmax=vmax,
+                      interpolation="nearest")
+    if label:
+        bar = ax.figure.colorbar(image, ax=ax, fraction=0.06, pad=0.03)
+        bar.set_label(label, fontsize=7)
+        bar.ax.tick_params(labelsize=6)
+    if title:
+        ax.set_title(title, fontsize=8)
+    ax.tick_params(labelsize=6)
+    return image
+
+
+def draw_materials(ax: Any, scenario: Scenario, legend: bool = True,
+                   extra: list[Any] | None = None) -> None:
+    """The true material of every cell, one colour per material present, with a legend (and
+    the ``extra`` handles after the materials)."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    present = list(dict.fromkeys(np.unique(scenario.material_map).tolist()))
+    palette = ["#e8dcc8", "#9ecae1", "#a1d99b", "#fdae6b", "#bcbddc", "#fc9272"]
+    index = np.searchsorted(present, scenario.material_map)
+    ax.imshow(index.T, origin="lower", extent=extent_cm(scenario), interpolation="nearest",
+              cmap=ListedColormap(palette[: len(present)]), vmin=-0.5, vmax=len(present) - 0.5)
+    if legend:
+        handles = [Patch(facecolor=palette[i], edgecolor="0.4", label=scenario.materials[m])
+                   for i, m in enumerate(present)]
+        ax.legend(handles=handles + (extra or []), fontsize=6, loc="upper right",
+                  framealpha=0.85)
+    ax.tick_params(labelsize=6)
+
+
+def draw_path(ax: Any, scenario: Scenario, path: list[int] | np.ndarray,
+              chosen: int | None = None) -> None:
+    """The probed path (line), its start (circle) and the chosen next cell (star)."""
+    px, py = centre_cm(scenario, path)
+    ax.plot(px, py, "-", color=PATH, lw=0.7, label="path")
+    ax.plot(px[:1], py[:1], "o", mfc="none", mec=START, ms=5, mew=1.2, label="start")
+    if chosen is not None:
+        cx, cy = centre_cm(scenario, [chosen])
+        ax.plot(cx, cy, "*", color=CHOSEN, ms=9, mec="black", mew=0.4, label="next cell")
+
+
+def axes_in_cm(axes: np.ndarray) -> None:
+    """Axis labels in cm on the left column and the bottom row of a grid of panels."""
+    rows, cols = axes.shape
+    for r in range(rows):
+        for c in range(cols):
+            ax = axes[r, c]
+            ax.set_xlabel("x (cm)" if r == rows - 1 else "", fontsize=7)
+            ax.set_ylabel("y (cm)" if c == 0 else "", fontsize=7)
