@@ -33,6 +33,11 @@ def _load(path: str) -> Program:
 
     try:
         return load(path)
+    except SpecError:
+        hint = _kind_hint(path)
+        if hint:
+            raise _UserError(hint) from None
+        raise
     except FileNotFoundError:
         raise _UserError(f"cannot read {path}: no such file") from None
     except IsADirectoryError:
@@ -43,20 +48,10 @@ def _load(path: str) -> Program:
 
 def _kind_hint(file: str) -> str | None:
     """Why a file is not a program, when it is plainly another kind of file."""
-    from bayesprog.language.loader import load_yaml
+    from bayesprog.language.loader import wrong_kind
 
-    try:
-        located, _ = load_yaml(Path(file).read_text(encoding="utf-8"), file)
-    except (OSError, UnicodeDecodeError):
-        return None
-    data = located.data
-    if isinstance(data, dict) and "bayesprog" not in data:
-        for key in ("experiment", "scenario"):
-            if key in data:
-                article = "an" if key[0] in "aeiou" else "a"
-                return (f"{file}: this is {article} {key} file, not a program (validate checks programs; "
-                        "`bayesprog run` checks experiments and their scenarios)")
-    return None
+    return wrong_kind(file, "program", "this command reads programs; `bayesprog run` reads "
+                      "experiments and their scenarios")
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -64,12 +59,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
     for file in args.files:
         try:
             _load(file)
+        except _UserError as exc:  # not a program (another kind of file), or unreadable
+            problems += 1
+            print(f"bayesprog: {exc}", file=sys.stderr)
+            continue
         except SpecError as exc:
             problems += len(exc.diagnostics)
-            hint = _kind_hint(file)
-            if hint:
-                print(f"bayesprog: {hint}", file=sys.stderr)
-                continue
             for d in exc.diagnostics:
                 print(d, file=sys.stderr)
             continue
@@ -212,6 +207,15 @@ def _experiment_runner(path: str) -> str | None:
         located, _ = load_yaml(Path(path).read_text(encoding="utf-8"), path)
     except FileNotFoundError:
         raise _UserError(f"cannot read {path}: no such file") from None
+    except IsADirectoryError:
+        raise _UserError(f"cannot read {path}: it is a directory; expected an experiment "
+                         "file") from None
+    from bayesprog.language.loader import wrong_kind
+
+    hint = wrong_kind(path, "experiment", "run takes an experiment file, for instance "
+                      "models/experiments/quick.yaml")
+    if hint:
+        raise _UserError(hint)
     data = located.data
     return data.get("runner") if isinstance(data, dict) else None
 
@@ -287,97 +291,124 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("validate", help="check program files; list every problem")
-    p.add_argument("files", nargs="+", metavar="FILE")
-    p.add_argument("-q", "--quiet", action="store_true", help="print nothing for valid files")
+    p.add_argument("files", nargs="+", metavar="FILE", help="program files (.yaml)")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="print nothing for valid files (default: print FILE: ok)")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("show", help="print a program in Bayesian-programming notation")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help='show the program with this term uniform, e.g. "P(S | M)"; repeatable '
+                   "(default: none)")
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("graph", help="draw the graphical model (.dot, .png, .pdf, .svg)")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("-o", "--output", required=True, metavar="OUT")
-    p.add_argument("--question", help="shade the known variables of this question")
+    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="the drawing: .dot (Graphviz text), .png, .pdf or .svg")
+    p.add_argument("--question", help="shade the known variables of this question (a name of "
+                   "the file's, or P(searched | known)); default: none")
     p.set_defaults(func=cmd_graph)
 
     p = sub.add_parser("query", help='ask a question, e.g. "P(A B | C=c1, D=0.3)"')
-    p.add_argument("file", metavar="FILE")
+    p.add_argument("file", metavar="FILE", help="a program file")
     p.add_argument("question", help="a named question of the file, or P(searched | known)")
-    p.add_argument("--map", action="store_true", help="joint argmax instead of the posterior")
+    p.add_argument("--map", action="store_true",
+                   help="the joint argmax instead of the posterior (default: the posterior)")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
-                   help='replace a term by a uniform, e.g. --ablate "P(S | O, T)"')
+                   help='replace a term by a uniform, e.g. --ablate "P(S | O, T)"; repeatable '
+                   "(default: none)")
     p.add_argument("--input", action="append", default=[], metavar="NAME=FILE.npy",
-                   help="bind a runtime input")
+                   help="bind a runtime input to an array; repeatable (default: none)")
     p.add_argument("--evidence", action="append", default=[], metavar="VAR=VALUE",
                    help="evidence for a known variable: a state, a number, or FILE.npy "
-                   "(an array: a field, or a batch of values)")
+                   "(an array: a field, or a batch of values); repeatable (default: none)")
     p.add_argument("--soft", action="append", default=[], metavar="VAR=p1,p2,...",
-                   help="soft evidence: one likelihood per state of VAR")
-    p.add_argument("--seed", type=int, default=0, help="seed for breaking MAP ties (default 0)")
-    p.add_argument("--limit", type=int, default=20, help="rows shown for large tables")
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+                   help="soft evidence: one likelihood per state of VAR (default: none)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed for breaking MAP ties (default: %(default)s)")
+    p.add_argument("--limit", type=int, default=20,
+                   help="rows shown for large tables (default: %(default)s)")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON (with log_evidence) instead of a table (default: a table)")
     p.set_defaults(func=cmd_query)
 
     p = sub.add_parser("learn", help="learn a program's parameters from data (CSV or Parquet)")
-    p.add_argument("file", metavar="PROGRAM.yaml")
+    p.add_argument("file", metavar="PROGRAM.yaml", help="the program whose parameters to learn")
     p.add_argument("data", metavar="DATA.csv|.parquet",
                    help="one column per variable; empty cells are missing values")
     p.add_argument("-o", "--output", required=True, metavar="FITTED.yaml",
                    help="the fitted program: the input file with learned values and the fit's "
                    "record")
     p.add_argument("--freeze", action="append", default=[], metavar="TERM",
-                   help='keep a term as written, e.g. --freeze "P(M)"')
-    p.add_argument("--max-iter", type=int, default=200, help="most EM iterations (default 200)")
+                   help='keep a term as written, e.g. --freeze "P(M)"; repeatable (default: '
+                   "the terms marked learn: false)")
+    p.add_argument("--max-iter", type=int, default=200,
+                   help="most EM iterations (default: %(default)s)")
     p.add_argument("--tol", type=float, default=1e-8,
-                   help="EM stops when the log-likelihood gains less than this, relative")
+                   help="EM stops when the log-likelihood gains less than this, relative "
+                   "(default: %(default)s)")
     p.set_defaults(func=cmd_learn)
 
     p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")
-    p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.yaml")
+    p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai",
+                   help="a network file (optionally .gz)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.yaml",
+                   help="the program file to write")
     p.set_defaults(func=cmd_import)
 
     p = sub.add_parser("export", help="write a discrete program as BIF, XMLBIF or UAI")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bif|.xmlbif|.uai")
-    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.add_argument("file", metavar="FILE", help="a discrete program with literal tables")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bif|.xmlbif|.uai",
+                   help="the network file; its format from the extension")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help="write the program with this term uniform; repeatable (default: none)")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("run", help="run an experiment file (a runner plugin does the work)")
-    p.add_argument("experiment", metavar="EXPERIMENT.yaml")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for results and figures")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--workers", type=int, default=1, metavar="N", help="local processes")
+    p.add_argument("experiment", metavar="EXPERIMENT.yaml", help="an experiment file")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for results and the report; an interrupted run resumes there")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (default: a bar on a terminal)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local processes (default: %(default)s)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                   help="an existing Dask scheduler (install bayesprog[dask])")
-    p.add_argument("--no-report", action="store_true", help="do not build the report")
+                   help="an existing Dask scheduler, instead of local processes (install "
+                   "bayesprog[dask]; default: none)")
+    p.add_argument("--no-report", action="store_true",
+                   help="do not build the report (default: build it)")
     p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
-                   help="report without the animation of Fig. 11 (an MP4 video)")
+                   help="report without the animation of Fig. 11, an MP4 video (default: with)")
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
-                   "findings are set beside these in the report")
+                   "findings are set beside these in the report (default: none)")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
-    p.add_argument("out", metavar="DIR")
+    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
     p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
-                   help="report without the animation of Fig. 11 (an MP4 video)")
+                   help="report without the animation of Fig. 11, an MP4 video (default: with)")
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
-                   "findings are set beside these in the report")
+                   "findings are set beside these in the report (default: none)")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")
-    p.add_argument("target", metavar="SCENARIO_OR_MODELS")
-    p.add_argument("--stdio", action="store_true", help="JSON lines on stdin/stdout")
+    p.add_argument("target", metavar="SCENARIO_OR_MODELS",
+                   help="a scenario file, or a models folder (its scenarios/paper.yaml)")
+    p.add_argument("--stdio", action="store_true",
+                   help="JSON lines on stdin/stdout (required: the only interface)")
     p.add_argument("--task", help="task of the scenario (default: its first)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--ablate", action="append", default=[], metavar="TERM")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the decisions' tie breaking (default: %(default)s)")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help="decide with this term of pi_tar uniform; repeatable (default: none)")
     p.add_argument("--runner", help="runner plugin (default: haptic)")
     p.set_defaults(func=cmd_explore)
 
     p = sub.add_parser("schema", help="print the JSON Schema of program files")
-    p.add_argument("-o", "--output", metavar="FILE")
+    p.add_argument("-o", "--output", metavar="FILE",
+                   help="write the schema there (default: print it)")
     p.set_defaults(func=cmd_schema)
     return parser
 

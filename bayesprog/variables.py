@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,13 @@ class Discrete:
     @property
     def card(self) -> int:
         return len(self.states)
+
+    @property
+    def typed_states(self) -> tuple[Any, ...]:
+        """The states as values of the variable's type: integers for a range, names else."""
+        if self.kind == "range" and self.values is not None:
+            return tuple(int(v) for v in self.values)
+        return self.states
 
     @property
     def is_discrete(self) -> bool:

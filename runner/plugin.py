@@ -41,6 +41,12 @@ def report(out: Path, options: dict) -> int:
 
 
 def _scenario_path(target: Path) -> Path:
+    from bayesprog.language.loader import wrong_kind
+
+    if target.is_file():
+        hint = wrong_kind(target, "scenario", "explore takes a scenario file or a models folder")
+        if hint:
+            raise BayesprogError(hint)
     if target.is_dir():
         candidate = target / "scenarios" / "paper.yaml"
         if candidate.is_file():

@@ -6,6 +6,7 @@ Numbers are checked against probabilities computed here by enumeration of the sp
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import json
 import re
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import bayesprog
 from bayesprog.cli import main
 
 ROOT = Path(__file__).parents[1]
@@ -338,11 +340,13 @@ def query_json(capsys, *args) -> dict:
 def test_query_json_posterior(capsys):
     data = query_json(capsys, SPRINKLER, "P(Rain | Grass=wet)")
     assert REQUIRED_POSTERIOR <= set(data)
-    assert set(data) - REQUIRED_POSTERIOR <= {"ablated"}
+    assert set(data) - REQUIRED_POSTERIOR <= {"ablated", "log_evidence"}
     assert data["question"] == "P(Rain | Grass=wet)"
     assert data["variables"] == ["Rain"]
     assert data["states"] == {"Rain": ["rain", "dry"]}
     assert data["probabilities"] == pytest.approx(p_rain_given_grass("wet"), abs=1e-12)
+    wet = sum(p for (_r, _s, g), p in joint().items() if g == "wet")  # P(Grass = wet)
+    assert data["log_evidence"] == pytest.approx(np.log(wet), abs=1e-12)
 
 
 def test_query_json_two_variables(capsys):
@@ -360,12 +364,30 @@ def test_query_json_two_variables(capsys):
 def test_query_json_map(capsys):
     data = query_json(capsys, SPRINKLER, "P(Rain Sprinkler | Grass=wet)", "--map")
     assert REQUIRED_MAP <= set(data)
-    assert set(data) - REQUIRED_MAP <= {"ablated", "ties", "zero_evidence"}
+    assert set(data) - REQUIRED_MAP <= {"ablated", "ties", "zero_evidence", "log_evidence"}
     assert data["ties"] == 1 and data["zero_evidence"] is False
     assignment, p = map_rain_sprinkler("wet")
     assert data["question"] == "P(Rain Sprinkler | Grass=wet)"
     assert data["map"] == assignment
     assert data["probability"] == pytest.approx(p, abs=1e-12)
+    wet = sum(p for (_r, _s, g), p in joint().items() if g == "wet")
+    assert data["log_evidence"] == pytest.approx(np.log(wet), abs=1e-12)
+
+
+def test_a_map_answer_has_the_variables_type(tmp_path, capsys):
+    path = tmp_path / "count.yaml"
+    path.write_text("""\
+bayesprog: 1
+variables: {K: {range: [2, 5]}, A: {states: [u, v]}}
+decomposition:
+  - {term: P(K), form: table, table: [0.1, 0.2, 0.6, 0.1]}
+  - {term: P(A | K), form: table, table: [[0.5, 0.5], [0.5, 0.5], [0.9, 0.1], [0.5, 0.5]]}
+""")
+    data = query_json(capsys, str(path), "P(K A)", "--map")
+    assert data["map"] == {"K": 4, "A": "u"} and isinstance(data["map"]["K"], int)
+    assert bayesprog.load(path).ask("P(K | A=u)", kind="map").assignment == {"K": 4}
+    data = query_json(capsys, str(path), "P(K | A=u)")
+    assert data["states"] == {"K": [2, 3, 4, 5]}
 
 
 def test_query_named_map_question_with_evidence(capsys):
@@ -683,3 +705,52 @@ def test_import_of_a_file_without_variables_writes_nothing(tmp_path, capsys):
     assert main(["import", str(bad), "-o", str(tmp_path / "x.yaml")]) == 2
     assert "bad.bif" in capsys.readouterr().err
     assert not (tmp_path / "x.yaml").exists()
+
+
+def test_every_subcommand_documents_its_arguments_and_defaults():
+    from bayesprog.cli import build_parser
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, sub in commands.choices.items():
+        for action in sub._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            what = f"{name} {action.option_strings or action.dest}"
+            assert action.help, f"{what}: no help"
+            has_default = action.default not in (None, False, [], argparse.SUPPRESS)
+            if has_default and action.option_strings:
+                assert "default" in action.help, f"{what}: its default is not said"
+
+
+@pytest.mark.parametrize("command, kind", [
+    (["query", "models/scenarios/paper.yaml", "P(M)"], "this is a scenario file, not a program"),
+    (["show", "models/experiments/quick.yaml"], "this is an experiment file, not a program"),
+    (["run", "models/pi_per.yaml", "--out", "OUT"], "this is a program file, not an experiment"),
+    (["run", "models/scenarios/paper.yaml", "--out", "OUT"], "a scenario file, not an experiment"),
+    (["explore", "models/pi_per.yaml", "--stdio"], "this is a program file, not a scenario"),
+])
+def test_a_file_of_the_wrong_kind_is_named(capsys, tmp_path, command, kind):
+    root = Path(__file__).parents[1]
+    argv = [str(root / a) if a.startswith("models/") else a for a in command]
+    argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert kind in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("bayesprog: 1\nvariables:\n  A: {states: [a, b]\ndecomposition: []\n",
+     "4:1: malformed YAML: expected ',' or '}' (the end of a {...} mapping), found a value "
+     "(the {...} or [...] opened at line 3)"),
+    ("bayesprog: 1\nvariables:\n\tA: {states: [a, b]}\n",
+     "3:1: malformed YAML: expected spaces for indentation, found a tab"),
+    ("bayesprog: 1\nvariables:\n  A: \"abc\n",
+     "4:1: malformed YAML: expected the closing quote of a string, found the end of the file"),
+    ("a: b: c\n", "1:5: malformed YAML: expected one 'key: value' per line, found a second ':'"),
+])
+def test_yaml_syntax_errors_say_what_was_expected_and_found(tmp_path, capsys, text, message):
+    path = tmp_path / "broken.yaml"
+    path.write_text(text)
+    assert main(["validate", str(path)]) == 2
+    assert f"broken.yaml:{message}" in capsys.readouterr().err

@@ -260,8 +260,10 @@ def check_map(program, text, evidence, posterior: np.ndarray, net: Net, searched
     else:
         assert chosen in near
     assert abs(float(result.probability) - flat[chosen]) <= 1e-9
-    assert result.assignment == {v: net.states[v][int(i)]
-                                 for v, i in zip(searched, result.indices, strict=True)}
+    # the assignment in each variable's type: the integer of a range, else the state's name
+    assert result.assignment == {
+        v: int(net.states[v][int(i)]) if v in net.range_low else net.states[v][int(i)]
+        for v, i in zip(searched, result.indices, strict=True)}
 
 
 @settings(max_examples=70, deadline=None, suppress_health_check=SLOW_OK)

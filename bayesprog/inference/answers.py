@@ -30,16 +30,22 @@ class Posterior:
     log_evidence: np.ndarray
     batch_shape: tuple[int, ...]
     ablated: tuple[str, ...] = ()
+    #: the states as values of each variable's type (integers for a range); names by default
+    values: dict[str, tuple[Any, ...]] | None = None
 
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
+
+    def typed(self, variable: str) -> tuple[Any, ...]:
+        return (self.values or {}).get(variable, self.states[variable])
 
     def to_json(self) -> dict[str, Any]:
         return {
             "question": self.question,
             "variables": list(self.variables),
-            "states": {v: list(s) for v, s in self.states.items()},
+            "states": {v: list(self.typed(v)) for v in self.variables},
             "probabilities": self.probabilities.tolist(),
+            "log_evidence": _floats(self.log_evidence),
             "ablated": list(self.ablated),
         }
 
@@ -64,12 +70,15 @@ class MapResult:
 
     @property
     def assignment(self) -> dict[str, Any]:
-        """State names of the argmax (arrays of names when batched)."""
+        """The argmax as values of each variable's type: state names, integers for a range
+        (arrays when batched)."""
         out = {}
         for i, var in enumerate(self.variables):
-            names = np.asarray(self.states[var], dtype=object)
-            chosen = names[self.indices[..., i]]
-            out[var] = chosen if self.indices.ndim > 1 else str(chosen)
+            values = np.empty(len(self.states[var]), dtype=object)
+            values[:] = list(self.posterior.typed(var))
+            chosen = values[self.indices[..., i]]
+            out[var] = chosen if self.indices.ndim > 1 else chosen.item() if hasattr(
+                chosen, "item") else chosen
         return out
 
     def _repr_html_(self) -> str | None:
@@ -83,8 +92,22 @@ class MapResult:
             "probability": self.probability.tolist(),
             "ties": self.ties.tolist(),
             "zero_evidence": self.zero_evidence.tolist(),
+            "log_evidence": _floats(self.posterior.log_evidence),
             "ablated": list(self.ablated),
         }
+
+
+def _floats(values: np.ndarray) -> Any:
+    """Numbers for JSON: -inf (evidence of probability zero) as None."""
+    array = np.asarray(values, float)
+    out = np.where(np.isfinite(array), array, np.nan).tolist()
+    if isinstance(out, float):
+        return None if np.isnan(out) else out
+    return _nested_none(out)
+
+
+def _nested_none(values: list) -> list:
+    return [_nested_none(v) if isinstance(v, list) else (None if v != v else v) for v in values]
 
 
 def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:

@@ -70,6 +70,48 @@ def _plain_scalar(value: str) -> Any:
     return value
 
 
+_TOKENS = {"<scalar>": "a value", "<stream end>": "the end of the file",
+           "<block end>": "the end of the indented block", "'?'": "a key",
+           "<block mapping start>": "a key indented more than the lines above it", "'-'": "a list item",
+           "<block sequence start>": "a list", "'{'": "'{'", "'['": "'['"}
+
+
+def _token(text: str) -> str:
+    text = text.strip()
+    if text.startswith("'<") and text.endswith(">'"):
+        text = text[1:-1]
+    return _TOKENS.get(text, text)
+
+
+def yaml_problem(exc: yaml.MarkedYAMLError, text: str) -> str:
+    """PyYAML's complaint in plain words: what was expected, what was found (and where the
+    construct that is not finished began)."""
+    problem = (exc.problem or exc.context or "").strip()
+    where = ""
+    if exc.context_mark is not None and exc.problem_mark is not None and \
+            exc.context_mark.line != exc.problem_mark.line:
+        where = f" (the {{...}} or [...] opened at line {exc.context_mark.line + 1})" \
+            if "flow" in (exc.context or "") else \
+            f" (in what began at line {exc.context_mark.line + 1})"
+    found = re.match(r"expected (.+), but (?:found|got) (.+)$", problem)
+    if found:
+        expected, got = found.groups()
+        expected = expected.replace("',' or '}'", "',' or '}' (the end of a {...} mapping)")
+        expected = expected.replace("',' or ']'", "',' or ']' (the end of a [...] list)")
+        return f"malformed YAML: expected {_token(expected)}, found {_token(got)}{where}"
+    if "mapping values are not allowed here" in problem:
+        return ("malformed YAML: expected one 'key: value' per line, found a second ':' "
+                "(quote a value that contains ': ')")
+    if "cannot start any token" in problem and "\\t" in problem:
+        return "malformed YAML: expected spaces for indentation, found a tab"
+    if "found unexpected end of stream" in problem:
+        return (f"malformed YAML: expected the closing quote of a string, found the end of the "
+                f"file{where}")
+    if "could not find expected ':'" in problem:
+        return f"malformed YAML: expected 'key: value', found a line without ':'{where}"
+    return f"malformed YAML: {problem}{where}"
+
+
 def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
     """Parse ``text`` strictly. Returns the located data and the problems found (maybe several)."""
     problems: list[Diagnostic] = []
@@ -78,7 +120,7 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line, column = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        message = f"malformed YAML: {exc.problem or exc.context}"
+        message = yaml_problem(exc, text)
         return Located(None, file), [Diagnostic(file, line, column, message)]
     except yaml.YAMLError as exc:  # pragma: no cover - every PyYAML error we know carries a mark
         return Located(None, file), [Diagnostic(file, 1, 1, f"malformed YAML: {exc}")]
@@ -134,3 +176,34 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
 
     located.data = build(node, ())
     return located, problems
+
+
+#: the top-level key that names each kind of file of the project
+KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenario",
+         "sensor": "sensor model"}
+
+
+def file_kind(path: str | Path) -> str | None:
+    """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
+    None (unreadable, not YAML, or none of these)."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+        return None
+    if not isinstance(data, dict):
+        return None
+    return next((kind for key, kind in KINDS.items() if key in data), None)
+
+
+def wrong_kind(path: str | Path, expected: str, hint: str = "") -> str | None:
+    """A message when the file at ``path`` is plainly another kind of file than ``expected``."""
+    kind = file_kind(path)
+    if kind is None or kind == expected:
+        return None
+    article = "an" if kind[0] in "aeiou" else "a"
+    wanted = "an" if expected[0] in "aeiou" else "a"
+    return (f"{path}: this is {article} {kind} file, not {wanted} {expected} file"
+            + (f" ({hint})" if hint else ""))

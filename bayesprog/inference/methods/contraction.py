@@ -91,6 +91,7 @@ def contract_question(plan: QuestionPlan) -> Posterior:
         question=str(expr),
         variables=searched,
         states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
         probabilities=probs.reshape(shape + cards),
         log_evidence=log_z.reshape(shape),
         batch_shape=shape,

@@ -90,6 +90,7 @@ class TableMethod(Method):
             question=str(plan.question.expression),
             variables=searched,
             states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
             probabilities=probs.reshape(shape + cards),
             log_evidence=(np.log(z) + compiled.log_offset).reshape(shape),
             batch_shape=shape,
