@@ -9,6 +9,7 @@ that later checks can point at it.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from typing import Any
@@ -183,7 +184,7 @@ KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenar
          "sensor": "sensor model"}
 
 
-def file_kind(path: str | Path) -> str | None:
+def file_kind(path: str | os.PathLike[str]) -> str | None:
     """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
     None (unreadable, not YAML, or none of these)."""
     import yaml
@@ -198,7 +199,7 @@ def file_kind(path: str | Path) -> str | None:
     return next((kind for key, kind in KINDS.items() if key in data), None)
 
 
-def wrong_kind(path: str | Path, expected: str, hint: str = "") -> str | None:
+def wrong_kind(path: str | os.PathLike[str], expected: str, hint: str = "") -> str | None:
     """A message when the file at ``path`` is plainly another kind of file than ``expected``."""
     kind = file_kind(path)
     if kind is None or kind == expected:
