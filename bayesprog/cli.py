@@ -229,19 +229,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     return int(runner.run(Path(args.experiment), Path(args.out), options))
 
 
-def cmd_report(args: argparse.Namespace) -> int:
-    import json
-
-    manifest = Path(args.out) / "experiment.json"
+def _output_runner(out: str) -> Any:
+    """The runner plugin that wrote the experiment output folder ``out``."""
+    manifest = Path(out) / "experiment.json"
     try:
         name = json.loads(manifest.read_text(encoding="utf-8"))["experiment"].get("runner")
     except FileNotFoundError:
-        raise _UserError(f"{args.out}: no experiment.json: not an experiment's output folder") \
+        raise _UserError(f"{out}: no experiment.json: not an experiment's output folder") \
             from None
-    except (ValueError, KeyError, AttributeError):
+    except (ValueError, KeyError, AttributeError, TypeError):
         raise _UserError(f"{manifest}: not a readable experiment manifest") from None
-    return int(_runner(name).report(Path(args.out), {"no_gif": args.no_animation,
-                                                     "compare": args.compare}))
+    return _runner(name)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    return int(_output_runner(args.out).report(Path(args.out), {"no_gif": args.no_animation,
+                                                                "compare": args.compare}))
+
+
+def cmd_results(args: argparse.Namespace) -> int:
+    runner = _output_runner(args.out)
+    if not hasattr(runner, "results"):
+        raise _UserError(f"{args.out}: its runner writes no results table")
+    return int(runner.results(Path(args.out), {"output": args.output}))
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
@@ -392,6 +402,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
                    "findings are set beside these in the report (default: none)")
     p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("results", help="write an experiment's stored runs as one tidy table")
+    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
+    p.add_argument("-o", "--output", required=True, metavar="RUNS.parquet|.csv",
+                   help="the table: one row per task, configuration, run and step, with the "
+                   "probed cell, Gamma and the cues at that cell; its format from the extension")
+    p.set_defaults(func=cmd_results)
 
     p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")
     p.add_argument("target", metavar="SCENARIO_OR_MODELS",

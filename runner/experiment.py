@@ -101,6 +101,10 @@ def simulate(
     gamma = BorderDistance(scenario.centres, scenario.border(task), runs)
     out_gamma = np.empty((runs, iterations))
     out_paths = np.empty((runs, iterations), dtype=np.int64)
+    # the cues behind each probed cell, at that cell (from the decision that chose it; none
+    # for the start cell)
+    cues = {name: np.full((runs, iterations), np.nan) for name in CUES}
+    rows = np.arange(runs)
     cells = explorer.expected
     for k in range(iterations):
         texture, compliance = sensor.probe(cells)
@@ -108,9 +112,19 @@ def simulate(
         out_gamma[:, k] = gamma.probe(cells)
         if k + 1 < iterations:
             cells = explorer.step(cells, texture, compliance)
+            d = explorer.last
+            cues["inhibition"][:, k + 1] = d.inhibition[rows, cells]
+            cues["saliency"][:, k + 1] = d.saliency[rows, cells]
+            cues["uncertainty"][:, k + 1] = d.uncertainty[rows, cells]
+            cues["target_probability"][:, k + 1] = explorer.target_probabilities[rows, cells]
         else:
             explorer.perceive(cells, texture, compliance)
-    return {"gamma": out_gamma, "paths": out_paths}
+    return {"gamma": out_gamma, "paths": out_paths, **cues}
+
+
+#: stored per probe beside Gamma and the path: the cues at the probed cell when it was chosen,
+#: and its probability under pi_tar's posterior then
+CUES = ("inhibition", "saliency", "uncertainty", "target_probability")
 
 
 def mean_sem(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,6 +40,15 @@ def report(out: Path, options: dict) -> int:
     return 0
 
 
+def results(out: Path, options: dict) -> int:
+    """Write the stored runs of ``out`` as one tidy table (Parquet or CSV)."""
+    from runner.tables import write_runs
+
+    path, rows = write_runs(out, options["output"])
+    print(f"{path}: {rows} rows (task, configuration, run, step, probed cell, Gamma, cues)")
+    return 0
+
+
 def _scenario_path(target: Path) -> Path:
     from bayesprog.language.loader import wrong_kind
 

@@ -97,4 +97,7 @@ class ResultStore:
                 parts.append({k: data[k] for k in data.files})
         if not parts:
             raise StoreError(f"{self.out}: no results for {task}/{configuration}")
-        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        keys = list(dict.fromkeys(k for p in parts for k in p))
+        # a field that earlier versions did not store: NaN for their runs
+        return {k: np.concatenate([p[k] if k in p else np.full(p["gamma"].shape, np.nan)
+                                   for p in parts]) for k in keys}

@@ -234,3 +234,32 @@ def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
     reference = tmp_path / "reference"
     run_experiment(load_experiment(path), reference, progress=False)
     assert_same(results_of(out), results_of(reference))
+
+
+def test_the_runs_table_holds_every_probe_with_its_cues(reference, tmp_path, capsys):
+    import pandas as pd
+
+    from runner.report import replay
+
+    out, results = reference
+    assert main(["results", str(out), "-o", str(tmp_path / "runs.parquet")]) == 0
+    table = pd.read_parquet(tmp_path / "runs.parquet")
+    experiment = load_experiment(ResultStore(out).manifest()["files"]["experiment"]["path"])
+    spec = experiment.spec
+    assert len(table) == len(spec.tasks) * len(spec.configurations) * spec.runs * spec.iterations
+    rows = table[(table.task == "T3") & (table.configuration == "full")]
+    stored = results["T3/full"]
+    np.testing.assert_array_equal(rows["cell"].to_numpy(), stored["paths"].ravel())
+    np.testing.assert_array_equal(rows["gamma_m"].to_numpy(), stored["gamma"].ravel())
+    assert rows[rows.step == 0][["inhibition", "saliency", "uncertainty"]].isna().all().all()
+    # the cues at a probed cell are those of the decision that chose it (a replay agrees)
+    frames = list(replay(experiment, "T3", "full", 1, spec.iterations))
+    run = rows[rows.run == 1].set_index("step")
+    for k, frame in enumerate(frames[:-1]):
+        chosen = frame["next"]
+        assert run.loc[k + 1, "cell"] == chosen
+        for key, column in (("I", "inhibition"), ("S", "saliency"), ("U", "uncertainty")):
+            np.testing.assert_equal(run.loc[k + 1, column], frame[key][chosen])
+    assert main(["results", str(out), "-o", str(tmp_path / "runs.csv")]) == 0
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == len(table)
+    assert main(["results", str(out), "-o", str(tmp_path / "runs.xlsx")]) == 2

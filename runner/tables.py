@@ -1,0 +1,83 @@
+"""An experiment's stored runs as one tidy table: a row per (task, configuration, run, step),
+for pandas, R or a spreadsheet (``bayesprog results DIR -o runs.parquet``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bayesprog.errors import BayesprogError
+from bayesprog.files import atomic_write
+from runner.experiment import CUES, ExperimentSpec, load_experiment, load_results
+from runner.figures import centre_cm
+from runner.metrics import border_band
+from runner.store import ResultStore
+
+#: the table's columns, in order, with what each holds
+COLUMNS = {
+    "task": "the task (T1, T2, ...)",
+    "configuration": "full, or the ablated term (without_S, ...)",
+    "run": "the run (same start cell and seeds in every configuration)",
+    "step": "k, from 0 (the start cell)",
+    "cell": "the probed cell (flat index, x-major)",
+    "x_cm": "its centre, cm",
+    "y_cm": "its centre, cm",
+    "near_border": "within one cell of the task's ground-truth border",
+    "gamma_m": "Gamma(k): summed distance from the border cells to the probed ones, m",
+    "inhibition": "I at the probed cell when it was chosen (none at step 0)",
+    "saliency": "S there (NaN: not observed, or step 0)",
+    "uncertainty": "U there",
+    "target_probability": "its probability under pi_tar's posterior when it was chosen",
+}
+
+
+def runs_table(out: str | Path) -> Any:
+    """The stored runs of the experiment in ``out`` as a pandas DataFrame (COLUMNS)."""
+    import pandas as pd
+
+    store = ResultStore(Path(out))
+    manifest = store.manifest()
+    spec = ExperimentSpec.model_validate(manifest["experiment"])
+    scenario = load_experiment(manifest["files"]["experiment"]["path"]).scenario
+    results = load_results(store, spec)
+    frames = []
+    for task in spec.tasks:
+        band = border_band(scenario.border(task)).ravel()
+        for conf in spec.configurations:
+            r = results[f"{task}/{conf}"]
+            paths = r["paths"]
+            runs, steps = paths.shape
+            x, y = centre_cm(scenario, paths.ravel())
+            columns = {
+                "task": np.full(paths.size, task), "configuration": np.full(paths.size, conf),
+                "run": np.repeat(r["runs"], steps), "step": np.tile(np.arange(steps), runs),
+                "cell": paths.ravel(), "x_cm": x, "y_cm": y,
+                "near_border": band[paths.ravel()], "gamma_m": r["gamma"].ravel()}
+            for name in CUES:
+                columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
+            frames.append(pd.DataFrame(columns))
+    table = pd.concat(frames, ignore_index=True)
+    for name in ("task", "configuration"):
+        table[name] = table[name].astype("category")
+    return table[list(COLUMNS)]
+
+
+def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:
+    """Write the runs table to ``path``: Parquet (.parquet) or CSV (.csv); (path, rows)."""
+    import io
+
+    path = Path(path)
+    table = runs_table(out)
+    if path.suffix.lower() in (".parquet", ".pq"):
+        buffer = io.BytesIO()
+        table.to_parquet(buffer, index=False)
+        data = buffer.getvalue()
+    elif path.suffix.lower() == ".csv":
+        data = table.to_csv(index=False).encode()
+    else:
+        raise BayesprogError(f"-o {path}: expected a .parquet or .csv file, found "
+                             f"{path.suffix or 'no suffix'}")
+    atomic_write(path, data)
+    return path, len(table)
