@@ -1,7 +1,17 @@
 """A step interface for a real robot: JSON lines in, JSON lines out.
 
-Each input line reports one probe, ``{"cell": [ix, iy], "texture": e, "compliance": c}``; the
-reply is ``{"k": k, "next": [ix, iy]}``, the cell to probe next. ``{"reset": {"seed": s}}``
+Each input line reports one probe, ``{"cell": [ix, iy], "texture": e, "compliance": c}`` (add
+``"maps": true`` for the full maps); the reply is the cell to probe next, with what stood behind
+the choice::
+
+    {"k": k, "next": [ix, iy],
+     "probed": {"cell": [ix, iy], "material": name, "probability": p, "task_material": p},
+     "chosen": {"inhibition": i, "saliency": s or null, "uncertainty": u, "probability": p},
+     "shape": {"in_force": bool, "posterior": {"rectangle": p, "triangle": p} or null},
+     "maps": {"belief": [[...]], "inhibition": ..., "saliency": ..., "uncertainty": ...,
+              "posterior": ...}}                           (only when asked; null: unknown)
+
+``{"maps": true}`` alone answers the maps of the last decision. ``{"reset": {"seed": s}}``
 starts a new exploration. A malformed line gets ``{"error": "..."}`` and the session goes on.
 """
 
@@ -11,6 +21,9 @@ import json
 import math
 from typing import IO
 
+import numpy as np
+
+import bayesprog
 from bayesprog.errors import BayesprogError, short_repr
 from runner.explorer import Explorer
 
@@ -38,11 +51,71 @@ def _seed(value: object) -> int:
     return value
 
 
+def _number(x: float) -> float | None:
+    return float(x) if math.isfinite(float(x)) else None
+
+
+def _grid(values: np.ndarray, shape: tuple[int, int]) -> list:
+    """A field over the grid as nested lists [ix][iy]; null where it is unknown (NaN)."""
+    grid = np.asarray(values, float).reshape(shape)
+    return [[_number(v) for v in row] for row in grid]
+
+
+class _Session:
+    """What the replies say beyond the next cell, read from the explorer after a decision."""
+
+    def __init__(self, explorer: Explorer):
+        self.explorer = explorer
+        self.shape_program: bayesprog.Program | None = None
+        if "P(R | O)" not in explorer.target.ablated:
+            self.shape_program = bayesprog.load(explorer.scenario.program_path("shape"))
+
+    def probed(self, cell: list[int]) -> dict:
+        e = self.explorer
+        flat = int(e.flat(np.asarray(cell).reshape(1, 2))[0])
+        belief = e.posterior[0, flat]
+        best = int(np.argmax(belief))
+        return {"cell": cell, "material": e.scenario.materials[best],
+                "probability": float(belief[best]),
+                "task_material": float(belief[e.target_material])}
+
+    def chosen(self) -> dict:
+        e = self.explorer
+        d, nxt = e.last, int(e.last.next_cell[0])
+        return {"inhibition": _number(d.inhibition[0, nxt]),
+                "saliency": _number(d.saliency[0, nxt]),
+                "uncertainty": _number(d.uncertainty[0, nxt]),
+                "probability": float(e.target_probabilities[0, nxt])}
+
+    def shape(self) -> dict:
+        d = self.explorer.last
+        ready = bool(d.shape_ready is not None and d.shape_ready[0])
+        if not ready or self.shape_program is None or d.shape_error is None:
+            return {"in_force": False, "posterior": None}
+        answer = self.shape_program.ask("shape", {"L1": float(d.shape_error[0, 0]),
+                                                  "L2": float(d.shape_error[0, 1])})
+        states = answer.states[answer.variables[0]]
+        probabilities = [float(x) for x in answer.probabilities]
+        return {"in_force": True, "posterior": dict(zip(states, probabilities, strict=True))}
+
+    def maps(self) -> dict:
+        e = self.explorer
+        if e.last is None:
+            raise ValueError("no decision yet: send a probe first")
+        shape = e.scenario.shape
+        belief = np.where(e.visits[0] > 0, e.posterior[0, :, e.target_material], np.nan)
+        return {"belief": _grid(belief, shape), "inhibition": _grid(e.last.inhibition[0], shape),
+                "saliency": _grid(e.last.saliency[0], shape),
+                "uncertainty": _grid(e.last.uncertainty[0], shape),
+                "posterior": _grid(e.target_probabilities[0], shape)}
+
+
 def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) -> int:
     """Answer probes until end of input. Returns the number of probes answered."""
     k = 0
     started = False
     answered = 0
+    session = _Session(explorer)
     for line_no, line in enumerate(stdin, 1):
         if not line.strip():
             continue
@@ -50,14 +123,18 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
             obj = json.loads(line)
             if not isinstance(obj, dict):
                 raise ValueError("expected a JSON object")
-            if "reset" in obj:
+            if set(obj) == {"maps"}:
+                if obj["maps"] is not True:
+                    raise ValueError(f'expected {{"maps": true}}, found {_short(obj)}')
+                reply: dict = {"k": k - 1, "maps": session.maps()}
+            elif "reset" in obj:
                 opts = obj["reset"]
                 if not isinstance(opts, dict) or set(opts) - {"seed"}:
                     raise ValueError('expected {"reset": {"seed": S}} (or {"reset": {}}), found '
                                      f"{_short(opts)}")
                 seed = _seed(opts.get("seed", seed))
                 started, k = False, 0
-                reply: dict = {"reset": True, "seed": seed}
+                reply = {"reset": True, "seed": seed}
             else:
                 missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
                 if missing:
@@ -75,8 +152,17 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
                 if not started:
                     explorer.reset(start=cell, seed=seed)
                     started = True
+                extra = set(obj) - {"cell", "texture", "compliance", "maps"}
+                if extra:
+                    raise ValueError(f"unknown key(s) {', '.join(sorted(extra))}: expected cell, "
+                                     "texture, compliance and maybe maps")
+                if obj.get("maps", False) not in (True, False):
+                    raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
                 nxt = explorer.observe(cell, texture, compliance)
-                reply = {"k": k, "next": list(nxt)}
+                reply = {"k": k, "next": list(nxt), "probed": session.probed(cell),
+                         "chosen": session.chosen(), "shape": session.shape()}
+                if obj.get("maps"):
+                    reply["maps"] = session.maps()
                 k += 1
                 answered += 1
         except (ValueError, BayesprogError) as exc:

@@ -11,8 +11,10 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+import bayesprog
 from runner.explorer import Explorer
 from runner.scenario import load_scenario
 from runner.stdio import serve
@@ -52,7 +54,7 @@ WALK = [probe((10, 12), "silicone"), probe((11, 12), "silicone"), probe((11, 13)
 
 def assert_step_replies(replies: list[dict], first_k: int = 0) -> None:
     for j, reply in enumerate(replies):
-        assert set(reply) == {"k", "next"}, reply
+        assert set(reply) == {"k", "next", "probed", "chosen", "shape"}, reply
         assert reply["k"] == first_k + j
         ix, iy = reply["next"]
         assert isinstance(ix, int) and isinstance(iy, int)
@@ -210,3 +212,51 @@ def test_reset_with_an_unknown_key_gets_an_error_reply():
     replies = session(['{"reset": {"start": [3, 4]}}', WALK[0]])
     assert "line 1" in replies[0]["error"] and "start" in replies[0]["error"]
     assert replies[1]["k"] == 0
+
+
+def test_replies_say_what_stood_behind_the_choice_and_the_maps_when_asked():
+    ex = explorer("T2")
+    lines = WALK[:5] + [WALK[5][:-1] + ', "maps": true}', json.dumps({"maps": True})]
+    replies = session(lines, ex=ex)
+    last = replies[5]
+    # the probed cell: the material posterior there, from the explorer's perceptual map
+    cell = last["probed"]["cell"]
+    flat = cell[0] * NY + cell[1]
+    belief = ex.posterior[0, flat]
+    assert last["probed"]["material"] == ex.scenario.materials[int(np.argmax(belief))]
+    assert last["probed"]["task_material"] == pytest.approx(belief[ex.target_material])
+    # the chosen cell: its cues and posterior, which the maps hold at the same place
+    ix, iy = last["next"]
+    maps = last["maps"]
+    assert last["chosen"]["inhibition"] == pytest.approx(maps["inhibition"][ix][iy])
+    assert last["chosen"]["uncertainty"] == pytest.approx(maps["uncertainty"][ix][iy])
+    assert last["chosen"]["probability"] == pytest.approx(maps["posterior"][ix][iy])
+    assert last["chosen"]["probability"] == pytest.approx(max(max(r) for r in maps["posterior"]))
+    assert len(maps["belief"]) == NX and len(maps["belief"][0]) == NY
+    assert maps["belief"][0][0] is None  # a cell never probed
+    assert maps["belief"][cell[0]][cell[1]] == pytest.approx(belief[ex.target_material])
+    assert replies[6] == {"k": 5, "maps": maps}
+    assert last["shape"] == {"in_force": False, "posterior": None}  # six probes: too few
+
+
+def test_the_shape_posterior_is_pi_objs_once_the_cue_is_in_force():
+    ex = explorer("T2")
+    materials = ex.scenario.material_map
+    border = np.argwhere(ex.scenario.border("T2"))
+    order = np.argsort(np.arctan2(*(border - border.mean(0)).T[::-1]))
+    lines = []
+    for ix, iy in border[order][:20]:  # each border cell, and a wood cell beside it
+        lines.append(probe((int(ix), int(iy)), "silicone"))
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            if ex.scenario.materials[materials[ix + dx, iy + dy]] == "wood":
+                lines.append(probe((int(ix + dx), int(iy + dy)), "wood"))
+                break
+    replies = session(lines, ex=ex)
+    assert replies[-1]["shape"]["in_force"]
+    posterior = replies[-1]["shape"]["posterior"]
+    d = ex.last
+    expected = bayesprog.load(ROOT / "models" / "pi_obj.yaml").ask(
+        "shape", {"L1": float(d.shape_error[0, 0]), "L2": float(d.shape_error[0, 1])})
+    assert posterior == pytest.approx(dict(zip(("rectangle", "triangle"),
+                                               expected.probabilities.tolist(), strict=True)))
+    assert sum(posterior.values()) == pytest.approx(1.0)
