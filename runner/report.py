@@ -273,7 +273,12 @@ class DecisionFigure:
 def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
                   out_png: Path, out_video: Path | None, steps: int) -> None:
     """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run at the same resolution."""
-    frames = list(replay(experiment, task, configuration, run, steps))
+    bar = progress(steps, "Fig. 11 replay")
+    frames = []
+    for frame in replay(experiment, task, configuration, run, steps):
+        frames.append(frame)
+        bar.update(1)
+    bar.close()
     title = (f"{experiment.spec.name}: task {task}, {configuration}, run {run}")
     figure = DecisionFigure(experiment.scenario, task, title)
     figure.show(frames[min(step, len(frames) - 1)], step)

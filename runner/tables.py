@@ -3,10 +3,12 @@ for pandas, R or a spreadsheet (``bayesprog results DIR -o runs.parquet``)."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from bayesprog.errors import BayesprogError
 from bayesprog.files import atomic_write
@@ -43,6 +45,8 @@ def runs_table(out: str | Path) -> Any:
     scenario = load_experiment(manifest["files"]["experiment"]["path"]).scenario
     results = load_results(store, spec)
     frames = []
+    bar = tqdm(total=len(spec.tasks) * len(spec.configurations), desc="runs table",
+               leave=False, disable=not sys.stderr.isatty())
     for task in spec.tasks:
         band = border_band(scenario.border(task)).ravel()
         for conf in spec.configurations:
@@ -58,6 +62,8 @@ def runs_table(out: str | Path) -> Any:
             for name in CUES:
                 columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
             frames.append(pd.DataFrame(columns))
+            bar.update(1)
+    bar.close()
     table = pd.concat(frames, ignore_index=True)
     for name in ("task", "configuration"):
         table[name] = table[name].astype("category")

@@ -161,3 +161,11 @@ def test_language_reference_mentions_every_form():
     assert forms
     missing = [name for name in forms if f"`{name}`" not in text]
     assert not missing, f"docs/language.md does not document the form(s) {missing}"
+
+
+def test_every_file_the_readme_names_exists():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"(?<![\w/.])((?:models|docs|benchmarks|tests)/[\w./-]+\.\w+)", text))
+    assert named, "the README names no file"
+    missing = sorted(n for n in named if not (ROOT / n).exists())
+    assert not missing, f"the README names files that do not exist: {missing}"

@@ -12,6 +12,7 @@ over data sets: a fit continues from a fitted file's statistics with more data.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Any
 
 import networkx as nx
 import numpy as np
+from tqdm import tqdm
 
 from bayesprog.errors import BayesprogError
 from bayesprog.forms import InputRef, ParamValue, TermContext
@@ -283,7 +285,10 @@ class _Em:
         previous = -np.inf
         converged = not self.iterative
         iterations = 0
+        bar = tqdm(total=max_iter, desc="EM", unit="iteration", leave=False,
+                   disable=not (self.iterative and sys.stderr.isatty()))
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
+            bar.update(1)
             # one pass needs no starting values: rows are not checked against them
             ll, stats = self.e_step(params, strict=self.iterative)
             objective = ll + self.log_prior(params)
@@ -294,6 +299,7 @@ class _Em:
                 converged = True
                 break
             previous = objective
+        bar.close()
         ll, stats = self.e_step(params)
         total = {i.term.label: self._merged(i, stats[i.term.label]) for i in self.todo}
         return params, ll, iterations, converged, total
