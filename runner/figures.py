@@ -10,8 +10,9 @@ import numpy as np
 
 from runner.scenario import Scenario
 
-#: the border line, the path, the start and the chosen cell
-BORDER, PATH, START, CHOSEN = "cyan", "white", "white", "red"
+#: the border line (over a 'viridis' map; over a 'hot' one, HOT_BORDER), the path, the start
+#: and the chosen cell: colours that stay distinct on either map
+BORDER, HOT_BORDER, PATH, START, CHOSEN = "magenta", "deepskyblue", "white", "white", "red"
 
 
 def plt() -> Any:

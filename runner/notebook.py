@@ -80,7 +80,7 @@ class StepView:
 
     def _figure(self) -> DecisionFigure:
         return DecisionFigure(self.experiment.scenario, self.task,
-                              f"{self.experiment.spec.name}: task {self.task}, "
+                              f"Experiment {self.experiment.spec.name}: task {self.task}, "
                               f"{self.configuration}, run {self.run}")
 
     def figure(self, k: int) -> Any:

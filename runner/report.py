@@ -85,7 +85,10 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
         for conf in spec.configurations:
             mean, sem = mean_sem(results[f"{task}/{conf}"]["gamma"])
             k = np.arange(mean.size)
-            ax.plot(k, mean, label=conf.replace("_", " "))
+            # the full model drawn wide underneath: an ablation equal to it stays visible
+            style = ({"color": "black", "lw": 3.0, "alpha": 0.55, "zorder": 1} if conf == "full"
+                     else {"lw": 1.3, "ls": "--" if conf == "without_R" else "-", "zorder": 2})
+            ax.plot(k, mean, label=conf.replace("_", " "), **style)
             ax.fill_between(k, mean - sem, mean + sem, alpha=0.25)
         ax.set_title(f"Task {task}")
         ax.set_xlabel("iteration k")
@@ -124,7 +127,7 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
             counts = np.bincount(paths.ravel(), minlength=nx * ny) / paths.shape[0]
             figures.draw_map(axes[r, c], counts, scenario, cmap="hot", vmin=0,
                              label="visits per run", title=f"{task} {conf.replace('_', ' ')}")
-            figures.draw_border(axes[r, c], scenario, task, width=0.6)
+            figures.draw_border(axes[r, c], scenario, task, colour=figures.HOT_BORDER, width=0.7)
     figures.axes_in_cm(axes)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -172,7 +175,7 @@ class DecisionFigure:
     PANELS = [("belief", "belief P(M = task material)", "probability (grey: not probed)", (0, 1)),
               ("S", "saliency S (eq. 12)", "S (grey: not observed)", (0, 1)),
               ("U", "uncertainty U (eq. 11)", "U: normalised entropy", (0, 1)),
-              ("I", "inhibition I (eq. 10)", "I", (0, 1)),
+              ("I", "inhibition I (eq. 10)", "I: inhibition level", (0, 1)),
               ("shape", "shape cue P(O | R)", "probability per cell", None),
               ("posterior", "P(O | t, i, s, u, R) (eq. 13)", "probability per cell", None)]
 
@@ -264,10 +267,10 @@ class DecisionFigure:
         x, y = figures.centre_cm(self.scenario, [frame["next"]])
         self.caption.set_text(
             f"step k = {k}\n\nwhite line: the path so far\nwhite circle: the start cell\n"
-            f"red star: the next cell (MAP of P(O | ...)),\n  at ({x[0]:.1f}, {y[0]:.1f}) cm\n"
-            f"cyan (black in the first panel): the ground-truth border of {self.task}\n\n"
-            "grey: a cell not probed (belief), or a saliency with nothing perceived to "
-            "compare (marginalised)")
+            f"red star: the next cell, the MAP of\n  P(O | ...), at ({x[0]:.1f}, {y[0]:.1f}) cm\n"
+            f"magenta (black in the first panel):\n  the ground-truth border of {self.task}\n\n"
+            "grey: a cell not probed (belief),\n  or a saliency with nothing perceived\n"
+            "  to compare (the term is left out)")
 
 
 def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
@@ -279,7 +282,8 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
         frames.append(frame)
         bar.update(1)
     bar.close()
-    title = (f"{experiment.spec.name}: task {task}, {configuration}, run {run}")
+    title = (f"Experiment {experiment.spec.name}: task {task}, "
+             f"{'full model' if configuration == 'full' else configuration}, run {run}")
     figure = DecisionFigure(experiment.scenario, task, title)
     figure.show(frames[min(step, len(frames) - 1)], step)
     figure.fig.savefig(out_png, dpi=110)
@@ -512,7 +516,8 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
              "## Visits (paper Fig. 9)", "", "![Visits](fig9_visits.png)", "",
              "*Fig. 9. First column: the materials, the task's ground-truth border (black) and "
              "the runs' start cells (crosses). Then, per configuration, the visits per run of "
-             "each cell (each panel with its colour bar), the border in cyan. Axes in cm.*", "",
+             "each cell (each panel with its own colour scale: compare shapes, not colours "
+             "across panels), the border in blue. Axes in cm.*", "",
              f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
              "", "![Decision](fig11_decision.png)", "",
              "*Fig. 11. The step that ends the longest stretch of probes within one cell of the "
