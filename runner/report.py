@@ -88,8 +88,9 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
             # the full model drawn wide underneath: an ablation equal to it stays visible
             style = ({"color": "black", "lw": 3.0, "alpha": 0.55, "zorder": 1} if conf == "full"
                      else {"lw": 1.3, "ls": "--" if conf == "without_R" else "-", "zorder": 2})
-            ax.plot(k, mean, label=conf.replace("_", " "), **style)
-            ax.fill_between(k, mean - sem, mean + sem, alpha=0.25)
+            line, = ax.plot(k, mean, label=conf.replace("_", " "), **style)
+            ax.fill_between(k, mean - sem, mean + sem, alpha=0.2, color=line.get_color(),
+                            lw=0)
         ax.set_title(f"Task {task}")
         ax.set_xlabel("iteration k")
         ax.grid(alpha=0.3)
