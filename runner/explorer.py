@@ -86,6 +86,8 @@ class Explorer:
         self.template_points = np.stack([scenario.templates[n][1] for n in names])
         self.materials = self.perception.variables["M"].card  # type: ignore[union-attr]
         self.target_material = scenario.task_material(task)
+        #: the other side of the task's discontinuity: the remaining materials of the workspace
+        self.counter_materials = scenario.counter_materials(task)
         self.centres = scenario.centres
         self.diagonal = float(np.hypot(*(np.asarray(scenario.shape) * scenario.cell)))
         self.tracker = ShapeTracker(self.outlines, self.template_points)
@@ -160,10 +162,16 @@ class Explorer:
 
     def percept(self) -> tuple[np.ndarray, np.ndarray]:
         """The perceived stimulus of the task: where the task's material is perceived (its
-        posterior P(M_v = material) >= 1/2), and which cells were probed; [runs, nx, ny] each."""
+        posterior P(M_v = material) >= 1/2), and where a side of the task's discontinuity is
+        perceived at all: a probed cell perceived as the task's material or as one of the
+        remaining materials of the workspace; [runs, nx, ny] each. A probed cell perceived as
+        neither (a misperception, another material than any of the task) says nothing about
+        the task's discontinuity: it counts as not perceived."""
         shape = (self.runs, *self.scenario.shape)
-        target = self.posterior[..., self.target_material].reshape(shape) >= 0.5
-        return target, (self.visits > 0).reshape(shape)
+        target = self.posterior[..., self.target_material] >= 0.5
+        other = self.posterior[..., self.counter_materials].sum(axis=-1) >= 0.5
+        perceived = (self.visits > 0) & (target | other)
+        return target.reshape(shape), perceived.reshape(shape)
 
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""

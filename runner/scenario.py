@@ -152,6 +152,13 @@ class Scenario:
     def task_material(self, task: str) -> int:
         return self.materials.index(self.spec.tasks[task])
 
+    def counter_materials(self, task: str) -> list[int]:
+        """The other side of a task's discontinuity (the paper's Material_b): the remaining
+        materials of the workspace, those of its background and objects but the task's."""
+        present = [self.spec.background] + [o.material for o in self.spec.objects]
+        own = self.spec.tasks[task]
+        return sorted({self.materials.index(m) for m in present if m != own})
+
     def border(self, task: str) -> np.ndarray:
         """Ground-truth border of a task: cells of its material 4-adjacent to another material."""
         m = self.material_map

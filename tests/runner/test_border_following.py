@@ -110,3 +110,33 @@ def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):
         fields.append(explorer.cue_fields()[1][0])
     assert np.isnan(fields[0]).all()
     assert not np.isnan(fields[1]).all() and np.nanmax(fields[1]) > 0.5
+
+
+def test_a_misperceived_cell_of_a_material_absent_from_the_workspace_is_no_discontinuity():
+    """The task's discontinuity is between its material and the remaining materials of the
+    workspace (the paper's Material_a and Material_b): a wood cell read as copper, which the
+    workspace does not hold, says nothing about it; read as plush, it is a perceived edge."""
+    from runner.explorer import Explorer
+
+    scenario = load_scenario(MODELS / "scenarios" / "paper.yaml")
+    assert [scenario.materials[m] for m in scenario.counter_materials("T3")] == ["plush",
+                                                                                  "silicone"]
+    ex = Explorer(scenario, "T3")
+    ex.reset(np.array([[2, 2]]), seed=[0])
+    ny = scenario.shape[1]
+    wood, copper, plush = (0.52, 0.08), (0.30, 0.04), (0.66, 0.62)
+    row = [(2, y) for y in range(2, 9)]
+    for (x, y), (e, c) in zip(row, [wood, wood, wood, copper, wood, wood, wood], strict=True):
+        ex.perceive(np.array([x * ny + y]), np.array([e]), np.array([c]))
+    target, perceived = ex.percept()
+    assert perceived[0, 2, 5] == False  # noqa: E712 - probed, but neither side of the task
+    assert target[0, 2, 4] and perceived[0, 2, 4]
+    _, saliency, _ = ex.cue_fields()
+    around = saliency[0].reshape(scenario.shape)[1:4, 4:7]
+    assert not np.any(around > 0.5)  # no edge where the copper reading was
+    ex.perceive(np.array([2 * ny + 5]), np.array([plush[0]]), np.array([plush[1]]))
+    ex.perceive(np.array([2 * ny + 5]), np.array([plush[0]]), np.array([plush[1]]))
+    target, perceived = ex.percept()
+    assert perceived[0, 2, 5] and not target[0, 2, 5]
+    _, saliency, _ = ex.cue_fields()
+    assert np.nanmax(saliency[0].reshape(scenario.shape)[1:4, 4:7]) >= 0.5  # now an edge
