@@ -171,19 +171,26 @@ def _merge_moments(a: Stats, b: Stats) -> Stats:
     return out
 
 
-class NormalEstimator(Estimator):
+def _moment_stats(x: np.ndarray, weights: np.ndarray, shape: tuple[int, ...]) -> Stats:
+    n, mean, m2 = _moments(x, weights)
+    return {"count": n.reshape(shape), "mean": mean.reshape(shape),
+            "sum_squared_deviations": m2.reshape(shape)}
+
+
+class _MomentEstimator(Estimator):
+    """Forms learned from weighted counts, means and sums of squared deviations."""
+
+    def merge(self, a: Stats, b: Stats) -> Stats:
+        return _merge_moments(a, b)
+
+
+class NormalEstimator(_MomentEstimator):
     """Maximum likelihood per parent configuration (``shared`` pools mean or sigma)."""
 
     learned = ("mean", "sigma")
 
     def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
-        n, mean, m2 = _moments(x, weights)
-        shape = weights.shape[1:]
-        return {"count": n.reshape(shape), "mean": mean.reshape(shape),
-                "sum_squared_deviations": m2.reshape(shape)}
-
-    def merge(self, a: Stats, b: Stats) -> Stats:
-        return _merge_moments(a, b)
+        return _moment_stats(x, weights, weights.shape[1:])
 
     def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
         n, means, m2 = stats["count"], stats["mean"], stats["sum_squared_deviations"]
@@ -308,7 +315,7 @@ def _beta_newton(a: np.ndarray, b: np.ndarray, g1: np.ndarray, g2: np.ndarray,
     return a, b
 
 
-class GmmEstimator(Estimator):
+class GmmEstimator(_MomentEstimator):
     """EM for a Gaussian mixture over a real child: the component of each row is one more
     hidden variable. One sigma per parent configuration (the form's components share it)."""
 
@@ -338,13 +345,7 @@ class GmmEstimator(Estimator):
             if np.any(f > 0):
                 total = np.logaddexp(total, np.log(f) - np.log(width))
         resp = np.exp(log_comp - total) * weights.reshape(len(x), -1, 1)  # [n, configs, K]
-        shape = weights.shape[1:] + (means.shape[-1],)
-        n, mean, m2 = _moments(x, resp.reshape(len(x), -1))
-        return {"count": n.reshape(shape), "mean": mean.reshape(shape),
-                "sum_squared_deviations": m2.reshape(shape)}
-
-    def merge(self, a: Stats, b: Stats) -> Stats:
-        return _merge_moments(a, b)
+        return _moment_stats(x, resp.reshape(len(x), -1), weights.shape[1:] + (means.shape[-1],))
 
     def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
         n, mean, m2 = stats["count"], stats["mean"], stats["sum_squared_deviations"]
