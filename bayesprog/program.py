@@ -8,7 +8,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import networkx as nx
 
@@ -21,8 +21,10 @@ from bayesprog.inference import MapResult, Posterior
 from bayesprog.language.check import InputDecl, Term, check_document, question_problem
 from bayesprog.language.document import Document, FitRecord, validate_located
 from bayesprog.language.loader import Located, load_yaml
-from bayesprog.learning import Estimate
 from bayesprog.variables import Variable
+
+if TYPE_CHECKING:  # imported when a program is learned, not when bayesprog is
+    from bayesprog.learning import Estimate
 
 
 class Program:

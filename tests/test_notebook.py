@@ -102,7 +102,8 @@ def test_show_inference_draws_each_posterior_at_its_node():
 
 
 def test_importing_bayesprog_draws_nothing():
-    code = "import sys, bayesprog; print(sorted(m for m in ('matplotlib', 'pandas') if m in sys.modules))"
+    code = ("import sys, bayesprog; print(sorted(m for m in ('matplotlib', 'pandas', 'ruamel', "
+            "'tqdm', 'bayesprog.learning') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 

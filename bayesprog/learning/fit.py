@@ -20,7 +20,6 @@ from typing import Any
 
 import networkx as nx
 import numpy as np
-from tqdm import tqdm
 
 from bayesprog.errors import BayesprogError
 from bayesprog.forms import InputRef, ParamValue, TermContext
@@ -285,6 +284,8 @@ class _Em:
         previous = -np.inf
         converged = not self.iterative
         iterations = 0
+        from tqdm import tqdm
+
         bar = tqdm(total=max_iter, desc="EM", unit="iteration", leave=False,
                    disable=not (self.iterative and sys.stderr.isatty()))
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
