@@ -207,6 +207,9 @@ def _experiment_runner(path: str) -> str | None:
         located, _ = load_yaml(Path(path).read_text(encoding="utf-8"), path)
     except FileNotFoundError:
         raise _UserError(f"cannot read {path}: no such file") from None
+    except UnicodeDecodeError:
+        raise _UserError(f"cannot read {path}: expected UTF-8 text (an experiment file)") \
+            from None
     except IsADirectoryError:
         raise _UserError(f"cannot read {path}: it is a directory; expected an experiment "
                          "file") from None
@@ -234,7 +237,7 @@ def _output_runner(out: str) -> Any:
     manifest = Path(out) / "experiment.json"
     try:
         name = json.loads(manifest.read_text(encoding="utf-8"))["experiment"].get("runner")
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         raise _UserError(f"{out}: no experiment.json: not an experiment's output folder") \
             from None
     except (ValueError, KeyError, AttributeError, TypeError):

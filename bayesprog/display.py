@@ -46,14 +46,19 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 def _ranked(post: Posterior, probs: np.ndarray) -> list[tuple[str, float]]:
     """(assignment, probability) of one batch row, in state order for one variable, else the
     most probable first."""
-    labels = [", ".join(f"{v}={post.states[v][i]}" if len(post.variables) > 1 else
-                        post.states[v][i] for v, i in zip(post.variables, idx, strict=True))
-              for idx in np.ndindex(*probs.shape)]
     values = probs.ravel()
-    pairs = list(zip(labels, values.tolist(), strict=True))
-    if len(post.variables) > 1 or len(pairs) > ROWS:
-        pairs.sort(key=lambda p: -p[1])
-    return pairs
+    ranked = len(post.variables) > 1 or values.size > ROWS
+    if ranked:  # the most probable first; only those are labelled
+        order = np.argsort(-values, kind="stable")[: ROWS * 4]
+    else:
+        order = np.arange(values.size)
+
+    def label(flat: int) -> str:
+        idx = np.unravel_index(flat, probs.shape)
+        return ", ".join(f"{v}={post.states[v][i]}" if len(post.variables) > 1 else
+                         post.states[v][i] for v, i in zip(post.variables, idx, strict=True))
+
+    return [(label(int(i)), float(values[i])) for i in order]
 
 
 def _bars(pairs: list[tuple[str, float]], title: str) -> str:
@@ -99,7 +104,8 @@ def posterior_html(post: Posterior) -> str:
     pairs = _ranked(post, post.probabilities)
     name = ", ".join(post.variables)
     table = _table([name, "probability"], [[label, f"{p:.6g}"] for label, p in pairs[:ROWS]])
-    more = f"<p>{len(pairs) - ROWS} more (smaller) entries</p>" if len(pairs) > ROWS else ""
+    size = post.probabilities.size
+    more = f"<p>{size - ROWS} more (smaller) entries</p>" if size > ROWS else ""
     chart = _bars(pairs, post.question)
     return (f'<div>{title}<div style="display:flex;gap:16px;align-items:flex-start">'
             f"<div>{table}{more}</div><div>{chart}</div></div></div>")
@@ -172,7 +178,7 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
     from bayesprog.expressions import Expression, Question
 
     if ablate:
-        program = program.ablate(list(ablate))
+        program = program.ablate([ablate] if isinstance(ablate, str) else list(ablate))
     evidence = dict(evidence or {})
     given = ", ".join(evidence)
     marginals = {}
@@ -180,8 +186,13 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
     for name, var in program.variables.items():
         if name in evidence:
             value = evidence[name]
-            text = value if isinstance(value, str) else f"{float(np.asarray(value)):.4g}"
-            panels[name] = _value_panel(f"{name} = {text}")
+            if isinstance(value, str):
+                text = f"{name} = {value}"
+            elif np.ndim(value) == 0:
+                text = f"{name} = {float(np.asarray(value)):.4g}"
+            else:  # a field, or a batch of values
+                text = f"{name}: array of shape {np.shape(value)}"
+            panels[name] = _value_panel(text)
         elif var.is_discrete:
             post = program.ask(f"P({name}" + (f" | {given})" if given else ")"), evidence,
                                inputs=inputs)
@@ -200,8 +211,15 @@ def _figure(program: Program, question: Any, panels: dict[str, Any]) -> Any:
 
 
 def _bar_panel(post: Posterior) -> Any:
+    probs = post.probabilities
+    rows = int(np.prod(post.batch_shape, dtype=np.int64)) if post.batch_shape else 1
+    if post.batch_shape:  # a batch of evidence: the first row's posterior
+        probs = probs.reshape((rows,) + probs.shape[len(post.batch_shape):])[0]
+
     def draw(ax: Any) -> None:
-        pairs = _ranked(post, post.probabilities)
+        if rows > 1:
+            ax.set_title(f"row 0 of {rows}", fontsize=6)
+        pairs = _ranked(post, probs)
         if len(pairs) > 6:  # the most probable states, with what the others hold together
             pairs = sorted(pairs, key=lambda p: -p[1])[:5]
             pairs.append((f"{post.probabilities.size - 5} others", 1 - sum(p for _, p in pairs)))

@@ -146,6 +146,39 @@ def units(spec: ExperimentSpec) -> list[Unit]:
     return out
 
 
+def stored_experiment(out: str | Path) -> Experiment:
+    """The experiment whose results ``out`` holds, rebuilt from the texts stored with them (its
+    spec, and every scenario, program and sensor file as they were when it ran): what a report
+    draws does not depend on the folder it is asked from, nor on files edited since."""
+    import tempfile
+
+    from pydantic import ValidationError
+
+    store = ResultStore(Path(out))
+    stored = store.manifest()
+    try:
+        spec = ExperimentSpec.model_validate(stored["experiment"])
+        files = {k: (Path(v["path"]), v["text"]) for k, v in stored["files"].items()}
+        scenario_path = files["scenario"][0]
+    except (KeyError, TypeError, ValidationError) as exc:
+        raise BayesprogError(f"{store.manifest_path}: not a readable experiment manifest "
+                             f"({str(exc).splitlines()[0]})") from None
+    with tempfile.TemporaryDirectory(prefix="bayesprog-stored-") as folder:
+        root = Path(folder)
+
+        def mirrored(path: Path) -> Path:  # the same place under the temporary root
+            return root / path.resolve().relative_to(path.resolve().anchor)
+
+        for key, (path, text) in files.items():
+            if key != "experiment":
+                target = mirrored(path)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_text(text, encoding="utf-8")
+        scenario = load_scenario(mirrored(scenario_path))
+    scenario.path = scenario_path
+    return Experiment(spec, files["experiment"][0], scenario)
+
+
 def manifest(experiment: Experiment) -> dict:
     """What identifies the results: the spec, the start cells and every file it resolved."""
     scenario = experiment.scenario

@@ -15,13 +15,15 @@ from runner.scenario import Scenario
 BORDER, HOT_BORDER, PATH, START, CHOSEN = "magenta", "deepskyblue", "white", "white", "red"
 
 
-def plt() -> Any:
-    import matplotlib
+def figure(figsize: tuple[float, float]) -> Any:
+    """A matplotlib figure drawn by Agg, outside pyplot: no backend is switched (a notebook's
+    plotting stays as it was) and nothing is kept open once the figure is dropped."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as pyplot
-
-    return pyplot
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def extent_cm(scenario: Scenario) -> tuple[float, float, float, float]:

@@ -14,8 +14,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from runner import figures
-from runner.experiment import Experiment, ExperimentSpec, load_experiment
+from bayesprog.errors import BayesprogError
+from runner.experiment import Experiment, ExperimentSpec, load_experiment, stored_experiment
+from runner.explorer import CONFIGURATIONS
 from runner.report import DecisionFigure, build_report, findings, replay
 from runner.store import ResultStore
 
@@ -98,7 +99,6 @@ class StepView:
             video = Path(folder) / "run.mp4"
             figure.video(self.frames, video, fps=4)
             data = base64.b64encode(video.read_bytes()).decode()
-        figures.plt().close(figure.fig)
         title = (f"<p><b>{html.escape(self.experiment.spec.name)}</b>: task {self.task}, "
                  f"{self.configuration}, run {self.run}, {len(self.frames)} steps</p>")
         return (f'{title}<video controls loop style="max-width:100%" '
@@ -114,9 +114,17 @@ def step_view(source: str | Path | Experiment, task: str | None = None,
         experiment = source
     else:
         path = Path(source)
-        if path.is_dir():
-            path = Path(ResultStore(path).manifest()["files"]["experiment"]["path"])
-        experiment = load_experiment(path)
+        experiment = stored_experiment(path) if path.is_dir() else load_experiment(path)
     task = task or experiment.spec.tasks[0]
+    if steps < 1:
+        raise BayesprogError(f"steps: expected at least 1, found {steps}")
+    if configuration not in CONFIGURATIONS:
+        raise BayesprogError(f"configuration: expected one of {', '.join(CONFIGURATIONS)}, "
+                             f"found {configuration!r}")
+    if task not in experiment.scenario.spec.tasks:
+        raise BayesprogError(f"task: expected one of {', '.join(experiment.scenario.spec.tasks)}"
+                             f", found {task!r}")
+    if not 0 <= run < experiment.spec.runs:
+        raise BayesprogError(f"run: expected 0 .. {experiment.spec.runs - 1}, found {run}")
     frames = list(replay(experiment, task, configuration, run, steps))
     return StepView(experiment, task, configuration, run, frames)

@@ -44,7 +44,10 @@ def results(out: Path, options: dict) -> int:
     """Write the stored runs of ``out`` as one tidy table (Parquet or CSV)."""
     from runner.tables import write_runs
 
-    path, rows = write_runs(out, options["output"])
+    try:
+        path, rows = write_runs(out, options["output"])
+    except OSError as exc:
+        raise BayesprogError(f"cannot write {options['output']}: {exc.strerror or exc}") from None
     print(f"{path}: {rows} rows (task, configuration, run, step, probed cell, Gamma, cues)")
     return 0
 
@@ -52,6 +55,8 @@ def results(out: Path, options: dict) -> int:
 def _scenario_path(target: Path) -> Path:
     from bayesprog.language.loader import wrong_kind
 
+    if not target.exists():
+        raise BayesprogError(f"cannot read {target}: no such file or folder")
     if target.is_file():
         hint = wrong_kind(target, "scenario", "explore takes a scenario file or a models folder")
         if hint:

@@ -15,7 +15,7 @@ from scipy import stats
 
 from bayesprog.errors import BayesprogError
 from runner import figures
-from runner.experiment import ExperimentSpec, load_experiment, load_results, mean_sem
+from runner.experiment import ExperimentSpec, load_results, mean_sem, stored_experiment
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import behaviour, border_band
 from runner.scenario import Scenario
@@ -57,7 +57,9 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
             am, as_ = mean_sem(auc[:, None])
             row = {"task": task, "configuration": conf, "runs": int(g.shape[0]),
                    "final_mean": float(fm[0]), "final_sem": float(fs[0]),
-                   "final_per_border_cell_mm": 1000 * float(fm[0]) / borders[task],
+                   # a task whose material borders nothing has no border to follow
+                   "final_per_border_cell_mm": (1000 * float(fm[0]) / borders[task]
+                                                if borders[task] else float("nan")),
                    "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
             if scenario is not None:
                 row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task)))
@@ -78,9 +80,8 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
 
 def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
     """Fig. 10: Gamma(k) mean +- SEM over runs, one curve per configuration, a panel per task."""
-    plt = figures.plt()
-    fig, axes = plt.subplots(1, len(spec.tasks), figsize=(5 * len(spec.tasks), 3.9),
-                             squeeze=False)
+    fig = figures.figure(figsize=(5 * len(spec.tasks), 3.9))
+    axes = fig.subplots(1, len(spec.tasks), squeeze=False)
     for ax, task in zip(axes[0], spec.tasks, strict=True):
         for conf in spec.configurations:
             mean, sem = mean_sem(results[f"{task}/{conf}"]["gamma"])
@@ -98,7 +99,6 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
     axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
 
 
 def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path,
@@ -107,11 +107,10 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
     visits per run of each configuration (each with its colour bar), the border over them."""
     from matplotlib.lines import Line2D
 
-    plt = figures.plt()
     nx, ny = scenario.shape
     cols = len(spec.configurations) + 1
-    fig, axes = plt.subplots(len(spec.tasks), cols, figsize=(2.6 * cols, 3.9 * len(spec.tasks)),
-                             squeeze=False)
+    fig = figures.figure(figsize=(2.6 * cols, 3.9 * len(spec.tasks)))
+    axes = fig.subplots(len(spec.tasks), cols, squeeze=False)
     for r, task in enumerate(spec.tasks):
         ax = axes[r, 0]
         extra = [Line2D([], [], color="black", lw=1.2, label=f"{task} border")]
@@ -132,7 +131,6 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
     figures.axes_in_cm(axes)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
 
 
 def replay(experiment, task: str, configuration: str, run: int, steps: int):
@@ -181,9 +179,9 @@ class DecisionFigure:
               ("posterior", "P(O | t, i, s, u, R) (eq. 13)", "probability per cell", None)]
 
     def __init__(self, scenario: Scenario, task: str, title: str = ""):
-        plt = figures.plt()
         self.scenario, self.task = scenario, task
-        self.fig, axes = plt.subplots(2, 4, figsize=(13, 9.6))
+        self.fig = figures.figure(figsize=(13, 9.6))
+        axes = self.fig.subplots(2, 4)
         self.axes = axes
         flat = list(axes.ravel())
         nan = np.full(scenario.shape[0] * scenario.shape[1], np.nan)
@@ -291,7 +289,6 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     if out_video is not None:
         figure.fig.set_dpi(110)
         figure.video(frames, out_video)
-    figures.plt().close(figure.fig)
 
 
 #: The significance level where the paper claims a difference (S, U), and below which a change
@@ -372,7 +369,7 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
              f"pi_per's parameters are {origin}. Probes are simulated from {source}"
              + (f" plus white noise of sd {noise}" if noise else "") + f". Single-probe "
              f"recognition on {HELD_OUT} held-out probes per material (seed {HELD_OUT_SEED}): "
-             f"{100 * np.diag(matrix).mean():.1f}% on average over the 10 materials.", "",
+             f"{100 * np.diag(matrix).mean():.1f}% on average over the {len(names)} materials.", "",
              "| material in the scenario | recognised | most often taken for |", "|---|---|---|"]
     used = list(dict.fromkeys([scenario.spec.background]
                               + [o.material for o in scenario.spec.objects]))
@@ -383,7 +380,7 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
         taken = ", ".join(f"{n} {100 * v:.1f}%" for v, n in others[:2] if v >= 0.001) or "-"
         lines.append(f"| {m} | {100 * matrix[i, i]:.1f}% | {taken} |")
     per = {r["task"]: r["final_per_border_cell_mm"] for r in rows if r["configuration"] == "full"}
-    if set(per) >= set(tasks) and tasks:
+    if set(per) >= set(tasks) and len(tasks) > 1:
         rate = {t: matrix[scenario.task_material(t), scenario.task_material(t)] for t in tasks}
         worst_task = max(tasks, key=lambda t: per[t])
         hardest = min(tasks, key=lambda t: rate[t])
@@ -414,8 +411,9 @@ def comparison_lines(found: list[tuple[str, str, str]], other: Path, name: str) 
     lines = [f"## The findings beside experiment {other_spec.name}", "",
              f"| the paper | {name} | {other_spec.name} |", "|---|---|---|"]
     for text, measured, verdict in found:
-        there = theirs.get(text, ("not measured", ""))
-        lines.append(f"| {text} | {verdict}: {measured} | {there[1]}: {there[0]} |")
+        there = theirs.get(text, ("", "not measured there"))
+        lines.append(f"| {text} | {verdict}: {measured} | "
+                     + (f"{there[1]}: {there[0]}" if there[0] else there[1]) + " |")
     return lines + [""]
 
 
@@ -424,8 +422,8 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     ``compare``: another experiment's output folder whose findings are set beside these."""
     store = ResultStore(out)
     manifest = store.manifest()
-    experiment = load_experiment(manifest["files"]["experiment"]["path"])
-    spec = ExperimentSpec.model_validate(manifest["experiment"])
+    experiment = stored_experiment(out)
+    spec = experiment.spec
     results = load_results(store, spec)
     scenario = experiment.scenario
     folder = out / "report"
@@ -438,20 +436,25 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png", experiment.start_cells())
     bar.update(1)
     task = spec.tasks[0]
-    run, step = following_step(results[f"{task}/full"]["paths"], scenario.border(task),
+    shown = "full" if "full" in spec.configurations else spec.configurations[0]
+    run, step = following_step(results[f"{task}/{shown}"]["paths"], scenario.border(task),
                                spec.iterations)
     video = "fig11_decision.mp4" if animation else None
     (folder / "fig11_decision.gif").unlink(missing_ok=True)  # an animation of earlier reports
-    plot_decision(experiment, task, "full", run, step, folder / "fig11_decision.png",
-                  folder / video if video else None, spec.iterations - 1)
+    if video is None:
+        (folder / "fig11_decision.mp4").unlink(missing_ok=True)  # not this report's
+    plot_decision(experiment, task, shown, run, step, folder / "fig11_decision.png",
+                  folder / video if video else None, max(spec.iterations - 1, 1))
     bar.update(1)
     bar.close()
     found = findings(rows, spec)
-    atomic_write(folder / "statistics.json", json.dumps(rows, indent=1).encode())
+    atomic_write(folder / "statistics.json", json.dumps(_json_safe(rows), indent=1,
+                                                        allow_nan=False).encode())
     extra = perception_lines(scenario, rows, spec.tasks)
     if compare is not None:
         extra += comparison_lines(found, compare, spec.name)
-    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video)
+    md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video,
+                   shown)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, video).encode())
     return folder
@@ -467,7 +470,7 @@ def following_step(paths: np.ndarray, border: np.ndarray, iterations: int) -> tu
     (1, 2)
     """
     band = border_band(border).ravel()[paths[:, : iterations - 1]]
-    best, where = 0, (0, min(40, iterations - 2))
+    best, where = 0, (0, max(min(40, iterations - 2), 0))
     for run, row in enumerate(band):
         length = 0
         for k, near in enumerate(row):
@@ -502,8 +505,14 @@ def _table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
+def _json_safe(rows: list[dict]) -> list[dict]:
+    """Rows for JSON: a number that is not finite (no run reached the border) as null."""
+    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
+            for r in rows]
+
+
 def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
-              animation: str | None = None) -> str:
+              animation: str | None = None, shown: str = "full") -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -519,7 +528,8 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
              "the runs' start cells (crosses). Then, per configuration, the visits per run of "
              "each cell (each panel with its own colour scale: compare shapes, not colours "
              "across panels), the border in blue. Axes in cm.*", "",
-             f"## One decision (paper Fig. 11): task {task}, full model, run {run}, step {step}",
+             f"## One decision (paper Fig. 11): task {task}, "
+             f"{'full model' if shown == 'full' else shown}, run {run}, step {step}",
              "", "![Decision](fig11_decision.png)", "",
              "*Fig. 11. The step that ends the longest stretch of probes within one cell of the "
              "border over every run: the walker follows the border. The ground truth, the "

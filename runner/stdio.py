@@ -128,12 +128,16 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
                     raise ValueError(f'expected {{"maps": true}}, found {_short(obj)}')
                 reply: dict = {"k": k - 1, "maps": session.maps()}
             elif "reset" in obj:
+                if set(obj) != {"reset"}:
+                    raise ValueError('expected {"reset": {"seed": S}} alone, found other keys: '
+                                     + ", ".join(sorted(set(obj) - {"reset"})))
                 opts = obj["reset"]
                 if not isinstance(opts, dict) or set(opts) - {"seed"}:
                     raise ValueError('expected {"reset": {"seed": S}} (or {"reset": {}}), found '
                                      f"{_short(opts)}")
                 seed = _seed(opts.get("seed", seed))
                 started, k = False, 0
+                explorer.last = None  # the maps of the last session are not this one's
                 reply = {"reset": True, "seed": seed}
             else:
                 missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
@@ -156,7 +160,7 @@ def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) ->
                 if extra:
                     raise ValueError(f"unknown key(s) {', '.join(sorted(extra))}: expected cell, "
                                      "texture, compliance and maybe maps")
-                if obj.get("maps", False) not in (True, False):
+                if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
                     raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
                 nxt = explorer.observe(cell, texture, compliance)
                 reply = {"k": k, "next": list(nxt), "probed": session.probed(cell),

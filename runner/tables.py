@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from bayesprog.errors import BayesprogError
 from bayesprog.files import atomic_write
-from runner.experiment import CUES, ExperimentSpec, load_experiment, load_results
+from runner.experiment import CUES, ExperimentSpec, load_results, stored_experiment
 from runner.figures import centre_cm
 from runner.metrics import border_band
 from runner.store import ResultStore
@@ -42,7 +42,7 @@ def runs_table(out: str | Path) -> Any:
     store = ResultStore(Path(out))
     manifest = store.manifest()
     spec = ExperimentSpec.model_validate(manifest["experiment"])
-    scenario = load_experiment(manifest["files"]["experiment"]["path"]).scenario
+    scenario = stored_experiment(out).scenario
     results = load_results(store, spec)
     frames = []
     bar = tqdm(total=len(spec.tasks) * len(spec.configurations), desc="runs table",
@@ -75,6 +75,9 @@ def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:
     import io
 
     path = Path(path)
+    if path.suffix.lower() not in (".parquet", ".pq", ".csv"):
+        raise BayesprogError(f"-o {path}: expected a .parquet or .csv file, found "
+                             f"{path.suffix or 'no suffix'}")
     table = runs_table(out)
     if path.suffix.lower() in (".parquet", ".pq"):
         buffer = io.BytesIO()

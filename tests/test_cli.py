@@ -754,3 +754,18 @@ def test_yaml_syntax_errors_say_what_was_expected_and_found(tmp_path, capsys, te
     path.write_text(text)
     assert main(["validate", str(path)]) == 2
     assert f"broken.yaml:{message}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("a: &x [*x]\n", "an alias that contains itself"),
+    ("a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [" + ", ".join([f"*{chr(97 + i)}"] * 9) + "]\n"
+        for i in range(8)), "more than 1,000,000 values"),
+    ("a: " + "[" * 5000 + "]" * 5000 + "\n", "malformed YAML"),
+])
+def test_yaml_that_would_never_end_is_refused(tmp_path, capsys, text, message):
+    path = tmp_path / "bomb.yaml"
+    path.write_text(text)
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

@@ -137,3 +137,12 @@ def test_the_tutorial_notebook_runs_with_the_tutorials_numbers():
     svgs = [o["data"]["image/svg+xml"] for o in outputs if "image/svg+xml" in o.get("data", {})]
     assert len(svgs) == 2
     assert not [o for o in outputs if o.output_type == "error"]
+
+
+def test_show_inference_takes_arrays_and_a_single_term_to_ablate():
+    program = bayesprog.load(ROOT / "models" / "pi_per.yaml")
+    view = bayesprog.show_inference(program, {"E": [0.45, 0.15], "C": [0.08, 0.35]})
+    assert "E: array of shape (2,)" in svg_texts(ET.fromstring(view._repr_svg_()))
+    assert view.marginals["M"].probabilities.shape == (2, 10)
+    ablated = bayesprog.show_inference(program, {"E": 0.5}, ablate="P(C | M)")
+    assert ablated.program.ablated == ("P(C | M)",)

@@ -123,14 +123,35 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
         line, column = (mark.line + 1, mark.column + 1) if mark else (1, 1)
         message = yaml_problem(exc, text)
         return Located(None, file), [Diagnostic(file, line, column, message)]
+    except RecursionError:
+        return Located(None, file), [Diagnostic(file, 1, 1, "malformed YAML: nested too deeply, "
+                                                "or an alias that contains itself")]
     except yaml.YAMLError as exc:  # pragma: no cover - every PyYAML error we know carries a mark
         return Located(None, file), [Diagnostic(file, 1, 1, f"malformed YAML: {exc}")]
     located = Located(None, file)
     if node is None:
         return located, [Diagnostic(file, 1, 1, "empty file: expected a program (a mapping)")]
 
+    built = [0]
+    active: set[int] = set()
+
     def build(node: yaml.Node, path: Path) -> Any:
+        built[0] += 1
+        if built[0] > MAX_VALUES:
+            raise _Refused(node, f"more than {MAX_VALUES:,} values (aliases that repeat "
+                           "aliases?): refused before it fills the memory")
+        if id(node) in active:
+            raise _Refused(node, "an alias that contains itself: the value would be infinite")
         located.positions[path] = (node.start_mark.line + 1, node.start_mark.column + 1)
+        if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
+            active.add(id(node))
+            try:
+                return build_collection(node, path)
+            finally:
+                active.discard(id(node))
+        return build_scalar(node, path)
+
+    def build_collection(node: yaml.Node, path: Path) -> Any:
         if isinstance(node, yaml.MappingNode):
             out: dict[Any, Any] = {}
             for key_node, value_node in node.value:
@@ -159,8 +180,9 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
                 )
             located.positions.pop(path + ("<key>",), None)
             return out
-        if isinstance(node, yaml.SequenceNode):
-            return [build(item, path + (i,)) for i, item in enumerate(node.value)]
+        return [build(item, path + (i,)) for i, item in enumerate(node.value)]
+
+    def build_scalar(node: yaml.Node, path: Path) -> Any:
         assert isinstance(node, yaml.ScalarNode)
         if node.style is not None:  # quoted or block scalar: always a string
             return node.value
@@ -175,8 +197,26 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
             return node.value
         return _plain_scalar(node.value)
 
-    located.data = build(node, ())
+    try:
+        located.data = build(node, ())
+    except _Refused as exc:
+        mark = exc.node.start_mark
+        return Located(None, file), [Diagnostic(file, mark.line + 1, mark.column + 1,
+                                                f"malformed YAML: {exc}")]
+    except RecursionError:
+        return Located(None, file), [Diagnostic(file, 1, 1, "malformed YAML: nested too "
+                                                "deeply to read")]
     return located, problems
+
+
+#: the most values a file may expand to (aliases included)
+MAX_VALUES = 1_000_000
+
+
+class _Refused(Exception):
+    def __init__(self, node: yaml.Node, message: str):
+        super().__init__(message)
+        self.node = node
 
 
 #: the top-level key that names each kind of file of the project

@@ -263,3 +263,24 @@ def test_the_runs_table_holds_every_probe_with_its_cues(reference, tmp_path, cap
     assert main(["results", str(out), "-o", str(tmp_path / "runs.csv")]) == 0
     assert len(pd.read_csv(tmp_path / "runs.csv")) == len(table)
     assert main(["results", str(out), "-o", str(tmp_path / "runs.xlsx")]) == 2
+
+
+def test_a_report_draws_what_was_stored_from_any_folder(tmp_path, monkeypatch, capsys):
+    path = write_experiment(tmp_path, configurations=["without_S"], iterations=1)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-report", "-q"]) == 0
+    stored = json.loads((out / "experiment.json").read_text())["start_cells"]
+    # the experiment file edited afterwards, the report asked from another folder
+    path.write_text(path.read_text().replace("seed: 7", "seed: 99"))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    from runner.experiment import stored_experiment
+
+    assert stored_experiment(out).start_cells().tolist() == stored
+    assert main(["report", str(out), "--no-animation"]) == 0  # no full model, one iteration
+    rows = json.loads((out / "report" / "statistics.json").read_text())  # strict JSON
+    assert {r["configuration"] for r in rows} == {"without_S"}
+    (elsewhere / "runs.csv").mkdir()
+    assert main(["results", str(out), "-o", str(elsewhere / "runs.csv")]) == 2  # a folder
+    assert "cannot write" in capsys.readouterr().err

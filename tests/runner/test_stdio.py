@@ -260,3 +260,15 @@ def test_the_shape_posterior_is_pi_objs_once_the_cue_is_in_force():
     assert posterior == pytest.approx(dict(zip(("rectangle", "triangle"),
                                                expected.probabilities.tolist(), strict=True)))
     assert sum(posterior.values()) == pytest.approx(1.0)
+
+
+def test_maps_after_a_reset_and_malformed_maps_requests_get_errors():
+    lines = [WALK[0], json.dumps({"reset": {"seed": 2}}), json.dumps({"maps": True}),
+             json.dumps({"cell": [10, 12], "texture": 0.1, "compliance": 0.3, "maps": 1}),
+             json.dumps({"reset": {}, "maps": True}), WALK[1]]
+    replies = session(lines)
+    assert replies[1] == {"reset": True, "seed": 2}
+    assert "no decision yet" in replies[2]["error"]
+    assert "'maps' true or false" in replies[3]["error"]
+    assert "alone" in replies[4]["error"]
+    assert replies[5]["k"] == 0
