@@ -27,9 +27,12 @@ class Discrete:
 
     @property
     def typed_states(self) -> tuple[Any, ...]:
-        """The states as values of the variable's type: integers for a range, names else."""
+        """The states as values of the variable's type: integers for a range, the cell's
+        indices (ix, iy, ...) for a grid, names else."""
         if self.kind == "range" and self.values is not None:
             return tuple(int(v) for v in self.values)
+        if self.kind == "grid":
+            return tuple(tuple(int(i) for i in s.split("_")) for s in self.states)
         return self.states
 
     @property

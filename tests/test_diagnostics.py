@@ -815,7 +815,7 @@ def test_tar_with_good_inputs_answers(tar):
     evidence, inputs = _tar_args()
     result = tar.ask("next", evidence, inputs=inputs)
     assert isinstance(result, bayesprog.MapResult)
-    assert result.assignment["O"] in tar.variables["O"].states
+    assert result.assignment["O"] in tar.variables["O"].typed_states  # a cell (ix, iy)
     posterior = tar.ask("P(O | T, I, S)", evidence, inputs=inputs)
     assert posterior.probabilities.shape == (N_CELLS,)
     assert posterior.probabilities.sum() == pytest.approx(1.0)

@@ -75,7 +75,8 @@ class MapResult:
         out = {}
         for i, var in enumerate(self.variables):
             values = np.empty(len(self.states[var]), dtype=object)
-            values[:] = list(self.posterior.typed(var))
+            for j, value in enumerate(self.posterior.typed(var)):
+                values[j] = value  # one object per state (a grid cell is a tuple)
             chosen = values[self.indices[..., i]]
             out[var] = chosen if self.indices.ndim > 1 else chosen.item() if hasattr(
                 chosen, "item") else chosen
