@@ -134,6 +134,8 @@ def _check_seed(seed: int) -> int:
 
 def cmd_query(args: argparse.Namespace) -> int:
     _check_seed(args.seed)
+    if args.limit < 1:
+        raise _UserError(f"--limit: expected at least 1 row, found {args.limit}")
     program = _load(args.file)
     for term in args.ablate:
         program = program.ablate(term)

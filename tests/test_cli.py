@@ -769,3 +769,12 @@ def test_yaml_that_would_never_end_is_refused(tmp_path, capsys, text, message):
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+def test_a_second_yaml_document_and_a_limit_below_one_are_refused(tmp_path, capsys):
+    path = tmp_path / "two.yaml"
+    path.write_text("bayesprog: 1\n---\nbayesprog: 1\n")
+    assert main(["validate", str(path)]) == 2
+    assert "expected one document, found a second" in capsys.readouterr().err
+    assert main(["query", str(SPRINKLER), "P(Rain)", "--limit", "0"]) == 2
+    assert "--limit: expected at least 1 row, found 0" in capsys.readouterr().err

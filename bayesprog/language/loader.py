@@ -100,6 +100,9 @@ def yaml_problem(exc: yaml.MarkedYAMLError, text: str) -> str:
         expected = expected.replace("',' or '}'", "',' or '}' (the end of a {...} mapping)")
         expected = expected.replace("',' or ']'", "',' or ']' (the end of a [...] list)")
         return f"malformed YAML: expected {_token(expected)}, found {_token(got)}{where}"
+    if "found another document" in problem:
+        return ("malformed YAML: expected one document, found a second (after a '---' line): "
+                "a file holds one program")
     if "mapping values are not allowed here" in problem:
         return ("malformed YAML: expected one 'key: value' per line, found a second ':' "
                 "(quote a value that contains ': ')")
