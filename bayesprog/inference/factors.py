@@ -69,7 +69,7 @@ def _bound_param(term: Term, key: str, ref: InputRef, bound: Bound) -> ParamValu
     return value
 
 
-def _observed_part(term: Term, value: ParamValue | None
+def observed_part(term: Term, value: ParamValue | None
                    ) -> tuple[ParamValue | None, ParamValue | None]:
     """A field's value with its missing (NaN) entries moved into the support, and where they
     are. A missing entry is marginalised: the term's factor is 1 there, which needs a form that
@@ -99,7 +99,7 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
         params[key] = _bound_param(term, key, param, bound) if isinstance(param, InputRef) \
             else param
     observed = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
-    value, missing = _observed_part(term, observed)
+    value, missing = observed_part(term, observed)
     axes = term.axes
     cards = tuple(discrete(program.variables[a]).card for a in axes)
     ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,

@@ -79,27 +79,22 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
                         f"{suffix or 'no suffix'}")
     sep = "\t" if suffix == ".tsv" else ","
     try:
-        lines = list(csvlib.reader(io.StringIO(raw.decode("utf-8-sig")), delimiter=sep))
+        lines = list(csvlib.reader(io.StringIO(raw.decode("utf-8-sig")), delimiter=sep,
+                                   skipinitialspace=True))
     except (UnicodeDecodeError, csvlib.Error) as exc:
         raise DataError(f"cannot read data {path} as CSV: {exc}") from None
     if not lines:
         raise DataError(f"cannot read data {path} as CSV: the file is empty")
-    header = lines[0]
+    header = [h.strip() for h in lines[0]]
     for line, fields in enumerate(lines[1:], start=2):
         if fields and len(fields) != len(header):
             raise DataError(f"{path}: row {line - 1} (line {line}) has {len(fields)} fields, "
                             f"the header {len(header)}: expected one value per column")
-    try:
-        # every cell as written: only an empty cell is missing (a state may be named NA or
-        # None); blank lines kept as empty rows, so that row r is line r + 1; no index column
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""],
-                            sep=sep, skipinitialspace=True, skip_blank_lines=False,
-                            index_col=False)
-    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
-        raise DataError(f"cannot read data {path} as CSV: {exc}") from None
-    names = [h.strip() for h in header]
-    if len(names) == len(frame.columns):
-        frame.columns = names  # pandas renames a repeated column ("L.1"): keep what was written
+    # every cell as written: only an empty cell is missing (a state may be named NA or None);
+    # a blank line is an empty row, so that row r is line r + 1
+    rows = [[cell if cell.strip() else None for cell in fields] or [None] * len(header)
+            for fields in lines[1:]]
+    frame = pd.DataFrame(rows, columns=header, dtype=object)
     return frame, str(path), hexdigest, True
 
 

@@ -21,8 +21,9 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from bayesprog.errors import BayesprogError
+from bayesprog.errors import BayesprogError, QuestionError
 from bayesprog.forms import InputRef, ParamValue, TermContext
+from bayesprog.inference.factors import observed_part
 from bayesprog.language.check import LearnOptions, Term
 from bayesprog.language.document import FitRecord
 from bayesprog.learning.data import Data, DataError, load_data
@@ -173,11 +174,6 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
         if estimator is None:
             raise DataError(f"term {term.label} (form {term.form.name}) cannot be learned from "
                             "data: freeze it (learn: false) or with --freeze")
-        for name, value in term.params.items():
-            if isinstance(value, InputRef):
-                raise DataError(f"term {term.label}: parameter {name!r} is the runtime input "
-                                f"{value.name!r}, which data cannot set: freeze the term "
-                                "(learn: false) or with --freeze")
         out.append(_Learned(term, estimator, term.learn, _previous(term.label, learned)))
     return out
 
@@ -196,7 +192,12 @@ class _Em:
             if inputs:
                 raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
                                 "input, so the program cannot be evaluated on data rows")
-        observed_continuous = {n for n, v in self.data.continuous.items()}
+        # the decomposition's DAG: which missing variables a row's likelihood depends on
+        self.graph = nx.DiGraph()
+        for term in model:
+            self.graph.add_node(term.child.name)
+            self.graph.add_edges_from((p.name, term.child.name) for p in term.parents)
+        observed_continuous = set(self.data.continuous)
         patterns, inverse = np.unique(codes < 0, axis=0, return_inverse=True)
         self.groups = []
         for g, pattern in enumerate(patterns):
@@ -204,7 +205,7 @@ class _Em:
             rows = np.nonzero(inverse.ravel() == g)[0]
             seen = {n for n in discrete if n not in missing} | {
                 n for n in observed_continuous if np.any(~np.isnan(self.data.continuous[n][rows]))}
-            needed = self._needed(seen, missing)
+            needed = self._needed(seen)
             hidden = tuple(n for n in discrete if n in missing and n in needed)
             cards = tuple(variables[n].card for n in hidden)  # type: ignore[union-attr]
             joint = math.prod(cards)
@@ -218,15 +219,10 @@ class _Em:
         learns_mixture = any(i.term.form.name == "gmm" for i in todo)
         self.iterative = learns_mixture or any(g.hidden for g in self.groups)
 
-    def _needed(self, seen: set[str], missing: set[str]) -> set[str]:
+    def _needed(self, seen: set[str]) -> set[str]:
         """The variables a row's likelihood and the learned terms' posteriors depend on: the
         observed ones, the learned terms' families, and their ancestors. A missing variable
         outside them sums out of normalised terms to one, so it is not enumerated."""
-        graph = nx.DiGraph()
-        for term in self.model:
-            graph.add_node(term.child.name)
-            for parent in term.parents:
-                graph.add_edge(parent.name, term.child.name)
         roots = set(seen)
         for item in self.todo:
             roots |= {item.term.child.name} | {p.name for p in item.term.parents}
@@ -235,8 +231,8 @@ class _Em:
                 roots |= {term.child.name} | {p.name for p in term.parents}
         needed = set(roots)
         for name in roots:
-            if name in graph:
-                needed |= nx.ancestors(graph, name)
+            if name in self.graph:
+                needed |= nx.ancestors(self.graph, name)
         return needed
 
     def start(self, item: _Learned, k: int, params: Params) -> Params:
@@ -387,17 +383,16 @@ class _Em:
     def _log_table(self, term: Term, rows: np.ndarray, params: Params) -> np.ndarray:
         """The term's log values on these rows: ``[rows or 1, *cards of term.axes]`` (0 where a
         continuous child has no value: its density integrates to one)."""
-        value = None
-        missing = None
+        value = missing = None
         if isinstance(term.child, Continuous):
             column = self.data.continuous.get(term.child.name)
             if column is None:
                 return np.zeros((1,) * (1 + len(term.axes)))
-            x = column[rows]
-            missing = np.isnan(x)
-            fill = 0.5 * (term.child.low + term.child.high) if np.isfinite(term.child.width) \
-                else 0.0
-            value = ParamValue((), np.where(missing, fill, x), batched=True)
+            # a missing value is marginalised, as the engine does for a missing field value
+            try:
+                value, missing = observed_part(term, ParamValue((), column[rows], batched=True))
+            except QuestionError as exc:
+                raise DataError(f"{self.data.source}: {exc}") from None
         axes = term.axes
         cards = tuple(self.variables[a].card for a in axes)  # type: ignore[union-attr]
         ctx = TermContext(term.child, term.parents, axes, cards,
@@ -405,8 +400,8 @@ class _Em:
         with np.errstate(divide="ignore", invalid="ignore"):
             log = np.asarray(term.form.log_factor(ctx), float)
         log = np.broadcast_to(log, np.broadcast_shapes(log.shape, (log.shape[0],) + cards))
-        if missing is not None and np.any(missing):
-            log = np.where(missing.reshape((-1,) + (1,) * len(cards)), 0.0, log)
+        if missing is not None:
+            log = np.where(missing.aligned(axes, 0), 0.0, log)
         return log
 
     def _index(self, axes: Sequence[str], rows: np.ndarray, hidden: tuple[str, ...],
