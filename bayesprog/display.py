@@ -14,8 +14,10 @@ from typing import Any
 import numpy as np
 
 from bayesprog import rich
+from bayesprog.draw import graph_figure
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.program import Program
+from bayesprog.show import render
 
 #: rows of a table (and bars of a chart) shown for one answer; the rest are summarised
 ROWS = 12
@@ -131,9 +133,6 @@ def map_html(result: MapResult) -> str:
 
 def program_html(program: Program) -> str:
     """A program: its decomposition in Bayesian-programming notation, and its graph."""
-    from bayesprog.draw import graph_figure
-    from bayesprog.show import render
-
     text = html.escape(render(program))
     graph = svg_of(graph_figure(program))
     return (f'<div style="display:flex;flex-wrap:wrap;gap:16px;align-items:flex-start">'
@@ -200,14 +199,8 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
             marginals[name] = post
             panels[name] = _bar_panel(post)
     question = Question(Expression(tuple(marginals), tuple(evidence), {}), "posterior")
-    figure = _figure(program, question, panels)
+    figure = graph_figure(program, question, panels)
     return InferenceView(program, figure, marginals)
-
-
-def _figure(program: Program, question: Any, panels: dict[str, Any]) -> Any:
-    from bayesprog.draw import graph_figure
-
-    return graph_figure(program, question, panels)
 
 
 def _bar_panel(post: Posterior) -> Any:

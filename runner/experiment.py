@@ -12,6 +12,7 @@ import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -229,7 +230,8 @@ def run_experiment(
     store.open(manifest(experiment))
     todo = [u for u in units(experiment.spec) if not store.done(u)]
     total = len(units(experiment.spec))
-    bar = _progress(total, total - len(todo), progress)
+    bar = progress_bar(total, "experiment", unit="chunk", done=total - len(todo),
+                       enabled=progress, leave=True)
     path = str(experiment.path.resolve())
     digest = store.manifest()["hash"]
     try:
@@ -294,11 +296,13 @@ def _run_dask(address: str, path: str, digest: str, todo: list[Unit], store: Res
             bar.update(1)
 
 
-def _progress(total: int, done: int, enabled: bool | None):
+def progress_bar(total: int, what: str, unit: str = "step", done: int = 0,
+                 enabled: bool | None = None, leave: bool = False) -> Any:
+    """A tqdm bar, shown on a terminal (or as ``enabled`` says)."""
     from tqdm import tqdm
 
     disable = not sys.stderr.isatty() if enabled is None else not enabled
-    return tqdm(total=total, initial=done, unit="chunk", disable=disable, desc="experiment")
+    return tqdm(total=total, initial=done, desc=what, unit=unit, leave=leave, disable=disable)
 
 
 def load_results(store: ResultStore, spec: ExperimentSpec) -> dict[str, dict[str, np.ndarray]]:

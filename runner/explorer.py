@@ -160,6 +160,11 @@ class Explorer:
         self.visits[rows, cells] += 1
         self.timings["perception"] += time.perf_counter() - start
 
+    def belief(self) -> np.ndarray:
+        """P(M_v = the task's material) at every probed cell, NaN where nothing was probed;
+        [runs, cells]."""
+        return np.where(self.visits > 0, self.posterior[..., self.target_material], np.nan)
+
     def percept(self) -> tuple[np.ndarray, np.ndarray]:
         """The perceived stimulus of the task: where the task's material is perceived (its
         posterior P(M_v = material) >= 1/2), and where a side of the task's discontinuity is

@@ -5,30 +5,26 @@ from __future__ import annotations
 
 import html
 import json
-import sys
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from scipy import stats
 
 from bayesprog.errors import BayesprogError
 from runner import figures
-from runner.experiment import ExperimentSpec, load_results, mean_sem, stored_experiment
+from runner.experiment import (
+    ExperimentSpec,
+    load_results,
+    mean_sem,
+    progress_bar,
+    stored_experiment,
+)
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import behaviour, border_band
 from runner.scenario import Scenario
 from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write
-
-
-def progress(total: int, what: str) -> Any:
-    """A progress bar on a terminal (silent otherwise) for a step of the report."""
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=what, unit="step", leave=False,
-                disable=not sys.stderr.isatty())
 
 
 def area_under(gamma: np.ndarray) -> np.ndarray:
@@ -158,8 +154,7 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         else:
             shape_field = np.full(len(scenario.centres), 1.0 / len(scenario.centres))
         posterior = explorer.target_probabilities[0]
-        belief = np.where(explorer.visits[0] > 0,
-                          explorer.posterior[0, :, explorer.target_material], np.nan)
+        belief = explorer.belief()[0]
         yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0], "belief": belief,
                "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
                "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}
@@ -230,7 +225,7 @@ class DecisionFigure:
             pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
             output_params=["-crf", "26"])
         writer.send(None)
-        bar = progress(len(frames), "Fig. 11 animation")
+        bar = progress_bar(len(frames), "Fig. 11 animation")
         try:
             for k, frame in enumerate(frames):
                 canvas.restore_region(background)
@@ -275,7 +270,7 @@ class DecisionFigure:
 def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
                   out_png: Path, out_video: Path | None, steps: int) -> None:
     """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run at the same resolution."""
-    bar = progress(steps, "Fig. 11 replay")
+    bar = progress_bar(steps, "Fig. 11 replay")
     frames = []
     for frame in replay(experiment, task, configuration, run, steps):
         frames.append(frame)
@@ -430,7 +425,7 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     folder.mkdir(parents=True, exist_ok=True)
     borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
     rows = statistics_table(results, spec, borders, scenario)
-    bar = progress(3, "report figures")
+    bar = progress_bar(3, "report figures")
     plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
     bar.update(1)
     plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png", experiment.start_cells())

@@ -149,10 +149,12 @@ class SensorModel:
         return out
 
 
-def load_sensor_model(path: str | Path, materials: Sequence[str]) -> SensorModel:
-    """Load a sensor model file; every material of ``materials`` must be described."""
+def load_sensor_model(path: str | Path, materials: Sequence[str] | None = None) -> SensorModel:
+    """Load a sensor model file; every material of ``materials`` must be described (by default
+    the file's materials, in its order)."""
     path = Path(path)
     located, spec = load_document(path, SensorModelSpec)
+    materials = tuple(spec.materials) if materials is None else materials
     missing = [m for m in materials if m not in spec.materials]
     if missing:
         raise SpecError([located.diagnostic(("materials",), f"no model for material(s) "
@@ -217,13 +219,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.per_material < 1:
             raise BayesprogError(f"--per-material: expected at least 1, found {args.per_material}")
+        materials = None
         if args.perception:
             import bayesprog
 
             materials = bayesprog.load(args.perception).variables["M"].states  # type: ignore[union-attr]
-        else:
-            located, spec = load_document(Path(args.model), SensorModelSpec)
-            materials = tuple(spec.materials)
         model = load_sensor_model(args.model, materials)
         frame = pd.DataFrame(model.record(args.per_material, args.seed))
         atomic_write(Path(args.output), frame.to_csv(index=False).encode())
@@ -234,7 +234,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (BayesprogError, OSError) as exc:
         print(f"runner.sensor: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.output}: {args.per_material} probes of each of {len(materials)} materials "
+    print(f"{args.output}: {args.per_material} probes of each of {len(model.materials)} materials "
           f"(seed {args.seed})")
     return 0
 

@@ -103,7 +103,7 @@ class _Session:
         if e.last is None:
             raise ValueError("no decision yet: send a probe first")
         shape = e.scenario.shape
-        belief = np.where(e.visits[0] > 0, e.posterior[0, :, e.target_material], np.nan)
+        belief = e.belief()[0]
         return {"belief": _grid(belief, shape), "inhibition": _grid(e.last.inhibition[0], shape),
                 "saliency": _grid(e.last.saliency[0], shape),
                 "uncertainty": _grid(e.last.uncertainty[0], shape),

@@ -3,16 +3,14 @@ for pandas, R or a spreadsheet (``bayesprog results DIR -o runs.parquet``)."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from bayesprog.errors import BayesprogError
 from bayesprog.files import atomic_write
-from runner.experiment import CUES, ExperimentSpec, load_results, stored_experiment
+from runner.experiment import CUES, load_results, progress_bar, stored_experiment
 from runner.figures import centre_cm
 from runner.metrics import border_band
 from runner.store import ResultStore
@@ -40,13 +38,11 @@ def runs_table(out: str | Path) -> Any:
     import pandas as pd
 
     store = ResultStore(Path(out))
-    manifest = store.manifest()
-    spec = ExperimentSpec.model_validate(manifest["experiment"])
-    scenario = stored_experiment(out).scenario
+    experiment = stored_experiment(out)
+    spec, scenario = experiment.spec, experiment.scenario
     results = load_results(store, spec)
     frames = []
-    bar = tqdm(total=len(spec.tasks) * len(spec.configurations), desc="runs table",
-               leave=False, disable=not sys.stderr.isatty())
+    bar = progress_bar(len(spec.tasks) * len(spec.configurations), "runs table")
     for task in spec.tasks:
         band = border_band(scenario.border(task)).ravel()
         for conf in spec.configurations:

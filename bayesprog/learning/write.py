@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import io
 import re
-from collections.abc import Mapping, MutableMapping, Sequence
+from collections.abc import Mapping, MutableMapping
 from typing import Any
 
 import numpy as np
@@ -39,16 +39,18 @@ def _number(x: float) -> float | int:
     return float(f"{x:.{DIGITS}g}")
 
 
-def _flow_seq(values: Sequence[Any]) -> CommentedSeq:
-    seq = CommentedSeq(values)
+def _flow(value: Any) -> Any:
+    """Nested lists as YAML flow sequences ([a, b]) at every level; anything else as it is."""
+    if not isinstance(value, list):
+        return value
+    seq = CommentedSeq([_flow(v) for v in value])
     seq.fa.set_flow_style()
     return seq
 
 
 def _leaf(array: np.ndarray) -> Any:
-    if array.ndim == 0:
-        return _number(float(array))
-    return _flow_seq([_leaf(a) for a in array])
+    """A parameter's array as numbers of DIGITS significant digits, in flow sequences."""
+    return _flow(np.vectorize(_number, otypes=[float])(array).tolist())
 
 
 def _is_flow(node: Any) -> bool:
@@ -131,23 +133,12 @@ def _record(record: FitRecord) -> CommentedMap:
             for label, named in value.items():
                 inner = CommentedMap()
                 for name, array in named.items():
-                    inner[name] = _flow_seq(array) if isinstance(array, list) else array
-                    _flow_nested(inner[name])
+                    inner[name] = _flow(array)
                 stats[label] = inner
             out[key] = stats
-        elif key == "terms":
-            out[key] = _flow_seq(value)
         else:
-            out[key] = value
+            out[key] = _flow(value)  # the terms' list in flow style
     return out
-
-
-def _flow_nested(node: Any) -> None:
-    if isinstance(node, list):
-        for i, item in enumerate(node):
-            if isinstance(item, list):
-                node[i] = _flow_seq(item)
-                _flow_nested(node[i])
 
 
 def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
