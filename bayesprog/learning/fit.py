@@ -21,7 +21,7 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from bayesprog.errors import BayesprogError, QuestionError
+from bayesprog.errors import QuestionError
 from bayesprog.forms import InputRef, ParamValue, TermContext
 from bayesprog.inference.factors import observed_part
 from bayesprog.language.check import LearnOptions, Term
@@ -466,10 +466,3 @@ class _Em:
         old = stats.get(label)
         stats[label] = new if old is None else item.estimator.merge(old, new)
 
-
-def check_fit(estimate: Estimate) -> None:
-    """Raise when a fit produced parameters that are not finite (a safeguard, never expected)."""
-    for label, params in estimate.params.items():
-        for name, value in params.items():
-            if not np.all(np.isfinite(value.array)):
-                raise BayesprogError(f"term {label}: the fit gave a non-finite {name!r}")
