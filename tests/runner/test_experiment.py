@@ -284,3 +284,51 @@ def test_a_report_draws_what_was_stored_from_any_folder(tmp_path, monkeypatch, c
     (elsewhere / "runs.csv").mkdir()
     assert main(["results", str(out), "-o", str(elsewhere / "runs.csv")]) == 2  # a folder
     assert "cannot write" in capsys.readouterr().err
+
+
+def _verdicts(areas: dict[str, dict[str, np.ndarray]]) -> tuple[dict[str, str], list[dict]]:
+    """The report's verdicts and statistics on made-up results: per task and configuration,
+    the per-run areas under a constant Gamma(k) of two steps (the area is the value itself)."""
+    from runner.experiment import ExperimentSpec
+    from runner.report import findings, statistics_table
+
+    configurations = ["full", "without_R", "without_S", "without_I", "without_U"]
+    spec = ExperimentSpec(name="made_up", scenario="none.yaml", tasks=list(areas),
+                          configurations=configurations, runs=60, iterations=2)
+    results = {f"{t}/{c}": {"gamma": np.repeat(areas[t][c][:, None], 2, axis=1)}
+               for t in areas for c in configurations}
+    rows = statistics_table(results, spec, {t: 10 for t in areas})
+    return {text.split()[1]: verdict for text, _, verdict in findings(rows, spec)}, rows
+
+
+def _task(s_shift: float, u_shift: float, seed: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    full = rng.uniform(8.0, 12.0, 60)
+    noise = lambda: rng.normal(0.0, 0.05, 60)  # noqa: E731
+    return {"full": full, "without_R": full + noise(), "without_I": full + 0.02 + noise(),
+            "without_S": full + s_shift + rng.normal(0.0, 0.8, 60),
+            "without_U": full + u_shift + rng.normal(0.0, 0.8, 60)}
+
+
+def test_removing_s_is_the_worst_unless_another_ablation_is_distinguishably_worse():
+    def s_row(rows: list[dict], task: str) -> dict:
+        return next(r for r in rows if (r["task"], r["configuration"]) == (task, "without_S"))
+
+    # S the worst in every task: agrees
+    verdicts, rows = _verdicts({t: _task(3.0, 1.0, i) for i, t in enumerate(("T1", "T2", "T3"))})
+    assert verdicts["S"] == "agrees" and s_row(rows, "T3")["runner_up"] == "without_U"
+    # in T3 removing U is worse by a margin the runs cannot tell from chance: still agrees
+    close = {"T1": _task(3.0, 1.0, 0), "T2": _task(3.0, 1.0, 1), "T3": _task(2.0, 1.0, 2)}
+    spread = np.random.default_rng(3).normal(0.0, 0.8, 60)
+    close["T3"]["without_U"] = close["T3"]["without_S"] + spread - spread.mean() + 0.05
+    verdicts, rows = _verdicts(close)
+    row = s_row(rows, "T3")
+    assert row["runner_up_auc"] > row["auc_mean"] and row["p_runner_up_holm"] >= 0.01
+    assert verdicts["S"] == "agrees"
+    # in T3 removing U is clearly worse: differs
+    far = {"T1": _task(3.0, 1.0, 0), "T2": _task(3.0, 1.0, 1), "T3": _task(1.0, 3.0, 2)}
+    verdicts, rows = _verdicts(far)
+    assert s_row(rows, "T3")["p_runner_up_holm"] < 0.01 and verdicts["S"] == "differs"
+    # removing S not significant in one task: differs, however it ranks
+    flat = {"T1": _task(3.0, 1.0, 0), "T2": _task(3.0, 1.0, 1), "T3": _task(0.0, -0.5, 2)}
+    assert _verdicts(flat)[0]["S"] == "differs"
