@@ -102,8 +102,9 @@ def draw_materials(ax: Any, scenario: Scenario, legend: bool = True,
     if legend:
         handles = [Patch(facecolor=palette[i], edgecolor="0.4", label=scenario.materials[m])
                    for i, m in enumerate(present)]
-        ax.legend(handles=handles + (extra or []), fontsize=6, loc="upper right",
-                  framealpha=0.85)
+        # beside the map, not over it: on a wide grid a legend inside would hide an object
+        ax.legend(handles=handles + (extra or []), fontsize=6, loc="upper left",
+                  bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
     ax.tick_params(labelsize=6)
 
 

@@ -127,8 +127,11 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
 
     nx, ny = scenario.shape
     cols = len(spec.configurations) + 1
-    fig = figures.figure(figsize=(2.6 * cols, 3.9 * len(spec.tasks)))
-    axes = fig.subplots(len(spec.tasks), cols, squeeze=False)
+    # panels as tall as the grid's aspect asks (the paper's 30 x 60: 3.9 in), the first column
+    # wider for its legend
+    fig = figures.figure(figsize=(2.6 * cols + 1.0, (1.6 * ny / nx + 0.7) * len(spec.tasks)))
+    axes = fig.subplots(len(spec.tasks), cols, squeeze=False,
+                        gridspec_kw={"width_ratios": [1.45] + [1.0] * (cols - 1)})
     for r, task in enumerate(spec.tasks):
         ax = axes[r, 0]
         extra = [Line2D([], [], color="black", lw=1.2, label=f"{task} border")]
@@ -197,7 +200,8 @@ class DecisionFigure:
 
     def __init__(self, scenario: Scenario, task: str, title: str = ""):
         self.scenario, self.task = scenario, task
-        self.fig = figures.figure(figsize=(13, 9.6))
+        nx, ny = scenario.shape  # rows as tall as the grid's aspect asks (30 x 60: 4.8 in)
+        self.fig = figures.figure(figsize=(13, 2 * (2.0 * ny / nx + 0.8)))
         axes = self.fig.subplots(2, 4)
         self.axes = axes
         flat = list(axes.ravel())
