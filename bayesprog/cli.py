@@ -46,6 +46,16 @@ def _load(path: str) -> Program:
         raise _UserError(f"cannot read {path}: expected UTF-8 text") from None
 
 
+def _ablated(program: Program, terms: Sequence[str]) -> Program:
+    """``program`` with each ``--ablate`` term uniform."""
+    for term in terms:
+        try:
+            program = program.ablate(term)
+        except BayesprogError as exc:
+            raise _UserError(f"--ablate {term!r}: {exc}") from None
+    return program
+
+
 def _kind_hint(file: str) -> str | None:
     """Why a file is not a program, when it is plainly another kind of file."""
     from bayesprog.language.loader import wrong_kind
@@ -76,10 +86,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_show(args: argparse.Namespace) -> int:
     from bayesprog.show import render
 
-    program = _load(args.file)
-    for term in args.ablate:
-        program = program.ablate(term)
-    print(render(program))
+    print(render(_ablated(_load(args.file), args.ablate)))
     return 0
 
 
@@ -136,9 +143,7 @@ def cmd_query(args: argparse.Namespace) -> int:
     _check_seed(args.seed)
     if args.limit < 1:
         raise _UserError(f"--limit: expected at least 1 row, found {args.limit}")
-    program = _load(args.file)
-    for term in args.ablate:
-        program = program.ablate(term)
+    program = _ablated(_load(args.file), args.ablate)
     inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
     evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
     soft = {}
@@ -279,9 +284,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from bayesprog.io import export_program
 
-    program = _load(args.file)
-    for term in args.ablate:
-        program = program.ablate(term)
+    program = _ablated(_load(args.file), args.ablate)
     print(f"wrote {export_program(program, args.output)}")
     return 0
 

@@ -28,7 +28,12 @@ class BayesprogError(Exception):
     """Base class of every error caused by user input (files, questions, evidence)."""
 
 
-class SpecError(BayesprogError):
+class ArgumentError(BayesprogError, TypeError):
+    """An argument of the Python API of the wrong type: the message names the argument, what
+    was expected and what was found."""
+
+
+class SpecError(BayesprogError, ValueError):
     """A program file has one or more problems; all of them are listed."""
 
     def __init__(self, diagnostics: list[Diagnostic]):
@@ -36,9 +41,33 @@ class SpecError(BayesprogError):
         super().__init__("\n".join(str(d) for d in self.diagnostics))
 
 
-class QuestionError(BayesprogError):
+class QuestionError(BayesprogError, ValueError):
     """A question or its evidence does not fit the program (unknown variable, state, shape...)."""
 
 
 class ZeroEvidenceError(QuestionError):
     """The evidence has probability zero under the program, so no posterior exists."""
+
+
+def expect_mapping(value: object, argument: str, of: str) -> dict:
+    """``value`` as a dict (None: empty), or an :class:`ArgumentError` naming ``argument``.
+
+    >>> expect_mapping(None, "evidence", "variable names to values")
+    {}
+    >>> expect_mapping(["wet"], "evidence", "variable names to values")
+    Traceback (most recent call last):
+    ...
+    bayesprog.errors.ArgumentError: evidence: expected a mapping of variable names to values (a dict), found list: ['wet']
+    """
+    from collections.abc import Mapping
+
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ArgumentError(f"{argument}: expected a mapping of {of} (a dict), found "
+                            f"{type(value).__name__}: {short_repr(value)}")
+    for key in value:
+        if not isinstance(key, str):
+            raise ArgumentError(f"{argument}: expected names (strings) as keys, found "
+                                f"{short_repr(key)}")
+    return dict(value)

@@ -11,11 +11,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from bayesprog.errors import BayesprogError
+
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 _SHAPE = re.compile(r"^\s*P\s*\((?P<body>.*)\)\s*$", re.DOTALL)
 
 
-class ExpressionError(ValueError):
+class ExpressionError(BayesprogError, ValueError):
     """The text is not of the form ``P(A B | C, D=d)``; the message says what was found."""
 
 

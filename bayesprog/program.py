@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import numbers
+import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -13,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import networkx as nx
 
 from bayesprog import inference, rich
-from bayesprog.errors import Diagnostic, QuestionError, SpecError
+from bayesprog.errors import ArgumentError, Diagnostic, QuestionError, SpecError, short_repr
 from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
 from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
@@ -212,7 +214,13 @@ class Program:
         """
         names: list[str] = []
         for item in terms:
-            names.extend([item] if isinstance(item, str) else item)
+            group = [item] if isinstance(item, str) else item
+            if isinstance(group, Iterable) and not isinstance(group, bytes):
+                group = list(group)
+            if not isinstance(group, list) or not all(isinstance(n, str) for n in group):
+                raise ArgumentError(f"ablate: expected terms like 'P(B | A)' (strings, or "
+                                    f"lists of them), found {short_repr(item)}")
+            names.extend(group)
         resolved = [str(self.term(n).expression) for n in names]
         new = copy.copy(self)
         new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
@@ -246,6 +254,15 @@ class Program:
         """
         from bayesprog.learning import fit_terms
 
+        if isinstance(freeze, str):
+            freeze = [freeze]
+        if not isinstance(freeze, Iterable) or not all(isinstance(t, str) for t in freeze):
+            raise ArgumentError(f"freeze: expected terms like 'P(B | A)' (strings), found "
+                                f"{short_repr(freeze)}")
+        if isinstance(max_iter, bool) or not isinstance(max_iter, numbers.Integral):
+            raise ArgumentError(f"max_iter: expected an integer >= 1, found {short_repr(max_iter)}")
+        if isinstance(tol, bool) or not isinstance(tol, numbers.Real):
+            raise ArgumentError(f"tol: expected a number >= 0, found {short_repr(tol)}")
         try:
             labels = [str(self.term(t).expression) for t in freeze]
         except ExpressionError as exc:
@@ -334,6 +351,12 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     >>> p.variables["O"].card
     16
     """
+    if not isinstance(text, (str, bytes)):
+        raise ArgumentError(f"loads: expected the text of a program (a string), found "
+                            f"{type(text).__name__} {short_repr(text)}")
+    if variables is not None and not isinstance(variables, Mapping):
+        raise ArgumentError(f"variables: expected a mapping of variable names to "
+                            f"declarations, found {short_repr(variables)}")
     located, problems = load_yaml(text, file)
     if problems and located.data is None:
         raise SpecError(problems)
@@ -382,6 +405,9 @@ def _replace_variables(located: Located, variables: Mapping[str, Any]) -> list[D
 
 def load(path: str | Path, variables: Mapping[str, Any] | None = None) -> Program:
     """Load and check the program file at ``path`` (``variables``: see :func:`loads`)."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ArgumentError(f"load: expected a path (a string or pathlib.Path), found "
+                            f"{type(path).__name__} {short_repr(path)}")
     path = Path(path)
     text = path.read_text(encoding="utf-8")
     return loads(text, str(path), path.parent, variables)

@@ -9,6 +9,7 @@ numbers whatever the batching, and the configurations are compared on paired run
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,11 +21,12 @@ from pydantic import BaseModel, ConfigDict, Field
 from bayesprog import Program
 from bayesprog.errors import BayesprogError, SpecError
 from bayesprog.language.document import load_document
+from bayesprog.limits import SizeError, check_size
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
 from runner.sensor import HapticSensor, ModelSensor, SyntheticSensor
-from runner.store import ResultStore, Unit
+from runner.store import ResultStore, Unit, config_hash
 
 
 class ExperimentSpec(BaseModel):
@@ -39,7 +41,7 @@ class ExperimentSpec(BaseModel):
     configurations: list[str] = Field(min_length=1)
     runs: int = Field(ge=1)
     iterations: int = Field(ge=1)
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     chunk: int = Field(25, ge=1, description="runs per stored piece of results")
 
 
@@ -69,6 +71,14 @@ def load_experiment(path: str | Path) -> Experiment:
         if conf not in CONFIGURATIONS:
             diags.append(located.diagnostic(("configurations", i), f"unknown configuration "
                                             f"{conf!r}: expected one of {', '.join(CONFIGURATIONS)}"))
+    # what the results of every run take (stored per step, and held together by the report),
+    # estimated before anything is allocated
+    entries = spec.runs * spec.iterations * (2 + len(CUES)) * len(spec.tasks) \
+        * len(spec.configurations)
+    try:
+        check_size(entries, f"{spec.runs:,} runs of {spec.iterations:,} iterations")
+    except SizeError as exc:
+        diags.append(located.diagnostic(("runs",), str(exc)))
     if diags:
         raise SpecError(diags)
     return Experiment(spec, path, scenario)
@@ -197,8 +207,12 @@ def manifest(experiment: Experiment) -> dict:
 
 
 @functools.lru_cache(maxsize=4)
-def _loaded(experiment_path: str, digest: str | None) -> Experiment:
-    return load_experiment(experiment_path)
+def _loaded(experiment_path: str, digest: str) -> Experiment:
+    experiment = load_experiment(experiment_path)
+    if config_hash(manifest(experiment)) != digest:
+        raise BayesprogError(f"{experiment_path}, or a file it names, changed while the "
+                             "experiment ran: run it again (the finished chunks are kept)")
+    return experiment
 
 
 def compute_unit(experiment_path: str, unit: Unit, digest: str | None = None
@@ -228,37 +242,20 @@ def run_experiment(
     """
     store = ResultStore(out)
     store.open(manifest(experiment))
-    todo = [u for u in units(experiment.spec) if not store.done(u)]
+    todo = [u for u in units(experiment.spec) if not store.done(u, experiment.spec.iterations)]
+    for path in store.set_aside:
+        print(f"{path}: damaged (it does not read back whole): set aside; its results are "
+              "computed again", file=sys.stderr)
     total = len(units(experiment.spec))
     bar = progress_bar(total, "experiment", unit="chunk", done=total - len(todo),
                        enabled=progress, leave=True)
     path = str(experiment.path.resolve())
-    digest = store.manifest()["hash"]
+    digest = store.hash
     try:
         if scheduler is not None:
             _run_dask(scheduler, path, digest, todo, store, bar)
         elif workers > 1:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
-            # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked
-            # child must not inherit; each worker then uses one thread (no oversubscription)
-            context = multiprocessing.get_context("spawn")
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                                       initializer=_worker_init)
-            futures = {pool.submit(compute_unit, path, u, digest): u for u in todo}
-            try:
-                for future in as_completed(futures):
-                    store.save(futures[future], future.result())
-                    bar.update(1)
-            except BaseException:
-                # Ctrl-C or a failed chunk: what is saved stays; stop the workers at once
-                processes = list((getattr(pool, "_processes", None) or {}).values())
-                pool.shutdown(wait=False, cancel_futures=True)
-                for process in processes:
-                    process.terminate()
-                raise
-            pool.shutdown()
+            _run_processes(workers, path, digest, todo, store, bar)
         else:
             for unit in todo:
                 store.save(unit, compute_unit(path, unit, digest))
@@ -268,32 +265,138 @@ def run_experiment(
     return store
 
 
-def _worker_init() -> None:
-    """A worker process: one compiled-kernel thread, and Ctrl-C left to the parent."""
+#: How often in a row workers may die before the run stops (each time the units they held
+#: are given to new workers); finished units reset the count.
+MAX_WORKER_DEATHS = 3
+#: Seconds a Dask scheduler may go without any worker before the run stops.
+WORKER_TIMEOUT = 60.0
+
+
+def _run_processes(workers: int, path: str, digest: str, todo: list[Unit], store: ResultStore,
+                   bar: Any) -> None:
+    """The units on local processes; a pool whose worker dies is replaced and the units it had
+    not finished are computed again (numbers do not depend on which process computes them)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked child
+    # must not inherit; each worker then uses one thread (no oversubscription)
+    context = multiprocessing.get_context("spawn")
+    left, deaths = list(todo), 0
+    while left:
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(left)), mp_context=context,
+                                   initializer=_worker_init, initargs=(os.getpid(),))
+        futures = {pool.submit(compute_unit, path, u, digest): u for u in left}
+        broken = False
+        try:
+            for future in as_completed(futures):
+                if isinstance(future.exception(), BrokenProcessPool):
+                    broken = True
+                    break
+                store.save(futures[future], future.result())
+                left.remove(futures[future])
+                deaths = 0
+                bar.update(1)
+            if broken:  # keep what finished before the pool broke
+                for future, unit in futures.items():
+                    if unit in left and future.done() and future.exception() is None:
+                        store.save(unit, future.result())
+                        left.remove(unit)
+                        bar.update(1)
+        except BaseException:
+            # Ctrl-C or a failed chunk: what is saved stays; stop the workers at once
+            _stop(pool)
+            raise
+        if not broken:
+            pool.shutdown()
+            return
+        _stop(pool)
+        deaths += 1
+        if deaths > MAX_WORKER_DEATHS:
+            raise BayesprogError(f"worker processes died {deaths} times in a row (killed, or "
+                                 "out of memory?): the finished chunks are kept; run again to "
+                                 "resume")
+        print(f"a worker process died: {len(left)} chunk(s) left go to new workers",
+              file=sys.stderr)
+
+
+def _stop(pool: Any) -> None:
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
+def _worker_init(parent: int) -> None:
+    """A worker process: one compiled-kernel thread, Ctrl-C left to the parent, and an end of
+    its own when the parent is gone (killed: nothing else would stop it)."""
     import signal
+    import threading
+    import time
 
     import numba
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     numba.set_num_threads(1)
 
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+
 
 def _run_dask(address: str, path: str, digest: str, todo: list[Unit], store: ResultStore,
-              bar) -> None:
+              bar: Any) -> None:
     try:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client, wait
+        from distributed.client import FutureCancelledError
+        from distributed.scheduler import KilledWorker
     except ImportError:
         raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
     try:
         client = Client(address, timeout="10s")
-    except OSError as exc:
+    except (OSError, ValueError, TypeError) as exc:
         raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
             from None
+    import time
+
     with client:
         futures = {client.submit(compute_unit, path, u, digest, pure=False): u for u in todo}
-        for future in as_completed(futures):
-            store.save(futures[future], future.result())
-            bar.update(1)
+        pending, deaths, alone_since = set(futures), 0, None
+        while pending:
+            try:
+                done, still = wait(list(pending), timeout=1.0, return_when="FIRST_COMPLETED")
+                pending = set(still)
+            except TimeoutError:  # nothing finished in that second
+                done = set()
+            for future in done:
+                unit = futures.pop(future)
+                try:
+                    result = future.result()
+                except (KilledWorker, FutureCancelledError):
+                    # the unit was on workers that died: give it to the others
+                    deaths += 1
+                    if deaths > MAX_WORKER_DEATHS * max(1, len(todo)):
+                        raise BayesprogError(f"--scheduler {address}: workers keep dying on "
+                                             f"{unit.name}; the finished chunks are kept") \
+                            from None
+                    again = client.submit(compute_unit, path, unit, digest, pure=False)
+                    futures[again] = unit
+                    pending.add(again)
+                    continue
+                store.save(unit, result)
+                bar.update(1)
+            if done or client.scheduler_info().get("workers"):
+                alone_since = None
+            elif alone_since is None:
+                alone_since = time.monotonic()
+            elif time.monotonic() - alone_since > WORKER_TIMEOUT:
+                raise BayesprogError(f"--scheduler {address}: no worker for "
+                                     f"{WORKER_TIMEOUT:.0f} s: start workers (dask worker "
+                                     f"{address}); the finished chunks are kept")
 
 
 def progress_bar(total: int, what: str, unit: str = "step", done: int = 0,

@@ -78,6 +78,11 @@ def explore(target: Path, options: dict) -> int:
 
     scenario = load_scenario(_scenario_path(target))
     task = options.get("task") or next(iter(scenario.spec.tasks))
+    for term in options.get("ablate") or ():
+        try:
+            scenario.target.ablate(term)
+        except BayesprogError as exc:
+            raise BayesprogError(f"--ablate {term!r}: {exc}") from None
     explorer = Explorer(scenario, task, ablate=options.get("ablate") or ())
     serve(explorer, sys.stdin, sys.stdout, seed=options.get("seed", 0))
     return 0

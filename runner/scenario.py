@@ -11,11 +11,12 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 import bayesprog
 from bayesprog.errors import SpecError
 from bayesprog.language.document import load_document
+from bayesprog.limits import limit
 from runner.sensor import SensorModel, load_sensor_model
 
 
@@ -26,6 +27,27 @@ class _Strict(BaseModel):
 class GridSpec(_Strict):
     shape: list[int] = Field(min_length=2, max_length=2)
     cell: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _size(self) -> GridSpec:
+        if any(n < 1 for n in self.shape):
+            raise ValueError(f"expected sizes >= 1, found {self.shape}")
+        cells, cap = self.shape[0] * self.shape[1], limit("states")
+        if cells > cap:
+            raise ValueError(f"a grid of {self.shape[0]} x {self.shape[1]} has {cells:,} cells, "
+                             f"more than the limit of {cap:,} (raise it with the environment "
+                             "variable BAYESPROG_MAX_STATES)")
+        return self
+
+
+def _outline(points: list[list[float]], what: str) -> None:
+    """A closed outline: at least three points of two finite coordinates."""
+    if len(points) < 3:
+        raise ValueError(f"{what}: expected at least 3 points [x, y], found {len(points)}")
+    for point in points:
+        if len(point) != 2 or not all(np.isfinite(point)):
+            raise ValueError(f"{what}: expected points [x, y] of two finite numbers, found "
+                             f"{point}")
 
 
 class ObjectSpec(_Strict):
@@ -41,6 +63,8 @@ class ObjectSpec(_Strict):
             raise ValueError("expected exactly one of 'template' (with 'at') or 'polygon'")
         if self.template is not None and self.at is None:
             raise ValueError("an object placed from a template needs 'at: [x, y]'")
+        if self.polygon is not None:
+            _outline(self.polygon, "polygon")
         return self
 
 
@@ -69,6 +93,13 @@ class ScenarioSpec(_Strict):
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
+
+    @field_validator("templates")
+    @classmethod
+    def _outlines(cls, templates: dict[str, list[list[float]]]) -> dict[str, list[list[float]]]:
+        for name, points in templates.items():
+            _outline(points, f"template {name!r}")
+        return templates
 
 
 def _rotation(degrees: float) -> np.ndarray:
@@ -189,6 +220,12 @@ def load_scenario(path: str | Path) -> Scenario:
     """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
     path = Path(path)
     located, spec = load_document(path, ScenarioSpec)
+    missing = [located.diagnostic(("programs", which), f"no program file {name!r} (looked for "
+                                  f"{(path.parent / name).resolve()})")
+               for which, name in spec.programs.model_dump().items()
+               if not (path.parent / name).is_file()]
+    if missing:
+        raise SpecError(missing)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     # the workspace sets pi_tar's grid: one program serves every grid size

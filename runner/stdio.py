@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable, Iterator
 from typing import IO
 
 import numpy as np
@@ -110,17 +111,46 @@ class _Session:
                 "posterior": _grid(e.target_probabilities[0], shape)}
 
 
-def serve(explorer: Explorer, stdin: IO[str], stdout: IO[str], seed: int = 0) -> int:
+#: The longest line read (characters); a longer one is answered with an error and skipped.
+MAX_LINE = 1 << 20
+
+
+def _lines(stdin: IO[str] | Iterable[str]) -> Iterator[str]:
+    """The lines of ``stdin``; from a file, one longer than ``MAX_LINE`` is cut there (its
+    rest dropped, never held)."""
+    if not hasattr(stdin, "readline"):
+        yield from stdin
+        return
+    while True:
+        line = stdin.readline(MAX_LINE + 1)
+        if not line:
+            return
+        if len(line) > MAX_LINE and not line.endswith("\n"):
+            while True:  # drop the rest of the long line without holding it
+                rest = stdin.readline(MAX_LINE)
+                if not rest or rest.endswith("\n"):
+                    break
+        yield line
+
+
+def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], seed: int = 0) -> int:
     """Answer probes until end of input. Returns the number of probes answered."""
     k = 0
     started = False
     answered = 0
     session = _Session(explorer)
-    for line_no, line in enumerate(stdin, 1):
+    for line_no, line in enumerate(_lines(stdin), 1):
         if not line.strip():
             continue
         try:
-            obj = json.loads(line)
+            if len(line) > MAX_LINE:
+                raise ValueError(f"a line of more than {MAX_LINE:,} characters: expected one "
+                                 "JSON object of a probe (the rest of the line is skipped)")
+            try:
+                obj = json.loads(line)
+            except RecursionError:
+                raise ValueError("JSON nested too deeply: expected one flat JSON object") \
+                    from None
             if not isinstance(obj, dict):
                 raise ValueError("expected a JSON object")
             if set(obj) == {"maps"}:

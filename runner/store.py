@@ -1,8 +1,10 @@
 """Results that survive: one file per (task, configuration, chunk of runs), written atomically.
 
 ``DIR/experiment.json`` records the experiment, its seed and start cells, the text of every
-program and scenario file it resolved, and a hash of all of it. Running again in the same folder
-skips the chunks already written; a different configuration is refused, never mixed in.
+program and scenario file it resolved, and a hash of all of it; every chunk carries that hash.
+Running again in the same folder skips the chunks already written whole; a chunk or manifest that
+does not read back (a full disk, a crash) is set aside as ``NAME.damaged`` and computed again; a
+different configuration is refused, never mixed in.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,14 +40,25 @@ class Unit:
         return f"{self.task}/{self.configuration}/runs_{self.runs[0]:04d}-{self.runs[-1]:04d}.npz"
 
 
+def identity(manifest: dict) -> dict:
+    """What the results depend on: the experiment's settings, its start cells and the text of
+    every file it resolved, by role (not where the files are, nor how their paths were
+    written)."""
+    return {"experiment": manifest["experiment"], "start_cells": manifest["start_cells"],
+            "files": {role: f["text"] for role, f in manifest["files"].items()}}
+
+
 def config_hash(manifest: dict) -> str:
-    payload = {k: manifest[k] for k in ("experiment", "start_cells", "files")}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(identity(manifest), sort_keys=True).encode()).hexdigest()[:16]
 
 
 class ResultStore:
     def __init__(self, out: Path):
         self.out = Path(out)
+        #: the configuration's hash once :meth:`open` has run (chunks carry it)
+        self.hash: str | None = None
+        #: what :meth:`open` and :meth:`done` set aside as damaged, for the user to read
+        self.set_aside: list[str] = []
 
     @property
     def manifest_path(self) -> Path:
@@ -52,35 +66,105 @@ class ResultStore:
 
     def manifest(self) -> dict:
         try:
-            return json.loads(self.manifest_path.read_text(encoding="utf-8"))
+            found = json.loads(self.manifest_path.read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise StoreError(f"{self.out}: no experiment.json: not an experiment's output "
                              "folder") from None
+        except (ValueError, OSError) as exc:
+            raise StoreError(f"{self.manifest_path}: not a readable experiment manifest "
+                             f"({exc})") from None
+        try:
+            identity(found)
+            found["hash"]
+        except (KeyError, TypeError, AttributeError):
+            raise StoreError(f"{self.manifest_path}: not a readable experiment manifest "
+                             "(expected keys experiment, start_cells, files and hash)") from None
+        return found
 
     def open(self, manifest: dict) -> None:
-        """Start or resume: refuse a folder that holds another configuration's results."""
+        """Start or resume: refuse a folder that holds another configuration's results; a
+        damaged manifest is set aside and written again (the chunks then prove, by the hash
+        each carries, which configuration they belong to)."""
         manifest = dict(manifest, hash=config_hash(manifest))
-        if self.manifest_path.exists():
-            old = self.manifest()
-            if old.get("hash") != manifest["hash"]:
-                raise StoreError(
-                    f"{self.out} holds results of another configuration (hash "
-                    f"{old.get('hash')}, this one {manifest['hash']}): choose another --out "
-                    "folder, or remove this one to start again"
-                )
-            return
-        self.out.mkdir(parents=True, exist_ok=True)
-        atomic_write(self.manifest_path, json.dumps(manifest, indent=1).encode())
+        self.hash = manifest["hash"]
+        self.set_aside = []
+        if self.manifest_path.is_file():
+            try:
+                old = self.manifest()
+            except StoreError:
+                self._set_aside(self.manifest_path)
+            else:
+                if identity(old) != identity(manifest):
+                    raise StoreError(
+                        f"{self.out} holds results of another configuration (hash "
+                        f"{old.get('hash')}, this one {manifest['hash']}): choose another "
+                        "--out folder, or remove this one to start again"
+                    )
+                if old.get("hash") == manifest["hash"]:
+                    return
+                # the same configuration under the hash of an earlier version: written anew
+        try:
+            self.out.mkdir(parents=True, exist_ok=True)
+            atomic_write(self.manifest_path, json.dumps(manifest, indent=1).encode())
+        except OSError as exc:
+            raise StoreError(f"--out {self.out}: cannot write results there "
+                             f"({exc.strerror or exc}): expected a folder that can be created "
+                             "or written") from None
+
+    def _set_aside(self, path: Path) -> None:
+        """Rename a damaged file ``NAME.damaged`` (kept for the user, never read again)."""
+        aside = path.with_name(path.name + ".damaged")
+        path.replace(aside)
+        self.set_aside.append(str(aside))
 
     def path(self, unit: Unit) -> Path:
         return self.out / "chunks" / unit.name
 
-    def done(self, unit: Unit) -> bool:
-        return self.path(unit).exists()
+    def done(self, unit: Unit, iterations: int | None = None) -> bool:
+        """Whether ``unit`` is stored whole: a chunk that does not read back (checksums of the
+        archive, its runs, the configuration it carries, its number of steps) is set aside
+        as damaged, to be computed again."""
+        path = self.path(unit)
+        if not path.exists():
+            return False
+        opened = self.hash is not None
+        if not opened:
+            self.hash = self.manifest()["hash"]
+        problem = self._check(path, unit, iterations)
+        if problem and opened:  # only a run that is about to compute it again moves it
+            self._set_aside(path)
+        return problem is None
+
+    def _check(self, path: Path, unit: Unit, iterations: int | None) -> str | None:
+        try:
+            with open(path, "rb") as file, np.load(file) as data:
+                arrays = {k: data[k] for k in data.files}  # reading checks each CRC
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError):
+            return "unreadable"
+        if "gamma" not in arrays or "runs" not in arrays:
+            return "incomplete"
+        if arrays["runs"].tolist() != list(unit.runs):
+            return "other runs"
+        stamp = arrays.get("config")
+        if stamp is not None and str(stamp) != self.hash:
+            return "another configuration"
+        if stamp is None and not self._manifest_intact:
+            return "no configuration"  # an earlier version's chunk, with no manifest to vouch
+        rows = len(unit.runs)
+        if any(a.shape[:1] != (rows,) for k, a in arrays.items() if k not in ("runs", "config")):
+            return "truncated"
+        if iterations is not None and arrays["gamma"].shape != (rows, iterations):
+            return "truncated"
+        return None
+
+    @property
+    def _manifest_intact(self) -> bool:
+        return not any(p.endswith("experiment.json.damaged") for p in self.set_aside)
 
     def save(self, unit: Unit, result: dict[str, np.ndarray]) -> None:
         buffer = io.BytesIO()
-        np.savez(buffer, runs=np.asarray(unit.runs), **result)
+        stamp = {} if self.hash is None else {"config": np.asarray(self.hash)}
+        np.savez(buffer, runs=np.asarray(unit.runs), **stamp, **result)
         atomic_write(self.path(unit), buffer.getvalue())
 
     def load(self, task: str, configuration: str, units: list[Unit]) -> dict[str, np.ndarray]:
@@ -93,8 +177,12 @@ class ResultStore:
             if not path.exists():
                 raise StoreError(f"{self.out}: results of {unit.name} are missing: run the "
                                  "experiment again to finish it")
-            with np.load(path) as data:
-                parts.append({k: data[k] for k in data.files})
+            try:
+                with open(path, "rb") as file, np.load(file) as data:
+                    parts.append({k: data[k] for k in data.files if k != "config"})
+            except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+                raise StoreError(f"{path}: a damaged chunk ({exc}): run the experiment again "
+                                 "to compute it anew") from None
         if not parts:
             raise StoreError(f"{self.out}: no results for {task}/{configuration}")
         keys = list(dict.fromkeys(k for p in parts for k in p))

@@ -31,6 +31,7 @@ from bayesprog.inference.methods import (
 )
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
+from bayesprog.limits import check_size, limit
 
 __all__ = [
     "Bound", "Cost", "InferenceCache", "MapResult", "Method", "Posterior", "ProgramLike",
@@ -47,10 +48,17 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound) ->
            *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
                                                bound.soft)))
     rankings = program.inference_cache.rankings
-    methods = rankings.get(key)
-    if methods is None:
-        methods = rankings[key] = [method for method, _ in ranked(plan)]
-    for method in methods:
+    found = rankings.get(key)
+    if found is None:
+        found = rankings[key] = (bound.size, ranked(plan))
+    ranked_size, methods = found
+    cap = limit("entries")
+    fitting = [(m, c) for m, c in methods if c.memory / ranked_size * bound.size <= cap]
+    if not fitting:
+        method, cost = methods[0]
+        check_size(cost.memory / ranked_size * bound.size,
+                   f"{question.expression} (by {method.name}, the method that needs least)")
+    for method, _ in fitting:
         answer = method.posterior(plan)
         if answer is not None:
             return answer

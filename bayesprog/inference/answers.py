@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from bayesprog import rich
-from bayesprog.errors import QuestionError, ZeroEvidenceError
+from bayesprog.errors import ArgumentError, QuestionError, ZeroEvidenceError, short_repr
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
 TIE_RTOL = 1e-12
@@ -111,6 +111,19 @@ def _nested_none(values: list) -> list:
     return [_nested_none(v) if isinstance(v, list) else (None if v != v else v) for v in values]
 
 
+def _generator(rng: Any) -> np.random.Generator:
+    """A generator from ``rng``: a ``numpy.random.Generator``, or a seed (an integer >= 0)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if isinstance(rng, (bool, np.bool_)) or not isinstance(rng, (int, np.integer)):
+        raise ArgumentError(f"rng: expected a seed (an integer >= 0), a "
+                            "numpy.random.Generator, or one of them per batch row; found "
+                            f"{type(rng).__name__} {short_repr(rng)}")
+    if rng < 0:
+        raise QuestionError(f"rng: expected a seed >= 0, found {rng}")
+    return np.random.default_rng(int(rng))
+
+
 def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:
     """Joint argmax per batch row; ties (relative 1e-12) broken uniformly by ``rng``.
 
@@ -124,10 +137,9 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
         if len(rng) != rows:
             raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
-        gens = [r if isinstance(r, np.random.Generator) else np.random.default_rng(r) for r in rng]
+        gens = [_generator(r) for r in rng]
     else:
-        gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        gens = [gen] * rows
+        gens = [_generator(rng)] * rows
     best = flat.max(axis=1)
     tied = flat >= (best * (1 - TIE_RTOL))[:, None]
     counts = tied.sum(axis=1)

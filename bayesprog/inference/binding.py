@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import QuestionError
+from bayesprog.errors import QuestionError, expect_mapping, short_repr
 from bayesprog.expressions import Question
 from bayesprog.forms import ParamValue
 from bayesprog.inference.protocol import ProgramLike
@@ -54,8 +54,11 @@ def bind(
 ) -> Bound:
     expr = question.expression
     variables = program.variables
+    evidence = expect_mapping(evidence, "evidence", "variable names to values")
+    inputs = expect_mapping(inputs, "inputs", "input names to arrays")
+    soft = expect_mapping(soft, "soft", "variable names to likelihood vectors")
     values: dict[str, Any] = dict(expr.values)
-    for name, value in (evidence or {}).items():
+    for name, value in evidence.items():
         if name not in variables:
             raise QuestionError(f"evidence for unknown variable {name!r} "
                                 f"(declared: {', '.join(variables)})")
@@ -80,18 +83,22 @@ def bind(
             arr = _continuous_values(var, value, variables)
             trailing = 1 if var.index is not None else 0
             staged.append(("continuous", name, arr, arr.shape[: arr.ndim - trailing], trailing))
-    for name, value in (inputs or {}).items():
+    for name, value in inputs.items():
         decl = program.inputs.get(name)
         if decl is None:
             raise QuestionError(f"unknown input {name!r} (declared inputs: "
                                 f"{', '.join(program.inputs) or 'none'})")
         arr = _input_array(program, decl, value)
         staged.append(("input", name, arr, arr.shape[: arr.ndim - decl.ndim], decl.ndim))
-    for name, value in (soft or {}).items():
+    for name, value in soft.items():
         soft_var = variables.get(name)
         if not isinstance(soft_var, Discrete):
             raise QuestionError(f"soft evidence needs a declared discrete variable, found {name!r}")
-        arr = np.asarray(value, dtype=float)
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise QuestionError(f"soft evidence on {name}: expected {soft_var.card} non-negative "
+                                f"likelihoods (numbers), found {short_repr(value)}") from None
         if arr.ndim < 1 or arr.shape[-1] != soft_var.card or np.any(arr < 0) or not np.all(np.isfinite(arr)):
             raise QuestionError(f"soft evidence on {name}: expected {soft_var.card} non-negative "
                                 f"likelihoods (one per state), found shape {arr.shape}")

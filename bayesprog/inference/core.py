@@ -54,5 +54,6 @@ class InferenceCache:
     static_factors: dict[int, Factor] = field(default_factory=dict)
     #: compiled tables of the table method, by (searched, observed)
     tables: dict[Any, Any] = field(default_factory=dict)
-    #: the methods that apply to a layout of question, cheapest first
-    rankings: dict[Any, list[Any]] = field(default_factory=dict)
+    #: the methods that apply to a layout of question, cheapest first, with their estimates
+    #: and the batch size they were made for
+    rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)

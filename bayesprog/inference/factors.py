@@ -105,7 +105,9 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
     ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,
                       term.extra)
     try:
-        log = np.asarray(term.form.log_factor(ctx), dtype=float)
+        # a value far out in a tail overflows to a log density of -inf: its exact limit
+        with np.errstate(over="ignore"):
+            log = np.asarray(term.form.log_factor(ctx), dtype=float)
         full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None

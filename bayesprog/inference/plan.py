@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+import opt_einsum
 
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
@@ -36,3 +37,24 @@ class QuestionPlan:
     def free_size(self, axes: tuple[str, ...]) -> int:
         """Entries of a factor over ``axes`` once the observed discrete variables are sliced."""
         return int(np.prod([self.card(a) for a in axes if a not in self.bound.discrete]))
+
+    def contraction_cost(self, output: tuple[str, ...], sliced: bool = True) -> tuple[float, float]:
+        """Operations and largest intermediate (entries) of contracting the relevant factors
+        down to ``output``, for one row of evidence, on the path opt_einsum would take.
+        ``sliced``: the observed discrete variables are fixed (else the factors are whole)."""
+        observed = set(self.bound.discrete) if sliced else set()
+        operands = [tuple(a for a in t.axes if a not in observed) for t in self.terms]
+        operands += [(name,) for name in self.bound.soft if name not in observed]
+        present = {a for axes in operands for a in axes}
+        operands += [(v,) for v in output if v not in present]
+        names = sorted({a for axes in operands for a in axes})
+        symbol = {n: opt_einsum.get_symbol(i) for i, n in enumerate(names)}
+        equation = (",".join("".join(symbol[a] for a in axes) for axes in operands) + "->"
+                    + "".join(symbol[a] for a in output))
+        shapes = [tuple(self.card(a) for a in axes) for axes in operands]
+        largest = max([float(np.prod(s)) for s in shapes]
+                      + [float(np.prod([self.card(v) for v in output]))])
+        if len(operands) < 2:
+            return largest, largest
+        _, info = opt_einsum.contract_path(equation, *shapes, shapes=True)
+        return float(info.opt_cost), max(float(info.largest_intermediate), largest)

@@ -6,6 +6,8 @@ states in tables, parameter constraints) is checked by :mod:`bayesprog.language.
 
 from __future__ import annotations
 
+import math
+from collections import Counter
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -13,9 +15,22 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from bayesprog.errors import Diagnostic, SpecError, short_repr
 from bayesprog.language.loader import Located, load_yaml
+from bayesprog.limits import limit
 
 FORMAT_VERSION = 1
 M = TypeVar("M", bound=BaseModel)
+
+
+#: Axes of a grid variable (numpy arrays have at most 32 dimensions, and a question may add
+#: a batch axis).
+MAX_AXES = 16
+
+
+def _check_states(count: int, what: str) -> None:
+    cap = limit("states")
+    if count > cap:
+        raise ValueError(f"{what} has {count:,} states, more than the limit of {cap:,} (raise "
+                         "it with the environment variable BAYESPROG_MAX_STATES)")
 
 
 class _Strict(BaseModel):
@@ -31,6 +46,9 @@ class GridSpec(_Strict):
     def _positive(self) -> GridSpec:
         if any(n < 1 for n in self.shape):
             raise ValueError(f"grid shape must have sizes >= 1, got {self.shape}")
+        if len(self.shape) > MAX_AXES:
+            raise ValueError(f"expected at most {MAX_AXES} axes, found {len(self.shape)}")
+        _check_states(math.prod(self.shape), f"a grid of {' x '.join(map(str, self.shape))}")
         if self.origin is not None and len(self.origin) != len(self.shape):
             raise ValueError(
                 f"origin must have {len(self.shape)} coordinates (one per axis), "
@@ -68,11 +86,13 @@ class VariableSpec(_Strict):
         if self.states is not None:
             if not self.states:
                 raise ValueError("expected at least one state, found none")
-            dups = sorted({s for s in self.states if self.states.count(s) > 1})
+            dups = sorted(s for s, n in Counter(self.states).items() if n > 1)
             if dups:
                 raise ValueError(f"expected distinct state names, found {dups} twice")
         if self.range is not None and self.range[0] > self.range[1]:
             raise ValueError(f"expected range [low, high] with low <= high, got {self.range}")
+        if self.range is not None:
+            _check_states(self.range[1] - self.range[0] + 1, f"the range {self.range}")
         if self.continuous is not None and not self.continuous[0] < self.continuous[1]:
             raise ValueError(f"expected support [low, high] with low < high, got {self.continuous}")
         return self

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv as csvlib
 import hashlib
 import io
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import BayesprogError, short_repr
+from bayesprog.errors import ArgumentError, BayesprogError, short_repr
 from bayesprog.variables import Continuous, Discrete, Variable
 
 
@@ -59,6 +60,10 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
                 f"{k} {n}" for k, n in lengths.items()) + "; expected one value per row in each")
         frame, _, hexdigest, _ = read_frame(pd.DataFrame({k: list(v) for k, v in source.items()}))
         return frame, "<columns>", hexdigest, False
+    if not isinstance(source, (str, os.PathLike)):
+        raise ArgumentError(f"data: expected a CSV or Parquet file, a pandas DataFrame or a "
+                            f"mapping of columns, found {type(source).__name__} "
+                            f"{short_repr(source)}")
     path = Path(source)
     try:
         raw = path.read_bytes()

@@ -23,12 +23,8 @@ class ContractionMethod(Method):
     name = "contraction"
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
-        size = plan.bound.size
-        sizes = [plan.free_size(t.axes) for t in plan.terms]
-        sizes += [plan.card(name) for name in plan.bound.soft]
-        out = int(np.prod([plan.card(v) for v in plan.searched]))
-        return Cost(operations=float(size * (sum(sizes) + out)),
-                    memory=float(size * max(sizes + [out])))
+        operations, largest = plan.contraction_cost(plan.searched)
+        return Cost(operations=plan.bound.size * operations, memory=plan.bound.size * largest)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         return contract_question(plan)

@@ -70,7 +70,10 @@ class TableMethod(Method):
         if joint > TABLE_LIMIT or not all(is_static(t) for t in plan.terms):
             return None
         lookup = int(np.prod([plan.card(v) for v in searched]))
-        return Cost(operations=float(bound.size * lookup), memory=float(joint))
+        if (searched, observed) in plan.program.inference_cache.tables:
+            return Cost(operations=float(bound.size * lookup), memory=float(joint))
+        _, compile_memory = plan.contraction_cost(observed + searched, sliced=False)
+        return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory))
 
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         compiled = _compile(plan)
