@@ -41,6 +41,14 @@ class SpecError(BayesprogError, ValueError):
         super().__init__("\n".join(str(d) for d in self.diagnostics))
 
 
+class ProgramCycleError(BayesprogError, ValueError):
+    """Programs that name each other (as sub-programs or soft evidence) in a circle."""
+
+    def __init__(self, files: list):
+        self.files = files
+        super().__init__(" -> ".join(getattr(f, "name", str(f)) for f in files))
+
+
 class QuestionError(BayesprogError, ValueError):
     """A question or its evidence does not fit the program (unknown variable, state, shape...)."""
 

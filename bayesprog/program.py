@@ -7,6 +7,7 @@ import dataclasses
 import numbers
 import os
 from collections.abc import Iterable, Mapping, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -15,7 +16,14 @@ from typing import TYPE_CHECKING, Any
 import networkx as nx
 
 from bayesprog import inference, rich
-from bayesprog.errors import ArgumentError, Diagnostic, QuestionError, SpecError, short_repr
+from bayesprog.errors import (
+    ArgumentError,
+    Diagnostic,
+    ProgramCycleError,
+    QuestionError,
+    SpecError,
+    short_repr,
+)
 from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
 from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
@@ -409,5 +417,19 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None) -> Progra
         raise ArgumentError(f"load: expected a path (a string or pathlib.Path), found "
                             f"{type(path).__name__} {short_repr(path)}")
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
-    return loads(text, str(path), path.parent, variables)
+    # programs name others (sub-programs, soft evidence): one that comes back to a file still
+    # being loaded is a cycle, reported where it is named instead of recursing without end
+    chain = _LOADING.get()
+    key = path.resolve()
+    if key in chain:
+        raise ProgramCycleError([*chain[chain.index(key):], key])
+    token = _LOADING.set((*chain, key))
+    try:
+        text = path.read_text(encoding="utf-8")
+        return loads(text, str(path), path.parent, variables)
+    finally:
+        _LOADING.reset(token)
+
+
+#: The program files being loaded, outermost first (see :func:`load`).
+_LOADING: ContextVar[tuple[Path, ...]] = ContextVar("bayesprog_loading", default=())

@@ -313,3 +313,27 @@ def test_any_robot_line_is_answered_and_the_session_goes_on(explorer, lines):
     for reply in replies:
         assert isinstance(reply, dict) and ("error" in reply or "next" in reply
                                             or "maps" in reply or "reset" in reply)
+
+
+def test_programs_that_name_each_other_are_reported_where_the_circle_closes(tmp_path, capsys):
+    program = """\
+bayesprog: 1
+variables:
+  A: {states: [a, b]}
+decomposition:
+  - {term: P(A), form: uniform}
+soft_evidence:
+  - {variable: A, form: program, program: OTHER, question: q}
+questions:
+  q: P(A)
+"""
+    (tmp_path / "a.yaml").write_text(program.replace("OTHER", "b.yaml"))
+    (tmp_path / "b.yaml").write_text(program.replace("OTHER", "a.yaml"))
+    (tmp_path / "self.yaml").write_text(program.replace("OTHER", "self.yaml"))
+    assert main(["validate", str(tmp_path / "a.yaml"), str(tmp_path / "self.yaml")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3, err
+    assert err[1].endswith("b.yaml:7:43: term P(A): program 'a.yaml': programs that name each "
+                           "other in a circle (a.yaml -> b.yaml -> a.yaml): expected a program "
+                           "that does not lead back to this one")
+    assert "(self.yaml -> self.yaml)" in err[2]

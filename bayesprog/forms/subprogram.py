@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import SpecError
+from bayesprog.errors import ProgramCycleError, SpecError
 from bayesprog.expressions import ExpressionError, parse_expression
 from bayesprog.forms.base import Form, InputRef, ParamValue, TermContext, register_form
 
@@ -48,6 +48,11 @@ class ProgramForm(Form):
             return len(checker.problems) - before
         try:
             sub = checker.load_program(file)
+        except ProgramCycleError as exc:
+            checker.error(path + ("program",), f"{what} {raw['program']!r}: programs that name "
+                          f"each other in a circle ({exc}): expected a program that does not "
+                          "lead back to this one")
+            return len(checker.problems) - before
         except SpecError as exc:
             checker.error(path + ("program",), f"{what} {raw['program']!r} has "
                           f"{len(exc.diagnostics)} problem(s), listed with its own file")
