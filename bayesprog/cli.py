@@ -152,6 +152,8 @@ def cmd_query(args: argparse.Namespace) -> int:
             soft[name] = np.array([float(x) for x in text.split(",")])
         except ValueError:
             raise _UserError(f"--soft {name}={text}: expected numbers separated by commas") from None
+    if args.samples < 1:
+        raise _UserError(f"--samples: expected at least 1, found {args.samples}")
     result = program.ask(
         args.question,
         evidence,
@@ -159,6 +161,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         soft=soft,
         kind="map" if args.map else None,
         rng=args.seed,
+        method=None if args.method == "auto" else args.method,
+        samples=args.samples,
     )
     from bayesprog.show import format_result
 
@@ -166,6 +170,30 @@ def cmd_query(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_json()))
     else:
         print(format_result(result, limit=args.limit))
+    return 0
+
+
+def cmd_sample(args: argparse.Namespace) -> int:
+    _check_seed(args.seed)
+    if args.n < 1:
+        raise _UserError(f"-n: expected at least 1 draw, found {args.n}")
+    out = Path(args.output)
+    if out.suffix.lower() not in (".csv", ".parquet"):
+        raise _UserError(f"-o {args.output}: expected a .csv or .parquet file")
+    program = _ablated(_load(args.file), args.ablate)
+    inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
+    evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
+    draws = program.sample(args.n, evidence, inputs=inputs, rng=args.seed, method=args.method)
+    try:
+        if out.suffix.lower() == ".csv":
+            draws.to_csv(out, index=False)
+        else:
+            draws.to_parquet(out, index=False)
+    except OSError as exc:
+        raise _UserError(f"cannot write {args.output}: {exc.strerror or exc}") from None
+    weighted = " (weighted: the column weight)" if "weight" in draws.columns else ""
+    print(f"wrote {out}: {len(draws)} draws of {', '.join(c for c in draws.columns if c != 'weight')}"
+          f"{weighted}")
     return 0
 
 
@@ -345,12 +373,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--soft", action="append", default=[], metavar="VAR=p1,p2,...",
                    help="soft evidence: one likelihood per state of VAR (default: none)")
     p.add_argument("--seed", type=int, default=0,
-                   help="seed for breaking MAP ties (default: %(default)s)")
+                   help="seed for breaking MAP ties and for sampling (default: %(default)s)")
+    p.add_argument("--method", default="auto",
+                   choices=["auto", "table", "contraction", "lbp", "lw"],
+                   help="auto: the cheapest exact method; table, contraction: exact; lbp: loopy "
+                   "belief propagation; lw: likelihood weighting, with standard errors "
+                   "(default: %(default)s)")
+    p.add_argument("--samples", type=int, default=10_000,
+                   help="draws per evidence set for --method lw (default: %(default)s)")
     p.add_argument("--limit", type=int, default=20,
                    help="rows shown for large tables (default: %(default)s)")
     p.add_argument("--json", action="store_true",
                    help="print JSON (with log_evidence) instead of a table (default: a table)")
     p.set_defaults(func=cmd_query)
+
+    p = sub.add_parser("sample", help="draw joint samples of a program to CSV or Parquet")
+    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("-n", type=int, required=True, metavar="N", help="number of draws")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.csv|.parquet",
+                   help="one column per variable, states by name; its format from the "
+                   "extension")
+    p.add_argument("--evidence", action="append", default=[], metavar="VAR=VALUE",
+                   help="condition on a known variable; repeatable (default: none)")
+    p.add_argument("--method", choices=["forward", "lw", "rejection"],
+                   help="forward (no evidence), lw (weighted draws, a weight column) or "
+                   "rejection (discrete evidence) (default: forward, or lw with evidence)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=FILE.npy",
+                   help="bind a runtime input to an array; repeatable (default: none)")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help="draw with this term uniform; repeatable (default: none)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the draws (default: %(default)s)")
+    p.set_defaults(func=cmd_sample)
 
     p = sub.add_parser("learn", help="learn a program's parameters from data (CSV or Parquet)")
     p.add_argument("file", metavar="PROGRAM.yaml", help="the program whose parameters to learn")

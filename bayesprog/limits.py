@@ -60,10 +60,11 @@ def set_limits(states: int | None = None, entries: int | None = None) -> None:
             _SET[kind] = value
 
 
-def check_size(size: float, what: str, kind: str = "entries") -> None:
-    """Refuse ``what`` when it needs more than the limit on ``kind``."""
+def check_size(size: float, what: str, kind: str = "entries", hint: str = "") -> None:
+    """Refuse ``what`` when it needs more than the limit on ``kind`` (``hint``: what else the
+    user can do, appended to the message)."""
     cap = limit(kind)
     if size > cap:
         shown = f"{size:,.0f}" if size < 1e18 else f"{size:.3g}"
         raise SizeError(f"{what} needs {shown} {kind}, more than the limit of {cap:,} "
-                        f"(raise it with the environment variable {_ENV[kind]})")
+                        f"(raise it with the environment variable {_ENV[kind]}){hint}")

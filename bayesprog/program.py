@@ -171,6 +171,8 @@ class Program:
         soft: Mapping[str, Any] | None = None,
         kind: str | None = None,
         rng: Any = None,
+        method: str | None = None,
+        samples: int | None = None,
     ) -> Posterior | MapResult:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
@@ -183,15 +185,29 @@ class Program:
         inputs : runtime inputs (arrays with the declared trailing shape, batch dims in front).
         soft : likelihood vectors over a discrete variable's states (virtual evidence).
         kind : ``"posterior"`` or ``"map"``, overriding the question's kind.
-        rng : for MAP ties: a seed, a ``numpy.random.Generator``, or one generator per batch row
-            (then each row's choice is independent of the batching). ``None`` means seed 0.
+        rng : for MAP ties and sampling: a seed, a ``numpy.random.Generator``, or one generator
+            per batch row (then each row's choice is independent of the batching). ``None``
+            means seed 0.
+        method : ``None`` (the cheapest exact method), ``"table"`` or ``"contraction"``
+            (exact), ``"lbp"`` (loopy belief propagation) or ``"lw"`` (likelihood weighting,
+            with ``stderr`` and ``ess`` on the answer).
+        samples : draws per evidence row for ``method="lw"`` (default 10,000).
 
         Returns
         -------
         Posterior with ``probabilities[batch..., states...]``, or MapResult for MAP questions.
         """
         q = self.question(question, kind)
-        return inference.ask(self, q, evidence, inputs, soft, rng)
+        options: dict[str, Any] = {}
+        if samples is not None:
+            if isinstance(samples, bool) or not isinstance(samples, numbers.Integral) \
+                    or samples < 1:
+                raise ArgumentError(f"samples: expected an integer >= 1, found "
+                                    f"{short_repr(samples)}")
+            options["samples"] = int(samples)
+        if method is not None and not isinstance(method, str):
+            raise ArgumentError(f"method: expected a method's name, found {short_repr(method)}")
+        return inference.ask(self, q, evidence, inputs, soft, rng, method, options)
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
                   **kw: Any) -> Posterior:
@@ -204,6 +220,40 @@ class Program:
         result = self.ask(question, evidence, kind="map", **kw)
         assert isinstance(result, MapResult)
         return result
+
+    def sample(self, n: int, evidence: Mapping[str, Any] | None = None, *,
+               inputs: Mapping[str, Any] | None = None, rng: Any = None,
+               method: str | None = None) -> Any:
+        """``n`` joint draws of the program's variables, as a pandas DataFrame: one column per
+        variable (state names, integers for a range; numbers for a continuous variable;
+        fields are not drawn), in declaration order.
+
+        ``method``: ``"forward"`` (ancestral sampling; the default without evidence),
+        ``"lw"`` (likelihood weighting: the known variables fixed to their evidence, each draw
+        with its normalised ``weight`` column; the default with evidence) or ``"rejection"``
+        (forward draws kept where they match discrete evidence; unweighted). ``rng``: a seed
+        or a ``numpy.random.Generator`` (default seed 0).
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {A: {states: [a0, a1]}, X: {continuous: [-.inf, .inf]}}
+        ... decomposition:
+        ...   - {term: P(A), form: table, table: [0.3, 0.7]}
+        ...   - {term: P(X | A), form: normal, mean: {a0: -1, a1: 1}, sigma: 0.5}
+        ... ''')
+        >>> draws = p.sample(1000, rng=0)
+        >>> list(draws.columns)
+        ['A', 'X']
+        """
+        from bayesprog.inference.sampling import sample_program
+
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
+            raise ArgumentError(f"n: expected a number of draws >= 1, found {short_repr(n)}")
+        if method not in (None, "forward", "lw", "rejection"):
+            raise QuestionError(f"method: expected 'forward', 'lw' or 'rejection', found "
+                                f"{short_repr(method)}")
+        return sample_program(self, int(n), evidence, inputs, rng, method)
 
     # ablation --------------------------------------------------------------------------------------
     def ablate(self, *terms: str | Iterable[str]) -> Program:

@@ -119,19 +119,32 @@ def format_result(result: Posterior | MapResult, limit: int = 20) -> str:
             out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
                        + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
         return "\n".join(out)
-    out = [f"{result.question}" + _ablated(result.ablated)]
+    out = [f"{result.question}" + _ablated(result.ablated) + _approximate(result)]
     for pos in np.ndindex(*result.batch_shape):
         if pos:
             out.append(f"  batch row [{', '.join(map(str, pos))}]")
-        out += _table(result, result.probabilities[pos], limit)
+        stderr = result.stderr[pos] if result.stderr is not None else None
+        out += _table(result, result.probabilities[pos], limit, stderr)
+        if result.ess is not None:
+            out.append(f"  effective sample size {float(result.ess[pos]):.0f}")
     return "\n".join(out)
+
+
+def _approximate(result: Posterior) -> str:
+    if result.method == "lw":
+        return "   (likelihood weighting: +- one standard error)"
+    if result.method == "lbp":
+        return (f"   (loopy belief propagation: {result.iterations} sweeps, last change "
+                f"{result.residual:.2g})")
+    return ""
 
 
 def _ablated(ablated: tuple[str, ...]) -> str:
     return f"   (ablated: {', '.join(ablated)})" if ablated else ""
 
 
-def _table(result: Posterior, probs: np.ndarray, limit: int) -> list[str]:
+def _table(result: Posterior, probs: np.ndarray, limit: int,
+           stderr: np.ndarray | None = None) -> list[str]:
     flat = probs.ravel()
     order = np.arange(flat.size)
     note = ""
@@ -146,8 +159,11 @@ def _table(result: Posterior, probs: np.ndarray, limit: int) -> list[str]:
     widths = [max(len(v), *(len(c[0][i]) for c in cells)) for i, v in enumerate(result.variables)]
     header = "  " + "  ".join(f"{v:<{w}}" for v, w in zip(result.variables, widths, strict=False)) + "  probability"
     lines = [header]
-    for states, p in cells:
-        lines.append("  " + "  ".join(f"{s:<{w}}" for s, w in zip(states, widths, strict=False)) + f"  {p:.6g}")
+    errors = stderr.ravel() if stderr is not None else None
+    for (states, p), k in zip(cells, order, strict=True):
+        error = f" +- {errors[k]:.2g}" if errors is not None else ""
+        lines.append("  " + "  ".join(f"{s:<{w}}" for s, w in zip(states, widths, strict=False))
+                     + f"  {p:.6g}{error}")
     if note:
         lines.append(note)
     return lines

@@ -159,6 +159,15 @@ class Form:
         """Log values with shape ``[batch or 1] + [card or 1 for each of ctx.axes]``."""
         raise NotImplementedError
 
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        """Values of a continuous ``child``, one per draw, from the parameters at each draw
+        (``params[k]``: ``draws + event``) and two independent uniforms per draw
+        (``u[..., 0]``, ``u[..., 1]``), by inverse transform. Discrete children need no
+        method: they are drawn from :meth:`log_factor`."""
+        raise NotImplementedError(f"form {self.name!r} cannot draw a continuous child: give "
+                                  f"{child.name} as evidence, or use a form that can")
+
 
 _REGISTRY: dict[str, Form] = {}
 

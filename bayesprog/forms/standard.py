@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.special import betaln, xlog1py, xlogy
+from scipy.special import betaincinv, betaln, ndtri, xlog1py, xlogy
 
 from bayesprog.forms.base import (
     Form,
@@ -19,7 +19,7 @@ from bayesprog.forms.base import (
     simplex,
     unit_interval,
 )
-from bayesprog.variables import Discrete, Variable
+from bayesprog.variables import Continuous, Discrete, Variable
 
 _LOG_2PI = float(np.log(2 * np.pi))
 
@@ -85,6 +85,13 @@ class Uniform(Form):
             value = -np.log(child.width) if np.isfinite(child.width) else 0.0
         return np.full((1,) + (1,) * len(ctx.axes), value)
 
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        assert isinstance(child, Continuous)
+        if not np.isfinite(child.width):
+            return super().sample(params, child, u)  # improper: nothing to draw from
+        return child.low + u[..., 0] * child.width
+
 
 @register_form
 class Normal(Form):
@@ -101,6 +108,10 @@ class Normal(Form):
         x, mu, sigma = ctx.child_value(), ctx.param("mean"), ctx.param("sigma")
         z = (x - mu) / sigma
         return -0.5 * z * z - np.log(sigma) - 0.5 * _LOG_2PI
+
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        return params["mean"] + params["sigma"] * ndtri(u[..., 0])
 
 
 @register_form
@@ -128,6 +139,10 @@ class Beta(Form):
         with np.errstate(divide="ignore", invalid="ignore"):
             out = xlogy(a - 1, x) + xlog1py(b - 1, -x) - betaln(a, b)
         return np.where((x < 0) | (x > 1), -np.inf, out)
+
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        return betaincinv(params["a"], params["b"], u[..., 0])
 
 
 @register_form
@@ -269,4 +284,25 @@ class GaussianMixture(Form):
             if not np.isfinite(area):
                 raise ValueError("gmm floor needs a bounded support or a grid")
             return np.logaddexp(np.log1p(-floor) + mix, np.log(floor) - np.log(area))
+
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        if child.is_discrete:
+            return super().sample(params, child, u)
+        means = params["means"]
+        k = means.shape[-1]
+        weights = params["weights"] if "weights" in params else np.full(k, 1.0 / k)
+        weights = np.broadcast_to(weights, means.shape)
+        floor = params.get("floor", np.zeros(()))
+        # the first uniform picks the floor or a component, the second the value within it
+        pick = u[..., 0]
+        in_floor = pick < floor
+        rest = np.where(in_floor, 0.0, (pick - floor) / np.where(floor < 1, 1 - floor, 1))
+        component = np.minimum((np.cumsum(weights, -1) <= rest[..., None]).sum(-1), k - 1)
+        mean = np.take_along_axis(means, component[..., None], -1)[..., 0]
+        value = mean + params["sigma"] * ndtri(u[..., 1])
+        if np.any(in_floor):
+            assert isinstance(child, Continuous)
+            value = np.where(in_floor, child.low + u[..., 1] * child.width, value)
+        return value
 

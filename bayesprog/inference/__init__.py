@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from bayesprog.errors import QuestionError
 from bayesprog.expressions import Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
@@ -39,9 +40,14 @@ __all__ = [
 ]
 
 
-def compute_posterior(program: ProgramLike, question: Question, bound: Bound) -> Posterior:
-    """The posterior of ``question`` for bound evidence, by the cheapest method that answers."""
-    plan = QuestionPlan(program, question, bound)
+def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
+                      method: str | None = None,
+                      options: Mapping[str, Any] | None = None) -> Posterior:
+    """The posterior of ``question`` for bound evidence: by ``method`` when it is named, else
+    by the cheapest exact method that answers."""
+    plan = QuestionPlan(program, question, bound, dict(options or {}))
+    if method is not None:
+        return _by(method, plan)
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
     key = (registry_version(), bound.size.bit_length(), question.expression.left,
@@ -55,14 +61,39 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound) ->
     cap = limit("entries")
     fitting = [(m, c) for m, c in methods if c.memory / ranked_size * bound.size <= cap]
     if not fitting:
-        method, cost = methods[0]
+        method_, cost = methods[0]
+        approximate = ", ".join(name for name, m in registered_methods().items()
+                                if not m.exact and m.estimate(plan) is not None)
         check_size(cost.memory / ranked_size * bound.size,
-                   f"{question.expression} (by {method.name}, the method that needs least)")
-    for method, _ in fitting:
-        answer = method.posterior(plan)
+                   f"{question.expression} (by {method_.name}, the exact method that needs "
+                   "least)", hint=f"; or ask an approximate method ({approximate}): method=... "
+                   "in Python, --method on the command line" if approximate else "")
+    for method_, _ in fitting:
+        answer = method_.posterior(plan)
         if answer is not None:
+            answer.method = answer.method or method_.name
             return answer
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+
+
+def _by(name: str, plan: QuestionPlan) -> Posterior:
+    """The answer of the method ``name``, which the question asks for."""
+    methods = registered_methods()
+    method = methods.get(name)
+    if method is None:
+        raise QuestionError(f"method {name!r}: expected one of {', '.join(methods)}")
+    cost = method.estimate(plan)
+    if cost is None:
+        raise QuestionError(f"method {name!r} does not answer {plan.question.expression} "
+                            f"(see the methods in the language reference)")
+    check_size(cost.memory, f"{plan.question.expression} (by {name})")
+    answer = method.posterior(plan)
+    if answer is None:
+        raise QuestionError(f"method {name!r} cannot answer every row of "
+                            f"{plan.question.expression} (probabilities below its precision): "
+                            "use method='contraction'")
+    answer.method = answer.method or name
+    return answer
 
 
 def ask(
@@ -72,10 +103,12 @@ def ask(
     inputs: Mapping[str, Any] | None = None,
     soft: Mapping[str, Any] | None = None,
     rng: Any = None,
+    method: str | None = None,
+    options: Mapping[str, Any] | None = None,
 ) -> Posterior | MapResult:
     """Answer ``question`` (posterior or MAP, by its kind) for batched evidence."""
     bound = bind(program, question, evidence, inputs, soft)
-    posterior = compute_posterior(program, question, bound)
+    posterior = compute_posterior(program, question, bound, method, dict(options or {}, rng=rng))
     if question.kind == "map":
         return choose_map(posterior, str(question.expression), 0 if rng is None else rng,
                           program.ablated)

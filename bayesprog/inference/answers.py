@@ -32,6 +32,14 @@ class Posterior:
     ablated: tuple[str, ...] = ()
     #: the states as values of each variable's type (integers for a range); names by default
     values: dict[str, tuple[Any, ...]] | None = None
+    #: the inference method that answered (``table``, ``contraction``: exact; ``lbp``, ``lw``)
+    method: str = ""
+    #: approximate answers: the standard error of each probability (``lw``), the effective
+    #: sample size per row (``lw``), the sweeps made and the last change of a message (``lbp``)
+    stderr: np.ndarray | None = None
+    ess: np.ndarray | None = None
+    iterations: int | None = None
+    residual: float | None = None
 
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
@@ -47,7 +55,19 @@ class Posterior:
             "probabilities": self.probabilities.tolist(),
             "log_evidence": _floats(self.log_evidence),
             "ablated": list(self.ablated),
+            **self._method_json(),
         }
+
+    def _method_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"method": self.method} if self.method else {}
+        if self.stderr is not None:
+            out["stderr"] = self.stderr.tolist()
+        if self.ess is not None:
+            out["ess"] = self.ess.tolist()
+        if self.iterations is not None:
+            out["iterations"] = self.iterations
+            out["residual"] = self.residual
+        return out
 
 
 @dataclass
@@ -95,6 +115,7 @@ class MapResult:
             "zero_evidence": self.zero_evidence.tolist(),
             "log_evidence": _floats(self.posterior.log_evidence),
             "ablated": list(self.ablated),
+            **self.posterior._method_json(),
         }
 
 
@@ -171,5 +192,5 @@ def zero_rows_message(posterior: Posterior) -> str:
 
 
 def check_zero(posterior: Posterior) -> None:
-    if np.any(~(posterior.log_evidence > -np.inf)):
+    if np.any(posterior.log_evidence == -np.inf):  # NaN: a method that estimates no evidence
         raise ZeroEvidenceError(zero_rows_message(posterior))

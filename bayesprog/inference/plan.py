@@ -3,8 +3,9 @@ matter for it; every method answers from a plan, and the cost model estimates fr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import opt_einsum
@@ -21,6 +22,8 @@ class QuestionPlan:
     program: ProgramLike
     question: Question
     bound: Bound
+    #: what the question asks of its method (``samples``, ``rng``, ``max_iterations``, ...)
+    options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def searched(self) -> tuple[str, ...]:

@@ -1,0 +1,258 @@
+"""Drawing from a program: forward (ancestral) sampling, with the known variables fixed to their
+evidence and each draw weighted by their likelihood (likelihood weighting).
+
+Draws are kept as arrays ``[rows, n]`` (a row per evidence set of the batch): a discrete
+variable as state indices, a continuous one as values. Row ``r`` draws its uniforms from its
+own generator, so its draws do not depend on the other rows of the batch.
+
+Every term is used as a factor over its discrete variables (:func:`term_factor`, the engine's
+own): a discrete child is drawn from the term's row at its drawn parents, normalised, and the
+draw is weighted by the row's total (one for a normalised term; a potential's mass else); a
+known variable is not drawn, and the draw is weighted by its term's factor at the drawn parents.
+Continuous variables that are not known are drawn by their form's :meth:`Form.sample`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import networkx as nx
+import numpy as np
+from scipy.special import logsumexp
+
+from bayesprog.errors import ArgumentError, QuestionError, short_repr
+from bayesprog.forms import ParamValue
+from bayesprog.inference.binding import Bound
+from bayesprog.inference.factors import _bound_param, term_factor
+from bayesprog.inference.protocol import ProgramLike
+from bayesprog.language.check import Term
+from bayesprog.limits import check_size
+from bayesprog.variables import Continuous, Discrete
+
+
+@dataclass
+class Draws:
+    """``values[name]``: ``[rows, n]`` state indices (discrete) or values (continuous);
+    ``log_weights``: ``[rows, n]`` (zeros for draws that need no weight)."""
+
+    values: dict[str, np.ndarray]
+    log_weights: np.ndarray
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Weights normalised per row (sum to one over the draws of a row)."""
+        top = np.max(self.log_weights, axis=1, keepdims=True)
+        top = np.where(np.isfinite(top), top, 0.0)
+        w = np.exp(self.log_weights - top)
+        total = w.sum(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(total > 0, w / total, 0.0)
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size per row, ``(sum w)^2 / sum w^2`` (n when unweighted)."""
+        w = self.weights
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(w.sum(axis=1) > 0, 1.0 / (w**2).sum(axis=1), 0.0)
+
+
+def generators(rng: Any, rows: int) -> list[np.random.Generator]:
+    """One generator per row: from a seed ``s`` (row ``r`` uses ``default_rng([s, r])``), from
+    a sequence of seeds or generators, one per row, or spawned from one generator."""
+    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
+        if len(rng) != rows:
+            raise QuestionError(f"rng: expected one seed or generator per batch row ({rows}), "
+                                f"found {len(rng)}")
+        return [r if isinstance(r, np.random.Generator) else np.random.default_rng(_seed(r))
+                for r in rng]
+    if isinstance(rng, np.random.Generator):
+        return list(rng.spawn(rows))
+    seed = _seed(0 if rng is None else rng)
+    return [np.random.default_rng([seed, r]) for r in range(rows)]
+
+
+def _seed(value: Any) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ArgumentError(f"rng: expected a seed (an integer >= 0) or one per batch row, "
+                            f"found {type(value).__name__} {short_repr(value)}")
+    if value < 0:
+        raise QuestionError(f"rng: expected a seed >= 0, found {value}")
+    return int(value)
+
+
+def _order(program: ProgramLike, terms: list[Term]) -> list[Term]:
+    """The decomposition's terms parents first; soft-evidence terms after their variable."""
+    by_child = {t.child.name: t for t in terms if not t.soft}
+    graph = nx.DiGraph()
+    for t in by_child.values():
+        graph.add_node(t.child.name)
+        for p in t.parents:
+            if p.name in by_child:
+                graph.add_edge(p.name, t.child.name)
+    ordered = [by_child[name] for name in nx.lexicographical_topological_sort(graph)]
+    return ordered + [t for t in terms if t.soft]
+
+
+def _gather(log: np.ndarray, batched: bool, axes: tuple[str, ...], values: dict[str, np.ndarray],
+            rows: int, n: int, keep: str | None = None) -> np.ndarray:
+    """``log`` (``[rows] + cards`` if batched, else ``cards``) at each draw's states of
+    ``axes`` -> ``[rows, n]`` (``[rows, n, card]`` with the axis ``keep`` left whole)."""
+    index: list[Any] = []
+    if batched:
+        index.append(np.arange(rows)[:, None])
+    for a in axes:
+        index.append(slice(None) if a == keep else values[a])
+    if keep is not None:  # move the kept axis last, then take the draws
+        k = (1 if batched else 0) + axes.index(keep)
+        log = np.moveaxis(log, k, -1)
+        index = [i for i in index if not isinstance(i, slice)]
+        out = log[tuple(index)] if index else log
+        return np.broadcast_to(out, (rows, n, log.shape[-1]))
+    out = log[tuple(index)] if index else log
+    return np.broadcast_to(out, (rows, n))
+
+
+def _uniforms(gens: list[np.random.Generator], n: int, k: int = 1) -> np.ndarray:
+    """``[rows, n]`` (or ``[rows, n, k]``) uniforms on [0, 1), row ``r`` from ``gens[r]``."""
+    shape = (n,) if k == 1 else (n, k)
+    return np.stack([g.random(shape) for g in gens])
+
+
+def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
+         gens: list[np.random.Generator]) -> Draws:
+    """``n`` draws per row of ``bound`` from the program restricted to ``terms`` (closed
+    under parents), the known variables fixed to their evidence and weighted."""
+    rows = bound.size
+    check_size(float(rows) * n * max(1, len(terms)), f"{n:,} draws of {len(terms)} terms")
+    values: dict[str, np.ndarray] = {}
+    log_w = np.zeros((rows, n))
+    inputs_only = Bound(bound.batch_shape, inputs=bound.inputs)
+    for name, idx in bound.discrete.items():
+        values[name] = np.broadcast_to(np.asarray(idx).reshape(-1, 1), (rows, n))
+    for term in _order(program, terms):
+        child = term.child
+        name = child.name
+        if term.soft or name in bound.discrete or name in bound.continuous:
+            factor = term_factor(program, term, bound if not child.is_discrete or term.soft
+                                 else inputs_only)
+            log_w = log_w + _gather(factor.log, factor.batched, factor.axes, values, rows, n)
+            continue
+        if isinstance(child, Discrete):
+            factor = term_factor(program, term, inputs_only)
+            check_size(float(rows) * n * child.card, f"drawing {name} ({child.card:,} states) "
+                       f"{n:,} times")
+            row = _gather(factor.log, factor.batched, factor.axes, values, rows, n, keep=name)
+            total = logsumexp(row, axis=-1)
+            if not np.all(np.isfinite(total)):
+                raise QuestionError(f"term {term.label} gives no state of {name} a positive "
+                                    "probability for some drawn parents: it cannot be sampled")
+            cdf = np.cumsum(np.exp(row - total[..., None]), axis=-1)
+            u = _uniforms(gens, n)
+            values[name] = np.minimum((cdf < u[..., None] * cdf[..., -1:]).sum(-1),
+                                      child.card - 1)
+            if not term.form.is_normalized(child):
+                log_w = log_w + total
+            continue
+        assert isinstance(child, Continuous)
+        if child.index is not None:
+            raise QuestionError(f"field {name} (one value per state of {child.index}) cannot "
+                                "be sampled: give it as evidence")
+        params = {}
+        for key, param in term.params.items():
+            value = _bound_param(term, key, param, bound) if not isinstance(param, ParamValue) \
+                else param
+            declared = {p.name: p for p in term.form.params}.get(key)
+            event = term.form.event_ndim(declared, child) if declared else 0
+            arr = value.aligned(term.axes, event)
+            params[key] = _gather_param(arr, value.batched, term.axes, values, rows, n, event)
+        values[name] = term.form.sample(params, child, _uniforms(gens, n, 2))
+    for name, pv in bound.soft.items():  # soft evidence given with the question
+        with np.errstate(divide="ignore"):
+            log_w = log_w + _gather(np.log(pv.array), pv.batched, (name,), values, rows, n)
+    return Draws(values, log_w)
+
+
+def _gather_param(arr: np.ndarray, batched: bool, axes: tuple[str, ...],
+                  values: dict[str, np.ndarray], rows: int, n: int, event: int) -> np.ndarray:
+    """A parameter aligned to ``axes`` (``[b or 1] + [card or 1] + event``) at each draw's
+    parent states -> ``[rows, n] + event``."""
+    index: list[Any] = [np.arange(rows)[:, None] if batched else np.zeros((1, 1), np.intp)]
+    for i, a in enumerate(axes):
+        size = arr.shape[1 + i]
+        index.append(values[a] if size > 1 else np.zeros((1, 1), np.intp))
+    out = arr[tuple(index)]
+    return np.broadcast_to(out, (rows, n) + out.shape[2:])
+
+
+
+def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng: Any,
+                   method: str | None) -> Any:
+    """The draws of ``Program.sample`` as a DataFrame (see there)."""
+    import pandas as pd
+
+    from bayesprog.errors import expect_mapping
+    from bayesprog.expressions import Expression, Question
+    from bayesprog.inference.binding import bind
+
+    evidence = expect_mapping(evidence, "evidence", "variable names to values")
+    variables = program.variables
+    drawn = tuple(name for name, var in variables.items()
+                  if name not in evidence and getattr(var, "index", None) is None)
+    method = method or ("lw" if evidence else "forward")
+    if method == "forward" and evidence:
+        raise QuestionError("forward sampling ignores evidence: use method='lw' or "
+                            "'rejection' to condition on it")
+    if method == "rejection":
+        continuous = [k for k in evidence if k in variables and not variables[k].is_discrete]
+        if continuous:
+            raise QuestionError(f"rejection sampling needs discrete evidence; "
+                                f"{', '.join(continuous)} is continuous: use method='lw'")
+    question = Question(Expression(drawn or tuple(variables)[:1], tuple(evidence)))
+    bound = bind(program, question, evidence, inputs, None)
+    if bound.size != 1:
+        raise QuestionError(f"sample draws for one evidence set, found a batch of {bound.size}")
+    terms = [t for t in program.active_terms
+             if getattr(t.child, "index", None) is None or t.child.name in evidence]
+    gen = generators(rng, 1)
+    weights = None
+    if method == "rejection":
+        free = Bound(bound.batch_shape, inputs=bound.inputs)
+        kept: dict[str, list[np.ndarray]] = {name: [] for name in drawn}
+        found, tried = 0, 0
+        while found < n:
+            if tried > 1000 * n:
+                raise QuestionError(f"rejection sampling kept {found} of {tried:,} draws: the "
+                                    "evidence is too unlikely; use method='lw'")
+            batch = max(n - found, 1000)
+            d = draw(program, terms, free, batch, gen)
+            match = np.ones(batch, bool)
+            for name, idx in bound.discrete.items():
+                match &= d.values[name][0] == int(np.asarray(idx).reshape(-1)[0])
+            for name in drawn:
+                kept[name].append(d.values[name][0][match])
+            found += int(match.sum())
+            tried += batch
+        values = {name: np.concatenate(kept[name])[:n] for name in drawn}
+    else:
+        d = draw(program, terms, bound, n, gen)
+        values = {name: d.values[name][0] for name in drawn}
+        if method == "lw":
+            weights = d.weights[0]
+            if not np.any(weights > 0):
+                raise QuestionError("every draw has weight zero: the evidence has probability "
+                                    "zero under the program")
+    columns: dict[str, Any] = {}
+    for name in drawn:
+        var = variables[name]
+        if isinstance(var, Discrete):
+            typed = np.asarray(var.values if var.kind == "range" else var.states, dtype=object)
+            columns[name] = typed[values[name]]
+        else:
+            columns[name] = np.asarray(values[name], float)
+    if weights is not None:
+        if "weight" in columns:
+            raise QuestionError("a variable is named 'weight', the column of the draws' weights")
+        columns["weight"] = weights
+    return pd.DataFrame(columns)
