@@ -146,6 +146,10 @@ def cmd_query(args: argparse.Namespace) -> int:
     program = _ablated(_load(args.file), args.ablate)
     inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
     evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
+    kind = args.over_time or ("map" if args.map else None)
+    if (kind or program.question(args.question).kind) in ("filter", "smooth", "sequence"):
+        # evidence over steps: one value per step, separated by commas
+        evidence = {k: v.split(",") if isinstance(v, str) else v for k, v in evidence.items()}
     soft = {}
     for name, text in _pairs(args.soft, "--soft").items():
         try:
@@ -159,7 +163,7 @@ def cmd_query(args: argparse.Namespace) -> int:
         evidence,
         inputs=inputs,
         soft=soft,
-        kind="map" if args.map else None,
+        kind=kind,
         rng=args.seed,
         method=None if args.method == "auto" else args.method,
         samples=args.samples,
@@ -362,6 +366,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("question", help="a named question of the file, or P(searched | known)")
     p.add_argument("--map", action="store_true",
                    help="the joint argmax instead of the posterior (default: the posterior)")
+    p.add_argument("--over-time", choices=["filter", "smooth", "sequence"],
+                   help="a program with time: the state at every step, from the steps so far "
+                   "(filter) or from all (smooth), or the most likely sequence; evidence as "
+                   "VAR=v1,v2,... (default: the question's own kind)")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help='replace a term by a uniform, e.g. --ablate "P(S | O, T)"; repeatable '
                    "(default: none)")

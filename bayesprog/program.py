@@ -68,6 +68,7 @@ class Program:
         path: Path | None = None,
         ablated: tuple[str, ...] = (),
         learned: Sequence[FitRecord] = (),
+        time: tuple[str, str] | None = None,
     ):
         self.variables = variables
         self.terms = terms
@@ -79,6 +80,8 @@ class Program:
         self.ablated = ablated
         #: the fits that set the parameters (provenance and statistics), oldest first
         self.learned = list(learned)
+        #: (previous, state) when the decomposition is one time step, else None
+        self.time = time
         self.inference_cache = inference.InferenceCache()
         self._parsed: dict[str, Question] = {}  # question texts asked before, parsed
 
@@ -157,8 +160,9 @@ class Program:
             if len(self._parsed) < 1024:  # a question asked again is parsed once
                 self._parsed[question] = q
         if kind is not None and kind != q.kind:
-            if kind not in ("posterior", "map"):
-                raise QuestionError(f"kind must be 'posterior' or 'map', got {kind!r}")
+            if kind not in ("posterior", "map", "filter", "smooth", "sequence"):
+                raise QuestionError(f"kind must be 'posterior', 'map', 'filter', 'smooth' or "
+                                    f"'sequence', got {kind!r}")
             q = Question(q.expression, kind, q.name, q.description)
         return q
 
@@ -207,6 +211,10 @@ class Program:
             options["samples"] = int(samples)
         if method is not None and not isinstance(method, str):
             raise ArgumentError(f"method: expected a method's name, found {short_repr(method)}")
+        if q.kind in ("filter", "smooth", "sequence"):
+            from bayesprog.dynamic import over_time
+
+            return over_time(self, q, evidence, inputs, soft, method, options)
         return inference.ask(self, q, evidence, inputs, soft, rng, method, options)
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
@@ -331,7 +339,7 @@ class Program:
                  if t.label in estimate.params else t for t in self.terms]
         fitted = Program(self.variables, terms, self.questions, self.inputs, name=self.name,
                          description=self.description, path=self.path, ablated=self.ablated,
-                         learned=[*self.learned, estimate.record])
+                         learned=[*self.learned, estimate.record], time=self.time)
         return Fit(fitted, estimate, self.path)
 
     def _repr_html_(self) -> str | None:
@@ -440,6 +448,7 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
         description=doc.description,
         path=Path(file) if file != "<string>" else None,
         learned=doc.learned,
+        time=checked.time,
     )
     if checked.ablate:
         program = program.ablate([str(e) for e in checked.ablate])

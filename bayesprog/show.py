@@ -115,13 +115,20 @@ def format_result(result: Posterior | MapResult, limit: int = 20) -> str:
         for pos in rows:
             names = [result.states[v][int(i)] for v, i in zip(result.variables, result.indices[pos], strict=False)]
             label = f"[{', '.join(map(str, pos))}] " if pos else ""
+            if result.question.endswith("(the most likely sequence)"):
+                label = f"step {pos[0] + 1}" + (f" [{', '.join(map(str, pos[1:]))}]"
+                                                if pos[1:] else "") + ": "
             assignment = ", ".join(f"{v}={s}" for v, s in zip(result.variables, names, strict=False))
             out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
                        + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
         return "\n".join(out)
     out = [f"{result.question}" + _ablated(result.ablated) + _approximate(result)]
+    over_time = result.method in ("filter", "smooth")
     for pos in np.ndindex(*result.batch_shape):
-        if pos:
+        if over_time:
+            rest = f", batch row [{', '.join(map(str, pos[1:]))}]" if pos[1:] else ""
+            out.append(f"  step {pos[0] + 1}{rest}")
+        elif pos:
             out.append(f"  batch row [{', '.join(map(str, pos))}]")
         stderr = result.stderr[pos] if result.stderr is not None else None
         out += _table(result, result.probabilities[pos], limit, stderr)

@@ -17,7 +17,13 @@ factors), which is what larger questions and continuous evidence get.
 
 Every figure is the median of several repeats; ratios are bayesprog's rate over the others'.
 
-    python benchmarks/engine.py [--networks asia alarm] [--repeats 5] [--out results/engine.json]
+Approximate methods on n x n grids of binary variables (each with its up and left neighbours
+as parents; exact inference grows as 2^n): loopy belief propagation beside pyAgrum's, likelihood
+weighting beside pyAgrum's importance sampling with as many draws, and the exact answer where
+pyAgrum's junction tree finds it.
+
+    python benchmarks/engine.py [--networks asia alarm] [--repeats 5] [--grids 12 20]
+        [--out results/engine.json]
 """
 
 from __future__ import annotations
@@ -224,22 +230,125 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+GRIDS = [12, 16, 20]
+
+
+def grid_network(n: int, tmp: Path) -> tuple[gum.BayesNet, Path]:
+    """An n x n grid of binary variables, each with its up and left neighbours as parents
+    (random tables, seeded), written as BIF by pyAgrum and imported by bayesprog."""
+    gum.initRandom(n)
+    bn = gum.BayesNet(f"grid{n}")
+    for i in range(n):
+        for j in range(n):
+            bn.add(gum.LabelizedVariable(f"X{i}_{j}", "", 2))
+    for i in range(n):
+        for j in range(n):
+            if i:
+                bn.addArc(f"X{i - 1}_{j}", f"X{i}_{j}")
+            if j:
+                bn.addArc(f"X{i}_{j - 1}", f"X{i}_{j}")
+    bn.generateCPTs()
+    bif = tmp / f"grid{n}.bif"
+    gum.saveBN(bn, str(bif))
+    from bayesprog.io import import_network
+
+    return bn, import_network(str(bif), str(tmp / f"grid{n}.yaml"))
+
+
+def bench_approximate(n: int, repeats: int, tmp: Path, samples: int = 10_000) -> dict:
+    """P(centre | two opposite corners) on an n x n grid: loopy belief propagation (ours and
+    pyAgrum's), likelihood weighting (ours, ``samples`` draws) and pyAgrum's importance
+    sampling (the same number of draws), and the exact answer where pyAgrum's junction tree
+    finds it within the run (12 x 12)."""
+    bn, path = grid_network(n, tmp)
+    program = bayesprog.load(path)
+    target, evidence = f"X{n // 2}_{n // 2}", {"X0_0": 1, f"X{n - 1}_{n - 1}": 0}
+    question = f"P({target} | X0_0=1, X{n - 1}_{n - 1}=0)"
+    row: dict = {"grid": f"{n} x {n}", "variables": n * n, "samples": samples}
+
+    def agrum(engine_class, setup=lambda e: None):
+        engine = engine_class(bn)
+        engine.setEvidence(evidence)
+        setup(engine)
+        engine.makeInference()
+        return engine.posterior(target).toarray()
+
+    ours_lbp = program.ask(question, method="lbp").probabilities
+    theirs_lbp = agrum(gum.LoopyBeliefPropagation)
+    row["lbp_seconds"] = {
+        "bayesprog": median_time(lambda: program.ask(question, method="lbp"), repeats),
+        "pyagrum": median_time(lambda: agrum(gum.LoopyBeliefPropagation), repeats)}
+    row["lbp_max_difference"] = float(np.abs(ours_lbp - theirs_lbp).max())
+    lw = program.ask(question, method="lw", samples=samples, rng=0)
+    row["lw"] = {"p": float(lw.probabilities[0]), "stderr": float(lw.stderr[0]),
+                 "ess": float(lw.ess)}
+
+    def sampled():
+        def fixed(engine):
+            engine.setMaxIter(samples)
+            engine.setEpsilon(1e-12)
+            engine.setMinEpsilonRate(1e-12)
+            engine.setMaxTime(60)
+        return agrum(gum.ImportanceSampling, fixed)
+
+    row["lw_seconds"] = {
+        "bayesprog": median_time(lambda: program.ask(question, method="lw", samples=samples,
+                                                     rng=0), repeats),
+        "pyagrum_importance_sampling": median_time(sampled, 1)}
+    row["pyagrum_importance_sampling_p"] = float(sampled()[0])
+    if n <= 12:
+        exact = agrum(gum.LazyPropagation, lambda e: e.addTarget(target))
+        row["exact_p"] = float(exact[0])
+        row["lw_error_in_stderr"] = abs(row["lw"]["p"] - row["exact_p"]) / row["lw"]["stderr"]
+        row["lbp_error"] = float(abs(ours_lbp[0] - exact[0]))
+    return row
+
+
+def approximate_table(rows: list[dict]) -> str:
+    head = (f"{'grid':<8} {'lbp s ours':>10} {'lbp s agrum':>11} {'max diff':>9}  "
+            f"{'lw s ours':>9} {'IS s agrum':>10}  {'lw p +- se':>18} {'agrum IS p':>10} "
+            f"{'exact p':>8}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lw = r["lw"]
+        exact = f"{r['exact_p']:.4f}" if "exact_p" in r else "-"
+        lines.append(f"{r['grid']:<8} {r['lbp_seconds']['bayesprog']:>10.3f} "
+                     f"{r['lbp_seconds']['pyagrum']:>11.3f} {r['lbp_max_difference']:>9.1e}  "
+                     f"{r['lw_seconds']['bayesprog']:>9.3f} "
+                     f"{r['lw_seconds']['pyagrum_importance_sampling']:>10.3f}  "
+                     f"{lw['p']:>9.4f} +- {lw['stderr']:.4f} "
+                     f"{r['pyagrum_importance_sampling_p']:>10.4f} {exact:>8}")
+    lines.append(f"P(centre | two corners), {rows[0]['samples'] if rows else 0} draws for "
+                 "likelihood weighting and for pyAgrum's importance sampling.")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--networks", nargs="+", default=NETWORKS)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", default="results/benchmarks/engine.json")
+    parser.add_argument("--grids", nargs="*", type=int, default=GRIDS,
+                        help="sizes of the grid networks for the approximate methods "
+                        "(none: skip them)")
     args = parser.parse_args(argv)
-    rows = []
+    rows, approximate = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for tables in (True, False):
             for name in args.networks:
                 rows.append(bench_network(name, args.repeats, Path(tmp), tables))
                 print(f"measured {rows[-1]['network']}", file=sys.stderr)
+        for n in args.grids:
+            approximate.append(bench_approximate(n, min(args.repeats, 3), Path(tmp)))
+            print(f"measured the {n} x {n} grid", file=sys.stderr)
     print(table(rows))
+    if approximate:
+        print()
+        print(approximate_table(approximate))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"repeats": args.repeats, "rows": rows}, indent=2))
+    out.write_text(json.dumps({"repeats": args.repeats, "rows": rows,
+                               "approximate": approximate}, indent=2))
     print(f"written to {out}")
     return 0
 

@@ -22,7 +22,7 @@ LAYERS = [
     {"language"},
     {"inference"},
     {"learning"},
-    {"program"},
+    {"program", "dynamic"},
     {"compile", "draw", "show", "display", "__init__"},
     {"io"},
     {"cli"},

@@ -172,7 +172,7 @@ API_MISUSES = [
      "freeze: expected terms"),
     ("question a number", lambda p: p.ask(5), QuestionError, "expected a string like"),
     ("kind unknown", lambda p: p.ask("P(Rain)", kind="foo"), QuestionError,
-     "kind must be 'posterior' or 'map'"),
+     "kind must be 'posterior', 'map'"),
 ]
 
 

@@ -85,6 +85,8 @@ class Checked:
     questions: dict[str, tuple[Expression, str, str]]
     ablate: list[Expression]
     problems: list[Diagnostic]
+    #: (previous, state) of a program that repeats per time step, else None
+    time: tuple[str, str] | None = None
 
 
 def build_variable(name: str, spec: Any) -> Variable:
@@ -478,6 +480,51 @@ class _Checker:
             out[name] = (expr, spec.kind, spec.description)
         return out
 
+    def check_time(self, terms: list[Term], questions: dict[str, tuple[Expression, str, str]]
+                   ) -> tuple[str, str] | None:
+        """The time section: PREVIOUS and STATE discrete with the same states, PREVIOUS
+        without parents; questions over steps search STATE."""
+        spec = self.doc.time
+        over_time = [(name, q) for name, q in questions.items()
+                     if q[1] in ("filter", "smooth", "sequence")]
+        if spec is None:
+            for name, (_, kind, _) in over_time:
+                self.error(("questions", name), f"question {name!r}: a {kind} question needs "
+                           "a program that repeats per step (a time: section)", at_key=True)
+            return None
+        (previous, state), = spec.previous.items()
+        where = ("time", "previous", previous)
+        problems = []
+        for name in (previous, state):
+            var = self.variables.get(name)
+            if var is None or not var.is_discrete:
+                problems.append(f"expected a declared discrete variable, found "
+                                f"{'nothing' if var is None else 'a continuous one'} named "
+                                f"{name!r}")
+        if not problems:
+            a, b = self.variables[previous], self.variables[state]
+            if a.states != b.states:  # type: ignore[union-attr]
+                problems.append(f"{previous} and {state} must have the same states, found "
+                                f"{a.describe_states()} and {b.describe_states()}")  # type: ignore[union-attr]
+            own = next((t for t in terms if not t.soft and t.child.name == previous), None)
+            if own is not None and own.parents:
+                problems.append(f"{previous}, the state one step earlier, has no parents in "
+                                f"a step; found {own.label}")
+            if not any(previous in {p.name for p in t.parents} for t in terms
+                       if t.child.name == state):
+                problems.append(f"the term of {state} should depend on {previous} (the "
+                                "transition)")
+        for problem in problems:
+            self.error(where, f"time: {problem}", at_key=True)
+        if problems:
+            return None
+        for name, (expr, kind, _) in over_time:
+            if expr.left != (state,):
+                self.error(("questions", name), f"question {name!r}: a {kind} question "
+                           f"searches the state: expected P({state} | ...), found {expr}",
+                           at_key=True)
+        return previous, state
+
     def check_ablate(self, terms: list[Term]) -> list[Expression]:
         out = []
         for i, text in enumerate(self.doc.ablate):
@@ -627,4 +674,5 @@ def check_document(located: Located, doc: Document, base_dir: Path,
     terms = c.check_terms()
     questions = c.check_questions()
     ablate = c.check_ablate(terms)
-    return Checked(c.variables, c.inputs, terms, questions, ablate, c.problems)
+    time = c.check_time(terms, questions)
+    return Checked(c.variables, c.inputs, terms, questions, ablate, c.problems, time)

@@ -169,8 +169,19 @@ class SoftEvidenceSpec(_WithParameters):
 
 class QuestionSpec(_Strict):
     ask: str = Field(description="P(searched | known)")
-    kind: Literal["posterior", "map"] = "posterior"
+    kind: Literal["posterior", "map", "filter", "smooth", "sequence"] = Field(
+        "posterior", description="posterior, map, or over a sequence of steps (a program with "
+        "time:): filter, smooth, sequence (the most likely sequence)")
     description: str = ""
+
+
+class TimeSpec(_Strict):
+    """A program that repeats per time step: its decomposition is one step."""
+
+    previous: dict[str, str] = Field(
+        min_length=1, max_length=1, description="{PREVIOUS: STATE}: the variable PREVIOUS is "
+        "the state variable STATE one step earlier; the term of PREVIOUS is the belief before "
+        "the first step")
 
 
 class Document(_Strict):
@@ -182,6 +193,7 @@ class Document(_Strict):
     decomposition: list[TermSpec] = Field(min_length=1)
     soft_evidence: list[SoftEvidenceSpec] = Field(default_factory=list)
     questions: dict[str, QuestionSpec | str] = Field(default_factory=dict)
+    time: TimeSpec | None = Field(None, description="the decomposition is one time step")
     ablate: list[str] = Field(default_factory=list)
     learned: list[FitRecord] = Field(default_factory=list, description="fits that set the "
                                      "parameters, oldest first")
@@ -195,7 +207,7 @@ class Document(_Strict):
 
     def question(self, name: str) -> QuestionSpec:
         q = self.questions[name]
-        return QuestionSpec(ask=q) if isinstance(q, str) else q
+        return QuestionSpec(ask=q, kind="posterior") if isinstance(q, str) else q
 
 
 _UNION_TAGS = {"QuestionSpec", "str"}

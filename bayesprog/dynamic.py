@@ -1,0 +1,156 @@
+"""Questions over a sequence of steps, for programs whose decomposition is one time step.
+
+A program with ``time: {previous: {PREV: X}}`` describes one step: ``PREV`` is the state ``X``
+one step earlier, its term the belief before the first step, and the other terms the
+transition ``P(X | PREV ...)`` and what is observed at a step. Evidence for ``T`` steps is given
+with time as the first axis (``{"Y": [y1, ..., yT]}``, batch axes after it).
+
+* ``filter``: ``P(X_t | y_1..t)`` for every t, by the forward recursion: each step is one
+  question of the step program, the belief of the step before given as soft evidence on
+  ``PREV`` (whose own term is then uniform). Nothing of the history is kept but that belief.
+* ``smooth``: ``P(X_t | y_1..T)``, by the forward and the backward recursion (the backward
+  message of a step is a question of the step program on ``PREV`` with soft evidence on ``X``).
+* ``sequence``: the most likely sequence ``argmax P(x_1..T | y_1..T)`` (Viterbi; the state
+  before the first step summed out), from the step program's joint ``P(PREV X | y_t)``; ties
+  go to the first state. Its ``probability`` is ``P(x_1..T | y_1..T)`` of that sequence.
+
+Every step's question is asked of the engine for all sequences of the batch at once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy.special import logsumexp
+
+from bayesprog.errors import QuestionError, expect_mapping
+from bayesprog.expressions import Expression, Question
+from bayesprog.inference import MapResult, Posterior
+
+KINDS = ("filter", "smooth", "sequence")
+
+
+def _steps(evidence: dict[str, Any]) -> tuple[int, dict[str, list[Any]]]:
+    """The number of steps and each step's evidence (time is the first axis)."""
+    lengths = {}
+    for name, value in evidence.items():
+        arr = np.asarray(value, dtype=object)
+        if arr.ndim < 1:
+            raise QuestionError(f"evidence for {name}: expected one value per step (time as "
+                                f"the first axis), found a single value {value!r}")
+        lengths[name] = len(arr)
+    if not lengths:
+        raise QuestionError("a question over steps needs evidence with time as the first axis")
+    if len(set(lengths.values())) > 1:
+        found = ", ".join(f"{k}: {n}" for k, n in lengths.items())
+        raise QuestionError(f"evidence over steps of different lengths ({found}): expected "
+                            "one value per step for every variable")
+    steps = next(iter(lengths.values()))
+    return steps, {name: [value[t] for t in range(steps)] for name, value in evidence.items()}
+
+
+def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | None,
+              inputs: Mapping[str, Any] | None, soft: Mapping[str, Any] | None,
+              method: str | None, options: Mapping[str, Any]) -> Posterior | MapResult:
+    """The answer of a ``filter``, ``smooth`` or ``sequence`` question (see the module)."""
+    if program.time is None:
+        raise QuestionError(f"a {question.kind} question needs a program that repeats per step "
+                            "(a time: section)")
+    previous, state = program.time
+    expr = question.expression
+    if expr.left != (state,):
+        raise QuestionError(f"a {question.kind} question searches the state: expected "
+                            f"P({state} | ...), found {expr}")
+    if soft:
+        raise QuestionError("soft evidence is not taken by questions over steps")
+    steps, per_step = _steps(expect_mapping(evidence, "evidence", "variable names to values"))
+    known = expr.right
+    step = program.ablate(str(program.term_of(previous).expression))
+    card = program.variables[state].card
+
+    def ask(searched: tuple[str, ...], t: int, soft_on: dict[str, np.ndarray]) -> Posterior:
+        q = Question(Expression(searched, known, dict(expr.values)))
+        return step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
+                        soft=soft_on, method=method, samples=options.get("samples"))
+
+    first = program.ask(f"P({previous})").probabilities  # the belief before the first step
+    forward, log_evidence = [], []
+    belief: np.ndarray = first
+    for t in range(steps):
+        answer = ask((state,), t, {previous: belief})
+        belief = answer.probabilities
+        forward.append(belief)
+        # log P(y_t | y_<t): the step's evidence under a uniform PREV, times the card
+        log_evidence.append(answer.log_evidence + np.log(card))
+    batch = forward[0].shape[:-1]
+    if question.kind == "filter":
+        return _posterior(question, program, state, np.stack(forward), np.stack(log_evidence),
+                          "filter")
+    if question.kind == "smooth":
+        backward = np.ones_like(forward[-1])
+        smoothed = [forward[-1]]
+        for t in range(steps - 1, 0, -1):
+            backward = ask((previous,), t, {state: backward}).probabilities
+            joint = forward[t - 1] * backward
+            smoothed.append(joint / joint.sum(axis=-1, keepdims=True))
+        return _posterior(question, program, state, np.stack(smoothed[::-1]),
+                          np.stack(log_evidence), "smooth")
+    # the most likely sequence: max-product over the step joints P(PREV X | y_t)
+    delta = np.log(first) if first.ndim == len(batch) + 1 else np.log(np.broadcast_to(
+        first, batch + (card,)))
+    pointers = []
+    log_best = np.zeros(batch)
+    for t in range(steps):
+        answer = ask((previous, state), t, {})
+        # P(PREV X | y_t) under a uniform PREV, times its evidence and the card:
+        # log P(X | PREV) + log P(y_t | X)
+        scale = (answer.log_evidence + np.log(card))[..., None, None]
+        with np.errstate(divide="ignore"):
+            scores = delta[..., :, None] + np.log(answer.probabilities) + scale
+        pointers.append(np.argmax(scores, axis=-2))
+        # the state before the first step is not part of the sequence: summed out, not maximised
+        delta = logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
+        top = np.max(delta, axis=-1, keepdims=True)
+        log_best += top[..., 0]
+        delta = delta - top
+    path = [np.argmax(delta, axis=-1)]
+    for t in range(steps - 1, 0, -1):
+        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
+    indices = np.stack(path[::-1])[..., None]  # [T, batch, 1]
+    marginals = over_time(program, Question(expr, "smooth"), evidence, inputs, None, method,
+                          options)
+    assert isinstance(marginals, Posterior)
+    total = np.sum(log_evidence, axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        probability = np.exp(log_best - np.broadcast_to(total, batch))
+    shape = indices.shape[:-1]
+    return MapResult(
+        question=str(expr) + "   (the most likely sequence)",
+        variables=(state,),
+        states={state: program.variables[state].states},
+        indices=indices,
+        probability=np.broadcast_to(probability, shape).copy(),
+        ties=np.ones(shape, int),
+        zero_evidence=np.zeros(shape, bool),
+        posterior=marginals,
+        ablated=program.ablated,
+    )
+
+
+def _posterior(question: Question, program: Any, state: str, probabilities: np.ndarray,
+               log_evidence: np.ndarray, kind: str) -> Posterior:
+    shape = probabilities.shape[:-1]
+    return Posterior(
+        question=f"{question.expression}   ({'filtered' if kind == 'filter' else 'smoothed'}, "
+                 f"{shape[0]} steps)",
+        variables=(state,),
+        states={state: program.variables[state].states},
+        values={state: program.variables[state].typed_states},
+        probabilities=probabilities,
+        log_evidence=np.broadcast_to(log_evidence, shape).copy(),
+        batch_shape=shape,
+        ablated=program.ablated,
+        method=kind,
+    )
