@@ -28,12 +28,17 @@ class Discrete:
     @property
     def typed_states(self) -> tuple[Any, ...]:
         """The states as values of the variable's type: integers for a range, the cell's
-        indices (ix, iy, ...) for a grid, names else."""
-        if self.kind == "range" and self.values is not None:
-            return tuple(int(v) for v in self.values)
-        if self.kind == "grid":
-            return tuple(tuple(int(i) for i in s.split("_")) for s in self.states)
-        return self.states
+        indices (ix, iy, ...) for a grid, names else (computed once)."""
+        cache = self.__dict__.get("_typed_cache")
+        if cache is None:
+            if self.kind == "range" and self.values is not None:
+                cache = tuple(int(v) for v in self.values)
+            elif self.kind == "grid":
+                cache = tuple(tuple(int(i) for i in s.split("_")) for s in self.states)
+            else:
+                cache = self.states
+            object.__setattr__(self, "_typed_cache", cache)
+        return cache
 
     @property
     def is_discrete(self) -> bool:
