@@ -46,13 +46,13 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     """The posterior of ``question`` for bound evidence: by ``method`` when it is named, else
     by the cheapest exact method that answers."""
     plan = QuestionPlan(program, question, bound, dict(options or {}))
-    if method is not None:
-        return _by(method, plan)
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
     key = (registry_version(), bound.size.bit_length(), question.expression.left,
            *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
                                                bound.soft)))
+    if method is not None:
+        return _by(method, plan, key)
     rankings = program.inference_cache.rankings
     found = rankings.get(key)
     if found is None:
@@ -76,13 +76,21 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 
 
-def _by(name: str, plan: QuestionPlan) -> Posterior:
-    """The answer of the method ``name``, which the question asks for."""
+def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior:
+    """The answer of the method ``name``, which the question asks for (its estimate kept per
+    layout of question, like a ranking)."""
     methods = registered_methods()
     method = methods.get(name)
     if method is None:
         raise QuestionError(f"method {name!r}: expected one of {', '.join(methods)}")
-    cost = method.estimate(plan)
+    estimates = plan.program.inference_cache.estimates
+    options = tuple(sorted((k, v) for k, v in plan.options.items() if k != "rng"))
+    found = estimates.get((name, options, *key))
+    if found is None:
+        found = estimates[(name, options, *key)] = (plan.bound.size, method.estimate(plan))
+    size, cost = found
+    if cost is not None:
+        cost = Cost(cost.operations / size * plan.bound.size, cost.memory / size * plan.bound.size)
     if cost is None:
         raise QuestionError(f"method {name!r} does not answer {plan.question.expression} "
                             f"(see the methods in the language reference)")

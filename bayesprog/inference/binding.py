@@ -125,6 +125,8 @@ def bind(
 
 
 def _state_indices(var: Discrete, value: Any) -> np.ndarray:
+    if isinstance(value, str) and value in var._lookup:  # one state by name: the common case
+        return np.asarray(var._lookup[value], dtype=np.intp)
     arr = np.asarray(value)
     if arr.dtype.kind in "iu":
         if var.values is not None:

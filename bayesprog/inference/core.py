@@ -57,3 +57,5 @@ class InferenceCache:
     #: the methods that apply to a layout of question, cheapest first, with their estimates
     #: and the batch size they were made for
     rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
+    #: a named method's estimate for a layout of question, and the batch size it was made for
+    estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
