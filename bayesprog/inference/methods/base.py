@@ -8,7 +8,9 @@ and answers it (:meth:`posterior`). A new method is one module with one class re
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
+
+import numpy as np
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.plan import QuestionPlan
@@ -37,6 +39,31 @@ class Method:
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         """The answer, or None when some rows need another method (the next cheapest)."""
         raise NotImplementedError
+
+
+def answer(plan: QuestionPlan, probabilities: np.ndarray, log_evidence: np.ndarray,
+           **extra: Any) -> Posterior:
+    """The posterior of ``plan``'s question from flat rows (``[rows] + cards`` and ``[rows]``),
+    shaped to the question's batch; ``extra``: the method's own fields (``method``,
+    ``stderr`` shaped like the probabilities, ...)."""
+    program, searched = plan.program, plan.searched
+    shape = plan.bound.batch_shape
+    cards = tuple(plan.card(v) for v in searched)
+    if "stderr" in extra:
+        extra["stderr"] = extra["stderr"].reshape(shape + cards)
+    if "ess" in extra:
+        extra["ess"] = extra["ess"].reshape(shape)
+    return Posterior(
+        question=str(plan.question.expression),
+        variables=searched,
+        states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
+        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
+        probabilities=probabilities.reshape(shape + cards),
+        log_evidence=np.asarray(log_evidence).reshape(shape),
+        batch_shape=shape,
+        ablated=program.ablated,
+        **extra,
+    )
 
 
 _METHODS: dict[str, Method] = {}

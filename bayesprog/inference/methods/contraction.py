@@ -12,7 +12,7 @@ from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import slice_factor, term_factor
-from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
 
@@ -81,15 +81,4 @@ def contract_question(plan: QuestionPlan) -> Posterior:
             total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
             log_z[row] = total
             probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
-    cards = tuple(program.variables[v].card for v in searched)  # type: ignore[union-attr]
-    shape = bound.batch_shape
-    return Posterior(
-        question=str(expr),
-        variables=searched,
-        states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
-        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
-        probabilities=probs.reshape(shape + cards),
-        log_evidence=log_z.reshape(shape),
-        batch_shape=shape,
-        ablated=program.ablated,
-    )
+    return answer(plan, probs, log_z)

@@ -16,7 +16,7 @@ from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import slice_factor, term_factor
-from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
 #: Sweeps over all messages at most, and the change of a message that counts as converged.
@@ -74,27 +74,14 @@ class LoopyBeliefPropagation(Method):
             raise QuestionError(f"lbp answers the marginal of one variable, or of variables "
                                 f"that share a term; {', '.join(searched)} do not: ask them "
                                 "one at a time, or use method='lw'")
-        shape = bound.batch_shape
         cards = tuple(card[v] for v in searched)
         total = probs.reshape(rows, -1).sum(axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             probs = probs / total.reshape((-1,) + (1,) * len(cards))
         zero = ~(total > 0)
         log_z = np.where(zero, -np.inf, np.nan)  # lbp estimates no evidence
-        return Posterior(
-            question=str(plan.question.expression),
-            variables=searched,
-            states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
-            values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
-            probabilities=np.where(zero.reshape((-1,) + (1,) * len(cards)), 0.0,
-                                   probs).reshape(shape + cards),
-            log_evidence=log_z.reshape(shape),
-            batch_shape=shape,
-            ablated=program.ablated,
-            method=self.name,
-            iterations=done,
-            residual=residual,
-        )
+        return answer(plan, np.where(zero.reshape((-1,) + (1,) * len(cards)), 0.0, probs), log_z,
+                      method=self.name, iterations=done, residual=residual)
 
 
 def _normalised(m: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.sampling import draw, generators
 
@@ -52,17 +52,4 @@ class LikelihoodWeighting(Method):
         stderr = np.sqrt(np.maximum(variance, 0.0))
         with np.errstate(divide="ignore"):
             log_z = logsumexp(draws.log_weights, axis=1) - np.log(n)
-        shape = bound.batch_shape
-        return Posterior(
-            question=str(plan.question.expression),
-            variables=searched,
-            states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
-            values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
-            probabilities=probs.reshape(shape + cards),
-            log_evidence=log_z.reshape(shape),
-            batch_shape=shape,
-            ablated=program.ablated,
-            method=self.name,
-            stderr=stderr.reshape(shape + cards),
-            ess=draws.ess.reshape(shape),
-        )
+        return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=draws.ess)

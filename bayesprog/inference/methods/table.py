@@ -13,7 +13,7 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import is_static, term_factor
-from bayesprog.inference.methods.base import Cost, Method, register_method
+from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
 #: Largest joint table (entries) that a compiled discrete question keeps.
@@ -77,7 +77,7 @@ class TableMethod(Method):
 
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         compiled = _compile(plan)
-        bound, program, searched = plan.bound, plan.program, plan.searched
+        bound, searched = plan.bound, plan.searched
         index = tuple(bound.discrete[v] for v in compiled.observed)
         rows = compiled.table[index] if index else compiled.table
         cards: tuple[int, ...] = tuple(rows.shape[rows.ndim - len(searched) :])
@@ -88,14 +88,4 @@ class TableMethod(Method):
         if not np.all(z > TINY):
             return None  # some row needs the exact log-space path
         probs = rows / z.reshape((-1,) + (1,) * len(cards))
-        shape = bound.batch_shape
-        return Posterior(
-            question=str(plan.question.expression),
-            variables=searched,
-            states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
-        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
-            probabilities=probs.reshape(shape + cards),
-            log_evidence=(np.log(z) + compiled.log_offset).reshape(shape),
-            batch_shape=shape,
-            ablated=program.ablated,
-        )
+        return answer(plan, probs, np.log(z) + compiled.log_offset)
