@@ -133,8 +133,8 @@ def _workers(process: subprocess.Popen) -> list[psutil.Process]:
 
 
 def _slow_experiment(folder: Path) -> Path:
-    return write_experiment(folder, tasks=["T1"], configurations=["full"], runs=6,
-                            iterations=40, chunk=1)
+    return write_experiment(folder, tasks=["T1"], configurations=["full"], runs=8,
+                            iterations=60, chunk=1)
 
 
 def test_a_killed_worker_is_replaced_and_the_numbers_do_not_change(tmp_path):
@@ -145,10 +145,12 @@ def test_a_killed_worker_is_replaced_and_the_numbers_do_not_change(tmp_path):
                                stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
-        while not list(out.glob("chunks/*/*/*.npz")) and time.monotonic() < deadline:
-            time.sleep(0.1)  # the workers are up and computing
-        workers = _workers(process)
+        workers: list[psutil.Process] = []
+        while not workers and time.monotonic() < deadline:
+            time.sleep(0.05)
+            workers = _workers(process)
         assert workers, "no worker process started"
+        time.sleep(0.5)  # importing or computing: either way it dies holding a unit
         workers[0].send_signal(signal.SIGKILL)
         _, err = process.communicate(timeout=300)
     finally:
