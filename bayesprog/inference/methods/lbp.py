@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 from opt_einsum import contract, get_symbol
+from scipy.special import logsumexp
 
 from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
@@ -84,68 +85,79 @@ class LoopyBeliefPropagation(Method):
                       method=self.name, iterations=done, residual=residual)
 
 
-def _normalised(m: np.ndarray) -> np.ndarray:
-    total = m.sum(axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(total > 0, m / total, 1.0 / m.shape[-1])
+#: Messages are kept above this, so that a variable's message to a factor (the product of its
+#: other messages) is the product of all divided by the factor's own.
+FLOOR = 1e-300
 
 
 def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list[str],
                card: dict[str, int], rows: int, iterations: int,
                tolerance: float) -> tuple[dict[str, Any], float, int]:
-    """Flooding schedule: all factor-to-variable messages from the variable-to-factor ones of
-    the previous sweep, then the reverse. Returns beliefs, the last residual and the sweeps."""
-    letters = {v: get_symbol(i + 1) for i, v in enumerate(variables)}
-    batch = get_symbol(0)
-    neighbours: dict[str, list[int]] = {v: [] for v in variables}
+    """Flooding schedule, vectorised: the factors are grouped by the cards of their axes, and
+    each group's messages to the variables of one position are one einsum over the group.
+    A variable's messages to its factors are, in log space, the sum of all it receives minus
+    the factor's own. Returns beliefs, the last residual (largest change of a factor-to-
+    variable message) and the sweeps made."""
+    index = {v: i for i, v in enumerate(variables)}
+    width = max([card[v] for v in variables] or [1])
+    groups: dict[tuple[int, ...], list[int]] = {}
     for i, (axes, _) in enumerate(tables):
-        for v in axes:
-            neighbours[v].append(i)
-    to_var = {(i, v): np.full((rows, card[v]), 1.0 / card[v])
-              for i, (axes, _) in enumerate(tables) for v in axes}
-    to_factor = dict(to_var)
-    specs = {}
-    for i, (axes, _) in enumerate(tables):
-        inputs = batch + "".join(letters[a] for a in axes)
-        for v in axes:
-            others = [u for u in axes if u != v]
-            eq = ",".join([inputs] + [batch + letters[u] for u in others]) + "->" + batch + \
-                letters[v]
-            specs[i, v] = (eq, others)
+        groups.setdefault(tuple(card[a] for a in axes), []).append(i)
+    plans = []
+    for cards, members in groups.items():
+        arity = len(cards)
+        stacked = np.stack([tables[i][1] for i in members])  # [F, rows, c1..ca]
+        where = np.array([[index[a] for a in tables[i][0]] for i in members])  # [F, a]
+        letters = [get_symbol(2 + k) for k in range(arity)]
+        head = "fr" + "".join(letters)
+        equations = [",".join([head] + ["fr" + letters[q] for q in range(arity) if q != p])
+                     + "->fr" + letters[p] for p in range(arity)]
+        plans.append((members, cards, stacked, where, equations))
+    # messages factor -> variable (probabilities) and variable -> factor (logs), by group and
+    # position: [F, rows, card]
+    to_var = [[np.full((len(m), rows, c), 1.0 / c) for c in cards]
+              for m, cards, *_ in plans]
+    to_factor = [[np.full((len(m), rows, c), -np.log(c)) for c in cards]
+                 for m, cards, *_ in plans]
+    received = np.zeros((len(variables), rows, width))
     residual, done = np.inf, 0
     while done < iterations:
         done += 1
-        new_to_var = {}
-        for i, (axes, table) in enumerate(tables):
-            for v in axes:
-                eq, others = specs[i, v]
-                new_to_var[i, v] = _normalised(contract(eq, table, *(to_factor[i, u]
-                                                                     for u in others)))
-        residual = max((float(np.max(np.abs(new_to_var[k] - to_var[k]))) for k in to_var),
-                       default=0.0)
-        to_var = new_to_var
-        for v in variables:
-            for i in neighbours[v]:
-                m = np.ones((rows, card[v]))
-                for j in neighbours[v]:
-                    if j != i:
-                        m = m * to_var[j, v]
-                to_factor[i, v] = _normalised(m)
+        residual = 0.0
+        received[...] = 0.0
+        for g, (_, cards, stacked, where, equations) in enumerate(plans):
+            incoming = [np.exp(m) for m in to_factor[g]]
+            for p, c in enumerate(cards):
+                others = [incoming[q] for q in range(len(cards)) if q != p]
+                m = contract(equations[p], stacked, *others) if others else stacked
+                total = m.sum(axis=-1, keepdims=True)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    m = np.where(total > 0, m / total, 1.0 / c)
+                m = np.maximum(m, FLOOR)
+                residual = max(residual, float(np.max(np.abs(m - to_var[g][p]))))
+                to_var[g][p] = m
+                np.add.at(received[:, :, :c], where[:, p], np.log(m))  # a view: in place
+        for g, (_, cards, _, where, _) in enumerate(plans):
+            for p, c in enumerate(cards):
+                log = received[where[:, p], :, :c] - np.log(to_var[g][p])
+                to_factor[g][p] = log - logsumexp(log, axis=-1, keepdims=True)
         if residual < tolerance:
             break
 
     def var_belief(v: str) -> np.ndarray:
-        m = np.ones((rows, card[v]))
-        for i in neighbours[v]:
-            m = m * to_var[i, v]
-        return m
+        log = received[index[v], :, : card[v]]
+        return np.exp(log - logsumexp(log, axis=-1, keepdims=True))
+
+    position = {i: (g, k) for g, (members, *_) in enumerate(plans)
+                for k, i in enumerate(members)}
 
     def factor_belief(i: int, keep: tuple[str, ...]) -> np.ndarray:
         axes, table = tables[i]
-        eq = ",".join([batch + "".join(letters[a] for a in axes)]
-                      + [batch + letters[a] for a in axes]) + "->" + batch + \
-            "".join(letters[a] for a in keep)
-        return contract(eq, table, *(to_factor[i, a] for a in axes))
+        g, k = position[i]
+        letters = [get_symbol(2 + q) for q in range(len(axes))]
+        eq = ",".join(["r" + "".join(letters)] + ["r" + letter for letter in letters]) + \
+            "->r" + "".join(letters[axes.index(a)] for a in keep)
+        return contract(eq, table, *(np.exp(to_factor[g][p][k]) for p in range(len(axes))))
 
     return ({"var": {v: var_belief(v) for v in variables}, "factor": factor_belief},
             residual, done)
