@@ -144,3 +144,36 @@ def slice_factor(f: Factor, bound: Bound) -> Factor:
         if any_batched and sliced.shape[0] != bound.size:
             sliced = np.broadcast_to(sliced, (bound.size,) + sliced.shape[1:])
     return Factor(tuple(f.axes[i] for i in rest), sliced, any_batched)
+
+
+def question_factors(program: ProgramLike, terms: list[Term], bound: Bound) -> list[Factor]:
+    """The log-factors of a question: its relevant terms and the soft evidence given with it,
+    sliced at the observed discrete variables."""
+    factors = [slice_factor(term_factor(program, term, bound), bound) for term in terms]
+    for name, pv in bound.soft.items():
+        with np.errstate(divide="ignore"):
+            log = np.log(pv.array)
+        factors.append(slice_factor(Factor((name,), log, pv.batched), bound))
+    return factors
+
+
+def rescaled(factors: list[Factor], size: int) -> tuple[list[Factor], np.ndarray]:
+    """Each factor with axes in the probability domain, divided by its largest value (per
+    row when batched), and the logs of those divisors and of the factors without axes summed
+    per row (``[size]``)."""
+    offset = np.zeros(size)
+    operands: list[Factor] = []
+    for f in factors:
+        red = tuple(range(1 if f.batched else 0, f.log.ndim))
+        with np.errstate(invalid="ignore"):
+            m = np.max(f.log, axis=red, keepdims=True) if red else f.log
+        if np.any(m == np.inf):
+            raise QuestionError(f"an infinite density over {', '.join(f.axes) or 'the evidence'}: "
+                                "a value sits on a singular point of its density")
+        m = np.where(np.isfinite(m), m, 0.0)
+        if not red:
+            offset += np.broadcast_to(f.log, (size,)) if f.batched else f.log
+            continue
+        offset += m.reshape(-1) if f.batched else m.reshape(())
+        operands.append(Factor(f.axes, np.exp(f.log - m), f.batched))
+    return operands, offset

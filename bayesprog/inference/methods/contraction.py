@@ -7,11 +7,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
-from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contract import TINY, contract, log_contract
-from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import slice_factor, term_factor
+from bayesprog.inference.factors import question_factors, rescaled
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
@@ -35,30 +33,9 @@ def contract_question(plan: QuestionPlan) -> Posterior:
     program, question, bound = plan.program, plan.question, plan.bound
     expr = question.expression
     searched = expr.left
-    factors = []
-    for term in plan.terms:
-        factors.append(slice_factor(term_factor(program, term, bound), bound))
-    for name, pv in bound.soft.items():
-        with np.errstate(divide="ignore"):
-            log = np.log(pv.array)
-        factors.append(slice_factor(Factor((name,), log, pv.batched), bound))
-
+    factors = question_factors(program, plan.terms, bound)
     size = bound.size
-    offset = np.zeros(size)
-    operands: list[Factor] = []
-    for f in factors:
-        red = tuple(range(1 if f.batched else 0, f.log.ndim))
-        with np.errstate(invalid="ignore"):
-            m = np.max(f.log, axis=red, keepdims=True) if red else f.log
-        if np.any(m == np.inf):
-            raise QuestionError(f"an infinite density over {', '.join(f.axes) or 'the evidence'}: "
-                                "a value sits on a singular point of its density")
-        m = np.where(np.isfinite(m), m, 0.0)
-        if not red:
-            offset += np.broadcast_to(f.log, (size,)) if f.batched else f.log
-            continue
-        offset += m.reshape(-1) if f.batched else m.reshape(())
-        operands.append(Factor(f.axes, np.exp(f.log - m), f.batched))
+    operands, offset = rescaled(factors, size)
     batched_out = any(f.batched for f in factors) or bool(bound.batch_shape)
     table = contract(program, operands, searched, batched_out, size)
     if not batched_out:

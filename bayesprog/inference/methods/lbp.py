@@ -15,8 +15,7 @@ from scipy.special import logsumexp
 
 from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import slice_factor, term_factor
+from bayesprog.inference.factors import question_factors, rescaled
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
@@ -30,10 +29,6 @@ class LoopyBeliefPropagation(Method):
     exact = False
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
-        if plan.bound.continuous and any(not plan.program.variables[t.child.name].is_discrete
-                                         and t.child.name not in plan.bound.continuous
-                                         for t in plan.terms):
-            return None
         sizes = [plan.free_size(t.axes) for t in plan.terms] or [1]
         iterations = plan.options.get("max_iterations", MAX_ITERATIONS)
         size = float(plan.bound.size)
@@ -43,24 +38,11 @@ class LoopyBeliefPropagation(Method):
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched
         rows = bound.size
-        factors = []  # (axes, table [rows, cards...]) in the probability domain, rescaled
-        offset = np.zeros(rows)
-        for term in plan.terms:
-            factors.append(slice_factor(term_factor(program, term, bound), bound))
-        for name, pv in bound.soft.items():
-            with np.errstate(divide="ignore"):
-                factors.append(slice_factor(Factor((name,), np.log(pv.array), pv.batched),
-                                            bound))
-        tables: list[tuple[tuple[str, ...], np.ndarray]] = []
-        for f in factors:
-            log = f.log if f.batched else f.log[np.newaxis]
-            log = np.broadcast_to(log, (rows,) + log.shape[1:])
-            axes_r = tuple(range(1, log.ndim))
-            top = np.max(log, axis=axes_r, keepdims=True) if axes_r else log
-            top = np.where(np.isfinite(top), top, 0.0)
-            offset += top.reshape(rows)
-            if f.axes:
-                tables.append((f.axes, np.exp(log - top)))
+        operands, _ = rescaled(question_factors(program, plan.terms, bound), rows)
+        # every table with the batch axis of rows, in the probability domain, largest value 1
+        tables = [(f.axes, np.broadcast_to(f.log if f.batched else f.log[np.newaxis],
+                                           (rows,) + f.log.shape[f.batched:]))
+                  for f in operands]
         variables = sorted({a for axes, _ in tables for a in axes} | set(searched))
         card = {v: plan.card(v) for v in variables}
         iterations = plan.options.get("max_iterations", MAX_ITERATIONS)
