@@ -88,18 +88,22 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     if question.kind == "filter":
         return _posterior(question, program, state, np.stack(forward), np.stack(log_evidence),
                           "filter")
-    if question.kind == "smooth":
+
+    def smoothed() -> Posterior:
         backward = np.ones_like(forward[-1])
-        smoothed = [forward[-1]]
+        marginals = [forward[-1]]
         for t in range(steps - 1, 0, -1):
             backward = ask((previous,), t, {state: backward}).probabilities
             joint = forward[t - 1] * backward
-            smoothed.append(joint / joint.sum(axis=-1, keepdims=True))
-        return _posterior(question, program, state, np.stack(smoothed[::-1]),
+            marginals.append(joint / joint.sum(axis=-1, keepdims=True))
+        return _posterior(question, program, state, np.stack(marginals[::-1]),
                           np.stack(log_evidence), "smooth")
+
+    if question.kind == "smooth":
+        return smoothed()
     # the most likely sequence: max-product over the step joints P(PREV X | y_t)
-    delta = np.log(first) if first.ndim == len(batch) + 1 else np.log(np.broadcast_to(
-        first, batch + (card,)))
+    with np.errstate(divide="ignore"):
+        delta = np.log(np.broadcast_to(first, batch + (card,)))
     pointers = []
     log_best = np.zeros(batch)
     for t in range(steps):
@@ -119,9 +123,7 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     for t in range(steps - 1, 0, -1):
         path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
     indices = np.stack(path[::-1])[..., None]  # [T, batch, 1]
-    marginals = over_time(program, Question(expr, "smooth"), evidence, inputs, None, method,
-                          options)
-    assert isinstance(marginals, Posterior)
+    marginals = smoothed()
     total = np.sum(log_evidence, axis=0)
     with np.errstate(over="ignore", invalid="ignore"):
         probability = np.exp(log_best - np.broadcast_to(total, batch))

@@ -132,17 +132,20 @@ def _nested_none(values: list) -> list:
     return [_nested_none(v) if isinstance(v, list) else (None if v != v else v) for v in values]
 
 
-def _generator(rng: Any) -> np.random.Generator:
-    """A generator from ``rng``: a ``numpy.random.Generator``, or a seed (an integer >= 0)."""
-    if isinstance(rng, np.random.Generator):
-        return rng
+def seed_of(rng: Any) -> int:
+    """``rng`` as a seed, checked: an integer >= 0."""
     if isinstance(rng, (bool, np.bool_)) or not isinstance(rng, (int, np.integer)):
         raise ArgumentError(f"rng: expected a seed (an integer >= 0), a "
                             "numpy.random.Generator, or one of them per batch row; found "
                             f"{type(rng).__name__} {short_repr(rng)}")
     if rng < 0:
         raise QuestionError(f"rng: expected a seed >= 0, found {rng}")
-    return np.random.default_rng(int(rng))
+    return int(rng)
+
+
+def generator_of(rng: Any) -> np.random.Generator:
+    """A generator from ``rng``: a ``numpy.random.Generator``, or a seed (an integer >= 0)."""
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(seed_of(rng))
 
 
 def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:
@@ -158,9 +161,9 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
         if len(rng) != rows:
             raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
-        gens = [_generator(r) for r in rng]
+        gens = [generator_of(r) for r in rng]
     else:
-        gens = [_generator(rng)] * rows
+        gens = [generator_of(rng)] * rows
     best = flat.max(axis=1)
     tied = flat >= (best * (1 - TIE_RTOL))[:, None]
     counts = tied.sum(axis=1)

@@ -22,8 +22,9 @@ import networkx as nx
 import numpy as np
 from scipy.special import logsumexp
 
-from bayesprog.errors import ArgumentError, QuestionError, short_repr
+from bayesprog.errors import QuestionError
 from bayesprog.forms import ParamValue
+from bayesprog.inference.answers import generator_of, seed_of
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import _bound_param, term_factor
 from bayesprog.inference.protocol import ProgramLike
@@ -65,21 +66,11 @@ def generators(rng: Any, rows: int) -> list[np.random.Generator]:
         if len(rng) != rows:
             raise QuestionError(f"rng: expected one seed or generator per batch row ({rows}), "
                                 f"found {len(rng)}")
-        return [r if isinstance(r, np.random.Generator) else np.random.default_rng(_seed(r))
-                for r in rng]
+        return [generator_of(r) for r in rng]
     if isinstance(rng, np.random.Generator):
         return list(rng.spawn(rows))
-    seed = _seed(0 if rng is None else rng)
+    seed = seed_of(0 if rng is None else rng)
     return [np.random.default_rng([seed, r]) for r in range(rows)]
-
-
-def _seed(value: Any) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ArgumentError(f"rng: expected a seed (an integer >= 0) or one per batch row, "
-                            f"found {type(value).__name__} {short_repr(value)}")
-    if value < 0:
-        raise QuestionError(f"rng: expected a seed >= 0, found {value}")
-    return int(value)
 
 
 def _order(program: ProgramLike, terms: list[Term]) -> list[Term]:
