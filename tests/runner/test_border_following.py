@@ -140,3 +140,18 @@ def test_a_misperceived_cell_of_a_material_absent_from_the_workspace_is_no_disco
     assert perceived[0, 2, 5] and not target[0, 2, 5]
     _, saliency, _ = ex.cue_fields()
     assert np.nanmax(saliency[0].reshape(scenario.shape)[1:4, 4:7]) >= 0.5  # now an edge
+
+
+@pytest.mark.parametrize("path", sorted((MODELS / "experiments").glob("*.yaml")),
+                         ids=lambda p: p.stem)
+def test_every_shipped_experiment_loads_and_each_task_has_a_border(path):
+    from runner.experiment import load_experiment
+    experiment = load_experiment(path)
+    scenario = experiment.scenario
+    materials = scenario.material_map
+    for task in experiment.spec.tasks:
+        border = scenario.border(task)
+        assert border.any(), f"{path.name}: task {task} has no border"
+        # a border cell is of the task's material and the task's material does not fill the grid
+        assert (materials[border] == scenario.task_material(task)).all()
+        assert (materials != scenario.task_material(task)).any()
