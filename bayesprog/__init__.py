@@ -19,12 +19,14 @@ from bayesprog.errors import BayesprogError, Diagnostic, QuestionError, SpecErro
 from bayesprog.expressions import Question
 from bayesprog.forms import Form, Param, available_forms, register_form
 from bayesprog.inference import MapResult, Posterior
+from bayesprog.inference.density import Density
 from bayesprog.program import Program, load, loads
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BayesprogError",
+    "Density",
     "Diagnostic",
     "Form",
     "MapResult",

@@ -167,14 +167,52 @@ def cmd_query(args: argparse.Namespace) -> int:
         rng=args.seed,
         method=None if args.method == "auto" else args.method,
         samples=args.samples,
+        bins=args.bins,
     )
     from bayesprog.show import format_result
+
+    if args.plot:
+        _plot_density(result, args.plot)
 
     if args.json:
         print(json.dumps(result.to_json()))
     else:
         print(format_result(result, limit=args.limit))
     return 0
+
+
+def _plot_density(result: Any, path: str) -> None:
+    """The density of each searched real variable (the first batch row), to an image file."""
+    from bayesprog.inference.density import Density
+
+    if not isinstance(result, Density):
+        raise _UserError("--plot: expected a question on real variables (a density); this one "
+                         "searches discrete variables")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(result.variables), figsize=(5 * len(result.variables), 3.5),
+                             squeeze=False)
+    for ax, v in zip(axes[0], result.variables, strict=True):
+        lo, hi = (float(np.ravel(result.quantile(v, q))[0]) for q in (0.0005, 0.9995))
+        pad = 0.1 * (hi - lo or 1.0)
+        x = np.linspace(lo - pad, hi + pad, 801)
+        ax.plot(x, np.asarray(result.pdf(v, x)).reshape(-1, x.size)[0])
+        ax.axvline(float(np.ravel(result.mean(v))[0]), color="k", lw=0.8, ls="--",
+                   label="mean")
+        ax.set_xlabel(v)
+        ax.set_ylabel("density")
+        ax.legend(frameon=False)
+    fig.suptitle(result.question)
+    fig.tight_layout()
+    try:
+        fig.savefig(path)
+    except (OSError, ValueError) as exc:
+        raise _UserError(f"--plot {path}: cannot write it: {exc}") from None
+    finally:
+        plt.close(fig)
 
 
 def cmd_sample(args: argparse.Namespace) -> int:
@@ -383,12 +421,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0,
                    help="seed for breaking MAP ties and for sampling (default: %(default)s)")
     p.add_argument("--method", default="auto",
-                   choices=["auto", "table", "contraction", "lbp", "lw"],
-                   help="auto: the cheapest exact method; table, contraction: exact; lbp: loopy "
-                   "belief propagation; lw: likelihood weighting, with standard errors "
+                   choices=["auto", "table", "contraction", "gaussian", "lbp", "lw", "grid"],
+                   help="auto: the cheapest exact method (with unknown real variables that are "
+                   "not linear-Gaussian: grid); table, contraction, gaussian: exact; lbp: loopy "
+                   "belief propagation; lw: likelihood weighting, with standard errors; grid: "
+                   "unknown real variables on bins, with estimated errors "
                    "(default: %(default)s)")
     p.add_argument("--samples", type=int, default=10_000,
                    help="draws per evidence set for --method lw (default: %(default)s)")
+    p.add_argument("--bins", type=int, default=None,
+                   help="bins per unknown real variable for the grid method (default: 128; "
+                   "the answer uses twice as many and estimates its error from the change)")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="a question on real variables: draw each one's density to FILE "
+                   "(default: no plot)")
     p.add_argument("--limit", type=int, default=20,
                    help="rows shown for large tables (default: %(default)s)")
     p.add_argument("--json", action="store_true",

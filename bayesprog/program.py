@@ -28,6 +28,7 @@ from bayesprog.expressions import Expression, ExpressionError, Question, parse_e
 from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
 from bayesprog.inference import MapResult, Posterior
+from bayesprog.inference.density import Density
 from bayesprog.language.check import InputDecl, Term, check_document, question_problem
 from bayesprog.language.document import Document, FitRecord, validate_located
 from bayesprog.language.loader import Located, load_yaml
@@ -177,7 +178,8 @@ class Program:
         rng: Any = None,
         method: str | None = None,
         samples: int | None = None,
-    ) -> Posterior | MapResult:
+        bins: int | None = None,
+    ) -> Posterior | MapResult | Density:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
         Parameters
@@ -192,14 +194,20 @@ class Program:
         rng : for MAP ties and sampling: a seed, a ``numpy.random.Generator``, or one generator
             per batch row (then each row's choice is independent of the batching). ``None``
             means seed 0.
-        method : ``None`` (the cheapest exact method), ``"table"`` or ``"contraction"``
-            (exact), ``"lbp"`` (loopy belief propagation) or ``"lw"`` (likelihood weighting,
-            with ``stderr`` and ``ess`` on the answer).
+        method : ``None`` (the cheapest exact method; with unknown real variables that are
+            not linear-Gaussian, ``"grid"``), ``"table"``, ``"contraction"`` or
+            ``"gaussian"`` (exact), ``"lbp"`` (loopy belief propagation), ``"lw"``
+            (likelihood weighting, with ``stderr`` and ``ess`` on the answer) or ``"grid"``
+            (unknown real variables on bins, with an estimated ``error``).
         samples : draws per evidence row for ``method="lw"`` (default 10,000).
+        bins : bins per unknown real variable for ``method="grid"`` (default 128; the answer
+            is made with twice as many, and its error estimated from the difference).
 
         Returns
         -------
-        Posterior with ``probabilities[batch..., states...]``, or MapResult for MAP questions.
+        Posterior with ``probabilities[batch..., states...]``, MapResult for MAP questions,
+        or, for a question on real variables, a Density (``mean``, ``sd``, ``quantile``,
+        ``map``, ``pdf``).
         """
         q = self.question(question, kind)
         options: dict[str, Any] = {}
@@ -209,6 +217,10 @@ class Program:
                 raise ArgumentError(f"samples: expected an integer >= 1, found "
                                     f"{short_repr(samples)}")
             options["samples"] = int(samples)
+        if bins is not None:
+            if isinstance(bins, bool) or not isinstance(bins, numbers.Integral) or bins < 2:
+                raise ArgumentError(f"bins: expected an integer >= 2, found {short_repr(bins)}")
+            options["bins"] = int(bins)
         if method is not None and not isinstance(method, str):
             raise ArgumentError(f"method: expected a method's name, found {short_repr(method)}")
         if q.kind in ("filter", "smooth", "sequence"):

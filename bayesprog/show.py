@@ -6,8 +6,9 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.forms import InputRef, ParamValue
+from bayesprog.forms import FormulaParam, InputRef, ParamValue
 from bayesprog.inference import MapResult, Posterior
+from bayesprog.inference.density import Density
 from bayesprog.language.check import Term
 from bayesprog.program import Program
 from bayesprog.variables import Continuous, Discrete, Variable
@@ -35,10 +36,16 @@ def _domain(var: Variable) -> str:
     return f"field over {var.index}: one real in {support} per state"
 
 
-def _param(program: Program, value: ParamValue | InputRef) -> str:
+def _param(program: Program, value: ParamValue | InputRef | FormulaParam) -> str:
     if isinstance(value, InputRef):
         decl = program.inputs[value.name]
         return f"input {value.name} {list(decl.axes) + list(decl.event)}"
+    if isinstance(value, FormulaParam):
+        if len(value.axes) == 1:
+            states = program.variables[value.axes[0]].states  # type: ignore[union-attr]
+            return "{" + ", ".join(f"{s}: \"{f}\"" for s, f in zip(states, value.formulas,
+                                                                strict=True)) + "}"
+        return str(value)
     arr = np.asarray(value.array)
     if not value.axes:
         return _fmt(float(arr)) if arr.ndim == 0 else _array(arr)
@@ -107,8 +114,37 @@ def render(program: Program) -> str:
     return "\n".join(lines)
 
 
-def format_result(result: Posterior | MapResult, limit: int = 20) -> str:
+def format_density(result: Density) -> str:
+    """Mean, sd, quantiles and MAP of each searched real variable (one block per batch row)."""
+    how = {"gaussian": "exact, Gaussian algebra",
+           "grid": "on a grid of " + ", ".join(f"{n} bins for {v}"
+                                               for v, n in result.resolution.items())}
+    out = [f"{result.question}" + _ablated(result.ablated)
+           + (f"   ({how.get(result.method, result.method)})" if result.method else "")]
+    summary = result.summary()
+    for pos in np.ndindex(*result.batch_shape):
+        if pos:
+            out.append(f"  batch row [{', '.join(map(str, pos))}]")
+        for v, s in summary.items():
+            def num(x: np.ndarray, stat: str | None = None, v: str = v,
+                    pos: tuple[int, ...] = pos) -> str:
+                text = f"{float(np.asarray(x)[pos]):.6g}"
+                if stat and result.error:
+                    text += f" (+- {float(np.asarray(result.error[stat][v])[pos]):.2g})"
+                return text
+            quantiles = "  ".join(f"{q:g}: {num(x)}" for q, x in s["quantiles"].items())
+            out.append(f"  {v}: mean {num(s['mean'], 'mean')}   sd {num(s['sd'], 'sd')}   "
+                       f"MAP {num(s['map'], 'map')}")
+            out.append(f"     quantiles  {quantiles}"
+                       + (f"   (+- {float(np.asarray(result.error['quantiles'][v])[pos]):.2g})"
+                          if result.error else ""))
+    return "\n".join(out)
+
+
+def format_result(result: Posterior | MapResult | Density, limit: int = 20) -> str:
     """A readable table (one block per batch row when batched)."""
+    if isinstance(result, Density):
+        return format_density(result)
     if isinstance(result, MapResult):
         rows = np.ndindex(*result.indices.shape[:-1])
         out = [f"MAP of {result.question}" + _ablated(result.ablated)]

@@ -10,7 +10,9 @@ import numpy as np
 
 @dataclass(frozen=True, eq=False)
 class Discrete:
-    """A discrete variable. ``coords`` (one row per state) is set for grids, ``values`` for ranges."""
+    """A discrete variable. ``coords`` (one row per state) is set for grids, ``values`` for
+    ranges (the integers) and for discretised continuous variables (``kind="bins"``: the bins'
+    midpoints, with their ``edges``)."""
 
     name: str
     states: tuple[str, ...]
@@ -20,6 +22,9 @@ class Discrete:
     cell: float | None = None
     description: str = ""
     kind: str = "states"
+    #: bin edges of a discretised continuous variable (``card + 1``), and its support
+    edges: np.ndarray | None = None
+    support: tuple[float, float] | None = None
 
     @property
     def card(self) -> int:
@@ -33,6 +38,8 @@ class Discrete:
         if cache is None:
             if self.kind == "range" and self.values is not None:
                 cache = tuple(int(v) for v in self.values)
+            elif self.kind == "bins" and self.values is not None:
+                cache = tuple(float(v) for v in self.values)
             elif self.kind == "grid":
                 cache = tuple(tuple(int(i) for i in s.split("_")) for s in self.states)
             else:
@@ -51,6 +58,8 @@ class Discrete:
         >>> g.index_of("1_2"), g.index_of(5), g.index_of("5")
         (5, 5, 5)
         """
+        if self.edges is not None and not isinstance(value, (bool, np.bool_)):
+            return self._bin_of(value)
         if isinstance(value, (str, np.str_)):
             text = str(value).strip()
             if text in self._lookup:
@@ -70,6 +79,21 @@ class Discrete:
                 return int(value)
             raise KeyError(value)
         raise KeyError(value)
+
+    def _bin_of(self, value: object) -> int:
+        """The bin of a number (a bin's name is also accepted) within the support."""
+        assert self.edges is not None and self.support is not None
+        if isinstance(value, (str, np.str_)) and str(value).strip() in self._lookup:
+            return self._lookup[str(value).strip()]
+        try:
+            x = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise KeyError(value) from None
+        low, high = self.support
+        if not low <= x <= high:
+            raise KeyError(value)
+        inner = self.edges[1:-1]
+        return int(np.searchsorted(inner, x, side="right"))
 
     def describe_states(self, limit: int = 6) -> str:
         shown = ", ".join(self.states[:limit])
@@ -148,3 +172,23 @@ def grid_variable(
         description=description,
         kind="grid",
     )
+
+
+def binned_variable(name: str, edges: np.ndarray, support: tuple[float, float],
+                    description: str = "") -> Discrete:
+    """A continuous variable answered on bins: one state per interval ``[e_i, e_i+1)``, its
+    value the interval's midpoint; the first and last bins also take the tails of the support.
+
+    >>> x = binned_variable("X", np.array([0.0, 1.0, 3.0]), (0.0, 3.0))
+    >>> x.states, x.typed_states, x.index_of(2.5), x.index_of("1.0")
+    (('[0, 1)', '[1, 3]'), (0.5, 2.0), 1, 1)
+    """
+    edges = np.asarray(edges, float)
+    states = tuple(f"[{_number(a)}, {_number(b)}{']' if i == len(edges) - 2 else ')'}"
+                   for i, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True)))
+    return Discrete(name, states, values=(edges[:-1] + edges[1:]) / 2, description=description,
+                    kind="bins", edges=edges, support=(float(support[0]), float(support[1])))
+
+
+def _number(x: float) -> str:
+    return f"{x:.6g}"

@@ -17,7 +17,7 @@ PACKAGE = Path(__file__).parents[1] / "bayesprog"
 
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
-    {"errors", "variables", "expressions", "files", "rich", "limits"},
+    {"errors", "variables", "expressions", "formula", "files", "rich", "limits"},
     {"forms"},
     {"language"},
     {"inference"},

@@ -24,6 +24,37 @@ class InputRef:
     name: str
 
 
+@dataclass(frozen=True, eq=False)
+class FormulaParam:
+    """A parameter written as arithmetic of the term's parents (``mean: "2*X + 1"``): one
+    formula per cell of a table keyed by discrete parents (``axes``; none for one formula).
+
+    The formulas' variables are continuous parents (their values come from the evidence, or
+    the Gaussian method treats them as unknowns) and numeric discrete parents (a range's
+    integers, a discretised variable's bin midpoints)."""
+
+    axes: tuple[str, ...]
+    #: object array of :class:`~bayesprog.formula.Formula`, one axis per entry of ``axes``
+    formulas: np.ndarray
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        seen: dict[str, None] = {}
+        for f in self.formulas.flat:
+            seen.update(dict.fromkeys(f.names))
+        return tuple(seen)
+
+    def __str__(self) -> str:
+        if not self.axes:
+            return f'"{self.formulas.flat[0]}"'
+        return "{" + ", ".join(f'"{f}"' for f in self.formulas.flat) + "}"
+
+
+def is_binned(var: Any) -> bool:
+    """A continuous variable answered on bins (``discretise:``)."""
+    return getattr(var, "kind", None) == "bins"
+
+
 @dataclass(frozen=True)
 class Constraint:
     """A constraint on parameter values; ``ok`` tests an array (events on the trailing axis)."""
@@ -132,7 +163,7 @@ class Form:
 
     def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
         """Problems with the variables this term joins (messages without location)."""
-        kind = "discrete" if child.is_discrete else "continuous"
+        kind = "discrete" if child.is_discrete and not is_binned(child) else "continuous"
         if kind not in self.child_kinds:
             wanted = " or ".join(self.child_kinds)
             return [f"form {self.name!r} needs a {wanted} child, found {kind} {child.name!r}"]
@@ -158,6 +189,12 @@ class Form:
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         """Log values with shape ``[batch or 1] + [card or 1 for each of ctx.axes]``."""
         raise NotImplementedError
+
+    def cdf(self, ctx: TermContext) -> np.ndarray | None:
+        """``P(X <= x | parents)`` at ``ctx.child_value()``, shaped like :meth:`log_factor`,
+        for a continuous child; None when the form has no closed-form CDF. A discretised
+        child's bins take the differences of the CDF at their edges."""
+        return None
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The standard parametric forms: table, categorical, uniform, normal, beta, gmm."""
+"""The standard parametric forms: table, categorical, uniform, normal, beta, gmm, dirac."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.special import betaincinv, betaln, ndtri, xlog1py, xlogy
+from scipy.special import betainc, betaincinv, betaln, ndtr, ndtri, xlog1py, xlogy
 
 from bayesprog.forms.base import (
     Form,
@@ -85,6 +85,12 @@ class Uniform(Form):
             value = -np.log(child.width) if np.isfinite(child.width) else 0.0
         return np.full((1,) + (1,) * len(ctx.axes), value)
 
+    def cdf(self, ctx: TermContext) -> np.ndarray | None:
+        low, high = _support(ctx.child)
+        if not (np.isfinite(low) and np.isfinite(high)):
+            return None  # improper: no distribution to integrate
+        return np.clip((ctx.child_value() - low) / (high - low), 0.0, 1.0)
+
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
         assert isinstance(child, Continuous)
@@ -109,6 +115,9 @@ class Normal(Form):
         z = (x - mu) / sigma
         return -0.5 * z * z - np.log(sigma) - 0.5 * _LOG_2PI
 
+    def cdf(self, ctx: TermContext) -> np.ndarray:
+        return ndtr((ctx.child_value() - ctx.param("mean")) / ctx.param("sigma"))
+
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
         return params["mean"] + params["sigma"] * ndtri(u[..., 0])
@@ -127,11 +136,10 @@ class Beta(Form):
 
     def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
         problems = super().check(child, parents)
-        if not problems and (child.low < 0 or child.high > 1):  # type: ignore[union-attr]
-            problems.append(
-                f"form 'beta' needs a support inside [0, 1], found "
-                f"[{child.low}, {child.high}] for {child.name!r}"  # type: ignore[union-attr]
-            )
+        low, high = _support(child)
+        if not problems and (low < 0 or high > 1):
+            problems.append(f"form 'beta' needs a support inside [0, 1], found "
+                            f"[{low}, {high}] for {child.name!r}")
         return problems
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
@@ -139,6 +147,9 @@ class Beta(Form):
         with np.errstate(divide="ignore", invalid="ignore"):
             out = xlogy(a - 1, x) + xlog1py(b - 1, -x) - betaln(a, b)
         return np.where((x < 0) | (x > 1), -np.inf, out)
+
+    def cdf(self, ctx: TermContext) -> np.ndarray:
+        return betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
@@ -306,3 +317,32 @@ class GaussianMixture(Form):
             value = np.where(in_floor, child.low + u[..., 1] * child.width, value)
         return value
 
+
+
+@register_form
+class Dirac(Form):
+    """A deterministic term: ``X = value`` exactly, ``value`` usually a formula of the parents
+    (``value: "sqrt(X**2 + Y**2)"``). The variable is known once its parents are: it is not
+    given as evidence (a noisy sensor of it is)."""
+
+    name = "dirac"
+    child_kinds = ("continuous",)
+    params = (Param("value", real, doc="the value, a number or a formula of the parents"),)
+
+    def log_factor(self, ctx: TermContext) -> np.ndarray:
+        raise ValueError(f"{ctx.child.name} is deterministic (form dirac): give evidence on "
+                         "its parents, or on a noisy sensor of it, not on it")
+
+    def cdf(self, ctx: TermContext) -> np.ndarray:
+        return (ctx.child_value() >= ctx.param("value")).astype(float)
+
+    def sample(self, params: Mapping[str, np.ndarray], child: Variable,
+               u: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(params["value"], u.shape[:-1]).astype(float)
+
+
+def _support(var: Variable) -> tuple[float, float]:
+    """The support of a continuous variable, or of a discretised one."""
+    if isinstance(var, Discrete):
+        return var.support if var.support is not None else (-np.inf, np.inf)
+    return var.low, var.high

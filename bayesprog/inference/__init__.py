@@ -22,7 +22,8 @@ from bayesprog.expressions import Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.core import InferenceCache
-from bayesprog.inference.cost import ranked
+from bayesprog.inference.cost import ranked, unanswerable
+from bayesprog.inference.density import Density
 from bayesprog.inference.methods import (
     Cost,
     Method,
@@ -42,9 +43,10 @@ __all__ = [
 
 def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                       method: str | None = None,
-                      options: Mapping[str, Any] | None = None) -> Posterior:
-    """The posterior of ``question`` for bound evidence: by ``method`` when it is named, else
-    by the cheapest exact method that answers."""
+                      options: Mapping[str, Any] | None = None) -> Posterior | Density:
+    """The posterior of ``question`` for bound evidence (a density when it searches real
+    variables): by ``method`` when it is named, else by the cheapest exact method that answers
+    (or, when none does, the cheapest approximate one that states its error)."""
     plan = QuestionPlan(program, question, bound, dict(options or {}))
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
@@ -56,7 +58,10 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     rankings = program.inference_cache.rankings
     found = rankings.get(key)
     if found is None:
-        found = rankings[key] = (bound.size, ranked(plan))
+        methods = ranked(plan)
+        if not methods:
+            raise QuestionError(unanswerable(plan))
+        found = rankings[key] = (bound.size, methods)
     ranked_size, methods = found
     cap = limit("entries")
     fitting = [(m, c) for m, c in methods if c.memory / ranked_size * bound.size <= cap]
@@ -76,7 +81,7 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 
 
-def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior:
+def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior | Density:
     """The answer of the method ``name``, which the question asks for (its estimate kept per
     layout of question, like a ranking)."""
     methods = registered_methods()
@@ -87,13 +92,17 @@ def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior:
     options = tuple(sorted((k, v) for k, v in plan.options.items() if k != "rng"))
     found = estimates.get((name, options, *key))
     if found is None:
-        found = estimates[(name, options, *key)] = (plan.bound.size, method.estimate(plan))
+        cost = None if plan.latent and not method.continuous else method.estimate(plan)
+        found = estimates[(name, options, *key)] = (plan.bound.size, cost)
     size, cost = found
     if cost is not None:
         cost = Cost(cost.operations / size * plan.bound.size, cost.memory / size * plan.bound.size)
     if cost is None:
-        raise QuestionError(f"method {name!r} does not answer {plan.question.expression} "
-                            f"(see the methods in the language reference)")
+        why = method.why_not(plan) or (f"{', '.join(plan.latent)} unknown and continuous"
+                                       if plan.latent and not method.continuous else None)
+        raise QuestionError(f"method {name!r} does not answer {plan.question.expression}"
+                            + (f": {why}" if why else " (see the methods in the language "
+                               "reference)"))
     check_size(cost.memory, f"{plan.question.expression} (by {name})")
     answer = method.posterior(plan)
     if answer is None:
@@ -113,10 +122,13 @@ def ask(
     rng: Any = None,
     method: str | None = None,
     options: Mapping[str, Any] | None = None,
-) -> Posterior | MapResult:
+) -> Posterior | MapResult | Density:
     """Answer ``question`` (posterior or MAP, by its kind) for batched evidence."""
     bound = bind(program, question, evidence, inputs, soft)
     posterior = compute_posterior(program, question, bound, method, dict(options or {}, rng=rng))
+    if isinstance(posterior, Density):  # its MAP is among its summaries
+        check_zero(posterior)
+        return posterior
     if question.kind == "map":
         return choose_map(posterior, str(question.expression), 0 if rng is None else rng,
                           program.ablated)

@@ -14,6 +14,7 @@ import numpy as np
 
 from bayesprog import rich
 from bayesprog.errors import ArgumentError, QuestionError, ZeroEvidenceError, short_repr
+from bayesprog.inference.density import Density
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
 TIE_RTOL = 1e-12
@@ -186,7 +187,7 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     )
 
 
-def zero_rows_message(posterior: Posterior) -> str:
+def zero_rows_message(posterior: Posterior | Density) -> str:
     zero = np.argwhere(~(posterior.log_evidence > -np.inf))
     where = ", ".join(str(tuple(int(i) for i in row)) for row in zero[:5]) if posterior.batch_shape else ""
     return (f"the evidence has probability zero under the program for {posterior.question}"
@@ -194,6 +195,6 @@ def zero_rows_message(posterior: Posterior) -> str:
             + ": no posterior exists; check the evidence or use a MAP question")
 
 
-def check_zero(posterior: Posterior) -> None:
+def check_zero(posterior: Posterior | Density) -> None:
     if np.any(posterior.log_evidence == -np.inf):  # NaN: a method that estimates no evidence
         raise ZeroEvidenceError(zero_rows_message(posterior))

@@ -128,6 +128,14 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
     if isinstance(value, str) and value in var._lookup:  # one state by name: the common case
         return np.asarray(var._lookup[value], dtype=np.intp)
     arr = np.asarray(value)
+    if var.edges is not None and arr.dtype.kind in "iuf":  # a discretised variable: a reading
+        assert var.support is not None
+        low, high = var.support
+        outside = ~((arr >= low) & (arr <= high))
+        if np.any(outside):
+            raise QuestionError(f"evidence for {var.name}: {arr[outside].ravel()[0]} is outside "
+                                f"its support [{low}, {high}]")
+        return np.searchsorted(var.edges[1:-1], arr, side="right").astype(np.intp)
     if arr.dtype.kind in "iu":
         if var.values is not None:
             lookup = {int(v): i for i, v in enumerate(var.values)}

@@ -59,3 +59,5 @@ class InferenceCache:
     rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
     #: a named method's estimate for a layout of question, and the batch size it was made for
     estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
+    #: programs derived from this one for a method (its real variables on bins, ...)
+    derived: dict[Any, Any] = field(default_factory=dict)

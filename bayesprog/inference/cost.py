@@ -13,10 +13,23 @@ def ranked(plan: QuestionPlan, exact: bool = True) -> list[tuple[Method, Cost]]:
     ones only, unless ``exact`` is False)."""
     found = []
     for order, method in enumerate(registered_methods().values()):
-        if exact and not method.exact:
+        if (exact and not method.exact) or (plan.latent and not method.continuous):
             continue
         cost = method.estimate(plan)
         if cost is not None:
             found.append((cost.operations, cost.memory, order, method, cost))
     found.sort(key=lambda item: item[:3])
+    if exact and not found:
+        # no exact method: one that answers approximately and states its error
+        return [(m, c) for m, c in ranked(plan, exact=False) if m.fallback]
     return [(method, cost) for *_, method, cost in found]
+
+
+def unanswerable(plan: QuestionPlan) -> str:
+    """Why no method answers ``plan``: each method's own reason."""
+    reasons = [f"{m.name}: {why}" for m in registered_methods().values()
+               if (why := m.why_not(plan)) is not None]
+    unknown = ", ".join(plan.latent)
+    head = (f"{plan.question.expression}: no method answers with {unknown} unknown"
+            if plan.latent else f"no method answers {plan.question.expression}")
+    return head + ("; " + "; ".join(reasons) if reasons else "")

@@ -7,9 +7,10 @@ import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.expressions import Question
-from bayesprog.forms import InputRef, ParamValue, TermContext
+from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_binned
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
+from bayesprog.inference.formulas import bins_log_factor, formula_value
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
 from bayesprog.variables import Continuous, discrete
@@ -30,12 +31,14 @@ def relevant_terms(program: ProgramLike, question: Question, bound: Bound) -> li
     keep = set(targets)
     for name in targets:
         keep |= program.ancestors(name)
-    for name in keep:
-        var = program.variables[name]
-        if not var.is_discrete and name not in bound.continuous:
-            raise QuestionError(f"continuous variable {name!r} is neither known nor barren in "
-                                f"{question.expression}: give it as evidence")
     return [t for t in terms if t.child.name in keep]
+
+
+def latent_continuous(program: ProgramLike, terms: list[Term], bound: Bound) -> list[str]:
+    """The continuous variables of ``terms`` that the question neither knows nor sums out by
+    itself (searched, or parents of a relevant term): the discrete methods cannot answer."""
+    return [t.child.name for t in terms
+            if not t.child.is_discrete and t.child.name not in bound.continuous]
 
 
 def is_static(term: Term) -> bool:
@@ -43,7 +46,9 @@ def is_static(term: Term) -> bool:
     return (
         term.child.is_discrete
         and term.form.name != "program"
-        and not any(isinstance(v, InputRef) for v in term.params.values())
+        and not any(isinstance(v, InputRef) or (isinstance(v, FormulaParam) and any(
+            not term_var.is_discrete for term_var in term.parents if term_var.name in v.names))
+            for v in term.params.values())
     )
 
 
@@ -96,8 +101,12 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
             return cached
     params: dict[str, ParamValue] = {}
     for key, param in term.params.items():
-        params[key] = _bound_param(term, key, param, bound) if isinstance(param, InputRef) \
-            else param
+        if isinstance(param, InputRef):
+            params[key] = _bound_param(term, key, param, bound)
+        elif isinstance(param, FormulaParam):
+            params[key] = formula_value(program.variables, param, bound, f"term {term.label}")
+        else:
+            params[key] = param
     observed = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
     value, missing = observed_part(term, observed)
     axes = term.axes
@@ -107,7 +116,10 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
     try:
         # a value far out in a tail overflows to a log density of -inf: its exact limit
         with np.errstate(over="ignore"):
-            log = np.asarray(term.form.log_factor(ctx), dtype=float)
+            if is_binned(term.child) and "continuous" in term.form.child_kinds:
+                log = np.asarray(bins_log_factor(term.form, ctx), dtype=float)
+            else:
+                log = np.asarray(term.form.log_factor(ctx), dtype=float)
         full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None

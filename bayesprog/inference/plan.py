@@ -12,7 +12,7 @@ import opt_einsum
 
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
-from bayesprog.inference.factors import relevant_terms
+from bayesprog.inference.factors import latent_continuous, relevant_terms
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
 
@@ -33,6 +33,12 @@ class QuestionPlan:
     def terms(self) -> list[Term]:
         """The relevant terms: ancestors of searched, observed and soft-evidence variables."""
         return relevant_terms(self.program, self.question, self.bound)
+
+    @cached_property
+    def latent(self) -> list[str]:
+        """The unknown continuous variables that matter (searched, or parents of a relevant
+        term): only the methods for continuous variables answer when there are some."""
+        return latent_continuous(self.program, self.terms, self.bound)
 
     def card(self, name: str) -> int:
         return int(self.program.variables[name].card)  # type: ignore[union-attr]

@@ -23,10 +23,11 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import ParamValue
+from bayesprog.forms import FormulaParam, ParamValue
 from bayesprog.inference.answers import generator_of, seed_of
 from bayesprog.inference.binding import Bound
-from bayesprog.inference.factors import _bound_param, term_factor
+from bayesprog.inference.factors import Factor, _bound_param, term_factor
+from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
 from bayesprog.limits import check_size
@@ -125,16 +126,26 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
     for term in _order(program, terms):
         child = term.child
         name = child.name
+        drawn = _drawn_parents(term, bound)
         if term.soft or name in bound.discrete or name in bound.continuous:
-            factor = term_factor(program, term, bound if not child.is_discrete or term.soft
-                                 else inputs_only)
-            log_w = log_w + _gather(factor.log, factor.batched, factor.axes, values, rows, n)
+            given = bound if not child.is_discrete or term.soft else inputs_only
+            if drawn:
+                factor = term_factor(program, term, _per_draw(given, values, drawn, rows, n))
+                log_w = log_w + _gather_draws(factor, values, rows, n)
+            else:
+                factor = term_factor(program, term, given)
+                log_w = log_w + _gather(factor.log, factor.batched, factor.axes, values, rows, n)
             continue
         if isinstance(child, Discrete):
-            factor = term_factor(program, term, inputs_only)
             check_size(float(rows) * n * child.card, f"drawing {name} ({child.card:,} states) "
                        f"{n:,} times")
-            row = _gather(factor.log, factor.batched, factor.axes, values, rows, n, keep=name)
+            if drawn:
+                factor = term_factor(program, term, _per_draw(inputs_only, values, drawn, rows, n))
+                row = _gather_draws(factor, values, rows, n, keep=name)
+            else:
+                factor = term_factor(program, term, inputs_only)
+                row = _gather(factor.log, factor.batched, factor.axes, values, rows, n,
+                              keep=name)
             total = logsumexp(row, axis=-1)
             if not np.all(np.isfinite(total)):
                 raise QuestionError(f"term {term.label} gives no state of {name} a positive "
@@ -152,11 +163,20 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
                                 "be sampled: give it as evidence")
         params = {}
         for key, param in term.params.items():
-            value = _bound_param(term, key, param, bound) if not isinstance(param, ParamValue) \
-                else param
             declared = {p.name: p for p in term.form.params}.get(key)
             event = term.form.event_ndim(declared, child) if declared else 0
-            arr = value.aligned(term.axes, event)
+            if isinstance(param, FormulaParam):
+                flat = _per_draw(bound, values, drawn, rows, n) if drawn else bound
+                value = formula_value(program.variables, param, flat, f"term {term.label}")
+                arr = value.aligned(term.axes, event)
+                if value.batched and drawn:  # one row per draw
+                    params[key] = _gather_param(arr.reshape((rows, n) + arr.shape[1:]), True,
+                                                term.axes, values, rows, n, event, per_draw=True)
+                    continue
+            else:
+                value = param if isinstance(param, ParamValue) else _bound_param(
+                    term, key, param, bound)
+                arr = value.aligned(term.axes, event)
             params[key] = _gather_param(arr, value.batched, term.axes, values, rows, n, event)
         values[name] = term.form.sample(params, child, _uniforms(gens, n, 2))
     for name, pv in bound.soft.items():  # soft evidence given with the question
@@ -165,13 +185,61 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
     return Draws(values, log_w)
 
 
+def _drawn_parents(term: Term, bound: Bound) -> tuple[str, ...]:
+    """The real variables that a formula of ``term`` names and that are drawn, not known."""
+    names: dict[str, None] = {}
+    for param in term.params.values():
+        if isinstance(param, FormulaParam):
+            names.update({n: None for n in param.names
+                          if not _is_discrete(term, n) and n not in bound.continuous})
+    return tuple(names)
+
+
+def _is_discrete(term: Term, name: str) -> bool:
+    return any(p.name == name and p.is_discrete for p in term.parents)
+
+
+def _per_draw(bound: Bound, values: dict[str, np.ndarray], drawn: tuple[str, ...], rows: int,
+              n: int) -> Bound:
+    """``bound`` with one batch row per draw (``rows * n``), the drawn real variables of
+    ``drawn`` given as evidence: a term whose formulas name them is evaluated draw by draw."""
+    def spread(pv: ParamValue) -> ParamValue:
+        return ParamValue(pv.axes, np.repeat(pv.array, n, axis=0), True) if pv.batched else pv
+
+    continuous = {k: spread(v) for k, v in bound.continuous.items()}
+    continuous |= {k: ParamValue((), np.asarray(values[k], float).reshape(-1), True)
+                   for k in drawn}
+    return Bound((rows * n,), continuous=continuous,
+                 inputs={k: spread(v) for k, v in bound.inputs.items()})
+
+
+def _gather_draws(factor: Factor, values: dict[str, np.ndarray], rows: int, n: int,
+                  keep: str | None = None) -> np.ndarray:
+    """A factor with one batch row per draw (from :func:`_per_draw`) at each draw's states of
+    its axes -> ``[rows, n]`` (``[rows, n, card]`` with the axis ``keep`` left whole)."""
+    log = factor.log if factor.batched else factor.log[np.newaxis]
+    log = np.broadcast_to(log, (rows * n,) + log.shape[1:]).reshape((rows, n) + log.shape[1:])
+    index: list[Any] = [np.arange(rows)[:, None], np.arange(n)[None, :]]
+    for a in factor.axes:
+        index.append(slice(None) if a == keep else values[a])
+    if keep is not None:
+        log = np.moveaxis(log, 2 + factor.axes.index(keep), -1)
+        index = [i for i in index if not isinstance(i, slice)]
+    return np.asarray(log[tuple(index)])
+
+
 def _gather_param(arr: np.ndarray, batched: bool, axes: tuple[str, ...],
-                  values: dict[str, np.ndarray], rows: int, n: int, event: int) -> np.ndarray:
+                  values: dict[str, np.ndarray], rows: int, n: int, event: int,
+                  per_draw: bool = False) -> np.ndarray:
     """A parameter aligned to ``axes`` (``[b or 1] + [card or 1] + event``) at each draw's
-    parent states -> ``[rows, n] + event``."""
+    parent states -> ``[rows, n] + event``; with ``per_draw``, ``arr`` has the two leading
+    axes ``[rows, n]`` instead of the batch axis."""
     index: list[Any] = [np.arange(rows)[:, None] if batched else np.zeros((1, 1), np.intp)]
+    if per_draw:
+        index.append(np.arange(n)[None, :])
+    lead = 2 if per_draw else 1
     for i, a in enumerate(axes):
-        size = arr.shape[1 + i]
+        size = arr.shape[lead + i]
         index.append(values[a] if size > 1 else np.zeros((1, 1), np.intp))
     out = arr[tuple(index)]
     return np.broadcast_to(out, (rows, n) + out.shape[2:])

@@ -15,14 +15,23 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from bayesprog.errors import Diagnostic
+from bayesprog.errors import Diagnostic, short_repr
 from bayesprog.expressions import Expression, ExpressionError, parse_expression
-from bayesprog.forms import Form, InputRef, Param, ParamValue, available_forms, get_form
-from bayesprog.forms.base import nonnegative
+from bayesprog.forms import (
+    Form,
+    FormulaParam,
+    InputRef,
+    Param,
+    ParamValue,
+    available_forms,
+    get_form,
+)
+from bayesprog.forms.base import nonnegative, real
+from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.document import Document, InputSpec, LearnSpec
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
-from bayesprog.variables import Continuous, Discrete, Variable, grid_variable
+from bayesprog.variables import Continuous, Discrete, Variable, binned_variable, grid_variable
 
 
 @dataclass(frozen=True)
@@ -58,7 +67,7 @@ class Term:
     child: Variable
     parents: tuple[Variable, ...]
     form: Form
-    params: dict[str, ParamValue | InputRef]
+    params: dict[str, ParamValue | InputRef | FormulaParam]
     position: tuple[str, int, int] = ("<python>", 0, 0)
     soft: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
@@ -103,6 +112,9 @@ def build_variable(name: str, spec: Any) -> Variable:
         g = spec.grid
         return grid_variable(name, tuple(g.shape), g.cell, g.origin, spec.description)
     low, high = spec.continuous
+    if spec.discretise is not None:
+        return binned_variable(name, np.asarray(spec.discretise.edges(spec.continuous)),
+                               (low, high), spec.description)
     return Continuous(name, float(low), float(high), spec.indexed_by, spec.description)
 
 
@@ -314,9 +326,9 @@ class _Checker:
             self.error(path + ("form",), f"term {expr}: {message}")
             ok = False
         for parent in parents:
-            if not parent.is_discrete:
-                self.error(tpath, f"term {expr}: parent {parent.name!r} is continuous; "
-                           "expected discrete parents (continuous variables are leaves)")
+            if isinstance(parent, Continuous) and parent.index is not None:
+                self.error(tpath, f"term {expr}: parent {parent.name!r} is a field (one value "
+                           f"per state of {parent.index}); expected a discrete or a real parent")
                 ok = False
         if isinstance(child, Continuous) and child.index is not None and child.index not in expr.right:
             self.error(tpath, f"term {expr}: {child.name!r} is a field indexed by "
@@ -330,6 +342,17 @@ class _Checker:
             problems = resolve(term, raw, self, path)
         else:
             problems = self.resolve_params(term, raw, path)
+        if not problems:
+            used = {n for v in term.params.values() if isinstance(v, FormulaParam)
+                    for n in v.names}
+            for parent in parents:
+                if not parent.is_discrete and parent.name not in used:
+                    hint = ("; a discrete child of a real variable needs it discretised "
+                            "(discretise: {bins: ...})" if child.is_discrete else "")
+                    self.error(tpath, f"term {expr}: parent {parent.name!r} is real-valued; "
+                               f"expected a parameter that uses it, as a formula (for instance "
+                               f"mean: \"2*{parent.name} + 1\"){hint}")
+                    problems += 1
         return None if problems else term
 
     def resolve_params(self, term: Term, raw: dict[str, Any], path: YPath) -> int:
@@ -360,13 +383,15 @@ class _Checker:
     # parameter values ---------------------------------------------------------------------------
     def param_value(
         self, term: Term, param: Param, raw: Any, path: YPath
-    ) -> ParamValue | InputRef | None:
+    ) -> ParamValue | InputRef | FormulaParam | None:
         form, child = term.form, term.child
         event_ndim = form.event_ndim(param, child)
         keyable = form.keyable(child, term.parents)
         what = f"term {term.label}: {form.name} parameter {param.name!r}"
         if isinstance(raw, dict) and set(raw) == {"input"}:
             return self.input_ref(term, param, raw["input"], path, event_ndim, keyable, what)
+        if _has_text(raw) and event_ndim == 0:
+            return self.formula_param(term, param, raw, path, keyable, what)
         spec = _LiteralSpec(param, child, event_ndim, form.event_shape(param, child), what)
         try:
             axes, array = self._literal(raw, spec, keyable, path)
@@ -374,6 +399,65 @@ class _Checker:
             self.error(exc.path, exc.message)
             return None
         return ParamValue(axes, array)
+
+    def formula_param(self, term: Term, param: Param, raw: Any, path: YPath, keyable: list,
+                      what: str) -> FormulaParam | ParamValue | None:
+        """A parameter given as formulas of the parents (``mean: "2*X + 1"``), possibly one per
+        state of discrete parents (``mean: {a: "X", b: "-X"}``); numbers are formulas too."""
+        formulas: list[Formula] = []
+        parents = {p.name: p for p in term.parents}
+        failed = False
+
+        def leaf(value: Any, where: YPath) -> Any:
+            nonlocal failed
+            if isinstance(value, dict):
+                return {k: leaf(v, where + (k,)) for k, v in value.items()}
+            if isinstance(value, list):
+                return [leaf(v, where + (i,)) for i, v in enumerate(value)]
+            if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+                self.error(where, f"{what}: expected a number or a formula, found "
+                           f"{short_repr(value)}")
+                failed = True
+                return 0.0
+            try:
+                formula = parse_formula(str(value), names=list(parents))
+            except FormulaError as exc:
+                self.error(where, f"{what}: {exc}")
+                failed = True
+                return 0.0
+            for name in formula.names:
+                var = parents[name]
+                if isinstance(var, Discrete) and var.kind not in ("range", "bins"):
+                    self.error(where, f"{what}: formula {str(value)!r} uses {name}, whose "
+                               f"states are not numbers; expected real parents, integer "
+                               f"ranges or discretised variables (key a table by {name}'s "
+                               "states instead)")
+                    failed = True
+            if formula.is_constant and not failed:
+                number = np.asarray(formula.evaluate({}), float)
+                if not param.constraint.ok(number):
+                    self.error(where, f"{what} must be {param.constraint}, got "
+                               f"{float(number):g}")
+                    failed = True
+            formulas.append(formula)
+            return float(len(formulas) - 1)
+
+        indices = leaf(raw, path)
+        if failed:
+            return None
+        spec = _LiteralSpec(Param(param.name, real), term.child, 0, None, what)
+        try:
+            axes, array = self._literal(indices, spec, keyable, path)
+        except _LiteralError as exc:
+            self.error(exc.path, exc.message)
+            return None
+        table = np.empty(array.shape, dtype=object)
+        for index in np.ndindex(*array.shape):
+            table[index] = formulas[int(array[index])]
+        if all(f.is_constant for f in formulas):  # numbers only, written as text
+            return ParamValue(axes, np.vectorize(lambda f: float(f.evaluate({})),
+                                                 otypes=[float])(table))
+        return FormulaParam(axes, table)
 
     def input_ref(self, term: Term, param: Param, name: Any, path: YPath, event_ndim: int,
                   keyable: list, what: str) -> InputRef | None:
@@ -563,10 +647,15 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
         if name not in variables:
             return (f"undeclared variable {name!r} in {expr} "
                     f"(declared: {', '.join(variables)})")
+    kinds = {variables[name].is_discrete for name in expr.left}
+    if len(kinds) > 1:
+        return (f"{expr} searches discrete and real variables together; expected one kind "
+                "(ask one question for each)")
     for name in expr.left:
-        if not variables[name].is_discrete:
-            return (f"cannot search continuous variable {name!r}: questions search discrete "
-                    "variables (continuous ones are known or summed out)")
+        var = variables[name]
+        if isinstance(var, Continuous) and var.index is not None:
+            return (f"cannot search the field {name!r} (one value per state of {var.index}): "
+                    "fields are known or summed out")
     for name, text in expr.values.items():
         var = variables[name]
         if isinstance(var, Discrete):
@@ -583,6 +672,17 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
             if not var.low <= value <= var.high:
                 return (f"{name}={value} is outside its support [{var.low}, {var.high}]")
     return None
+
+
+def _has_text(raw: Any) -> bool:
+    """Whether a parameter's value holds a string (a formula) anywhere."""
+    if isinstance(raw, str):
+        return True
+    if isinstance(raw, dict):
+        return any(_has_text(v) for v in raw.values())
+    if isinstance(raw, list):
+        return any(_has_text(v) for v in raw)
+    return False
 
 
 @dataclass(frozen=True)

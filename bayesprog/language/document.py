@@ -57,6 +57,42 @@ class GridSpec(_Strict):
         return self
 
 
+class DiscretiseSpec(_Strict):
+    """Bins of a discretised continuous variable: a number of equal bins over a bounded
+    support, or the bin edges (increasing; the outer bins also take the tails)."""
+
+    bins: int | list[float] = Field(description="a number of equal bins (>= 2) or the edges")
+
+    def check_support(self, support: list[float]) -> None:
+        low, high = support
+        if isinstance(self.bins, int):
+            if not 2 <= self.bins <= MAX_BINS:
+                raise ValueError(f"expected between 2 and {MAX_BINS:,} bins, found {self.bins}")
+            if not (math.isfinite(low) and math.isfinite(high)):
+                raise ValueError(f"equal bins need a bounded support, found [{low}, {high}]: "
+                                 "give the edges (bins: [e0, e1, ...])")
+            return
+        edges = self.bins
+        if not 3 <= len(edges) <= MAX_BINS + 1:
+            raise ValueError(f"expected between 3 and {MAX_BINS + 1:,} edges, found {len(edges)}")
+        if not all(math.isfinite(e) for e in edges) or any(
+                b <= a for a, b in zip(edges, edges[1:], strict=False)):
+            raise ValueError(f"expected finite, increasing bin edges, found {edges}")
+        if edges[0] < low or edges[-1] > high:
+            raise ValueError(f"expected edges inside the support [{low}, {high}], found "
+                             f"[{edges[0]}, {edges[-1]}]")
+
+    def edges(self, support: list[float]) -> list[float]:
+        if isinstance(self.bins, int):
+            low, high = support
+            return [low + (high - low) * i / self.bins for i in range(self.bins + 1)]
+        return list(self.bins)
+
+
+#: The most bins a discretised variable may have (a discrete variable of that many states).
+MAX_BINS = 100_000
+
+
 class VariableSpec(_Strict):
     """Exactly one of ``states``, ``range``, ``grid`` or ``continuous``."""
 
@@ -70,6 +106,10 @@ class VariableSpec(_Strict):
     )
     indexed_by: str | None = Field(
         None, description="a continuous field: one value per state of this discrete variable"
+    )
+    discretise: DiscretiseSpec | None = Field(
+        None, description="answer a continuous variable on bins (it may then have discrete "
+        "children): its term gives each bin the probability of the interval"
     )
     description: str = ""
 
@@ -95,6 +135,10 @@ class VariableSpec(_Strict):
             _check_states(self.range[1] - self.range[0] + 1, f"the range {self.range}")
         if self.continuous is not None and not self.continuous[0] < self.continuous[1]:
             raise ValueError(f"expected support [low, high] with low < high, got {self.continuous}")
+        if self.discretise is not None:
+            if self.continuous is None or self.indexed_by is not None:
+                raise ValueError("discretise is for a continuous variable (not a field)")
+            self.discretise.check_support(self.continuous)
         return self
 
 

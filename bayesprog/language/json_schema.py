@@ -9,9 +9,11 @@ from bayesprog.forms import available_forms, get_form
 from bayesprog.language.document import Document
 
 _PARAM_VALUE: dict[str, Any] = {
-    "description": "a number or list, a table keyed by parent states, or {input: NAME}",
+    "description": ("a number or list, a formula of the parents and inputs (\"2*X + 1\"), "
+                    "a table keyed by parent states, or {input: NAME}"),
     "anyOf": [
         {"type": "number"},
+        {"type": "string", "description": "a formula, for instance \"2*X + 1\""},
         {"type": "array"},
         {"type": "object"},
         {"type": "object", "properties": {"input": {"type": "string"}}, "required": ["input"]},

@@ -22,8 +22,10 @@ import networkx as nx
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import InputRef, ParamValue, TermContext
+from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_binned
+from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
+from bayesprog.inference.formulas import bins_log_factor, formula_value
 from bayesprog.language.check import LearnOptions, Term
 from bayesprog.language.document import FitRecord
 from bayesprog.learning.data import Data, DataError, load_data
@@ -170,6 +172,15 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
     for term in model:
         if term.learn is None or term.label in freeze or not term.form.params:
             continue
+        formulas = [k for k, v in term.params.items() if isinstance(v, FormulaParam)]
+        if formulas:
+            raise DataError(f"term {term.label}: its {formulas[0]!r} is a formula of its parents, "
+                            "whose coefficients are not learned from data: freeze the term "
+                            "(learn: false, or --freeze)")
+        if is_binned(term.child):
+            raise DataError(f"term {term.label}: {term.child.name} is discretised, and the "
+                            "parameters of its density are not learned from its bins: freeze "
+                            "the term (learn: false, or --freeze)")
         estimator = estimator_for(term)
         if estimator is None:
             raise DataError(f"term {term.label} (form {term.form.name}) cannot be learned from "
@@ -395,14 +406,38 @@ class _Em:
                 raise DataError(f"{self.data.source}: {exc}") from None
         axes = term.axes
         cards = tuple(self.variables[a].card for a in axes)  # type: ignore[union-attr]
+        formulas = {k: self._formula_on_rows(term, k, v, rows)
+                    for k, v in term.params.items() if isinstance(v, FormulaParam)}
         ctx = TermContext(term.child, term.parents, axes, cards,
-                          params, value, self.variables, term.extra)
+                          {**params, **formulas}, value, self.variables, term.extra)
         with np.errstate(divide="ignore", invalid="ignore"):
-            log = np.asarray(term.form.log_factor(ctx), float)
+            if is_binned(term.child):
+                log = np.asarray(bins_log_factor(term.form, ctx), float)
+            else:
+                log = np.asarray(term.form.log_factor(ctx), float)
         log = np.broadcast_to(log, np.broadcast_shapes(log.shape, (log.shape[0],) + cards))
         if missing is not None:
             log = np.where(missing.aligned(axes, 0), 0.0, log)
         return log
+
+    def _formula_on_rows(self, term: Term, key: str, param: FormulaParam,
+                         rows: np.ndarray) -> ParamValue:
+        """A frozen term's formula evaluated on the data rows: its real parents need a value
+        in every row (a missing one would have to be integrated out)."""
+        continuous = {}
+        for name in param.names:
+            if isinstance(self.variables[name], Discrete):
+                continue
+            column = self.data.continuous.get(name)
+            if column is None or np.isnan(column[rows]).any():
+                raise DataError(f"{self.data.source}: term {term.label} uses {name} in its "
+                                f"{key!r}, and {'no column' if column is None else 'some rows'}"
+                                f" of the data {'gives' if column is None else 'miss'} it: "
+                                "a real parent must be observed in every row to fit a program "
+                                "that uses it")
+            continuous[name] = ParamValue((), column[rows], batched=True)
+        bound = Bound((len(rows),), continuous=continuous)
+        return formula_value(self.variables, param, bound, f"term {term.label}")
 
     def _index(self, axes: Sequence[str], rows: np.ndarray, hidden: tuple[str, ...],
                cards: tuple[int, ...]) -> list[np.ndarray]:

@@ -13,6 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from bayesprog.inference.answers import Posterior
+from bayesprog.inference.density import Density
 from bayesprog.inference.plan import QuestionPlan
 
 
@@ -31,13 +32,24 @@ class Method:
     name: ClassVar[str] = ""
     #: whether the answers are exact (else they carry an error estimate)
     exact: ClassVar[bool] = True
+    #: whether it answers questions with unknown continuous variables (searched ones, or
+    #: parents of a relevant term); the discrete methods do not
+    continuous: ClassVar[bool] = False
+    #: an approximate method the cost model may choose on its own when no exact method
+    #: applies (its answers state their error)
+    fallback: ClassVar[bool] = False
+
+    def why_not(self, plan: QuestionPlan) -> str | None:
+        """Why this method does not answer ``plan`` (None: it does, or has nothing to say)."""
+        return None
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         """The cost of answering ``plan``, or None when this method does not apply to it."""
         raise NotImplementedError
 
-    def posterior(self, plan: QuestionPlan) -> Posterior | None:
-        """The answer, or None when some rows need another method (the next cheapest)."""
+    def posterior(self, plan: QuestionPlan) -> Posterior | Density | None:
+        """The answer (a density when the searched variables are real), or None when some rows
+        need another method (the next cheapest)."""
         raise NotImplementedError
 
 

@@ -9,6 +9,7 @@ from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contract import TINY, contract, log_contract
+from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import question_factors, rescaled
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
@@ -30,10 +31,15 @@ class ContractionMethod(Method):
 
 def contract_question(plan: QuestionPlan) -> Posterior:
     """The posterior by scaled contraction, with exact log-space rows where it underflows."""
-    program, question, bound = plan.program, plan.question, plan.bound
-    expr = question.expression
-    searched = expr.left
-    factors = question_factors(program, plan.terms, bound)
+    factors = question_factors(plan.program, plan.terms, plan.bound)
+    return answer(plan, *contract_factors(plan, factors, plan.searched))
+
+
+def contract_factors(plan: QuestionPlan, factors: list[Factor], searched: tuple[str, ...]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """``factors`` contracted to a normalised table over ``searched`` (``[rows] + cards``),
+    and the log of the normaliser per row (``[rows]``)."""
+    program, bound = plan.program, plan.bound
     size = bound.size
     operands, offset = rescaled(factors, size)
     batched_out = any(f.batched for f in factors) or bool(bound.batch_shape)
@@ -58,4 +64,4 @@ def contract_question(plan: QuestionPlan) -> Posterior:
             total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
             log_z[row] = total
             probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
-    return answer(plan, probs, log_z)
+    return probs, log_z

@@ -2,7 +2,8 @@
 known variables fixed and each draw weighted by their likelihood
 (:mod:`bayesprog.inference.sampling`). Answers every question the exact methods answer, with a
 standard error per probability and the effective sample size per row; the error shrinks as
-``1 / sqrt(samples)``."""
+``1 / sqrt(samples)``. Unknown real variables are drawn too (a formula's parents draw by draw),
+so it also answers a discrete question where the exact methods do not apply."""
 
 from __future__ import annotations
 
@@ -22,8 +23,19 @@ DEFAULT_SAMPLES = 10_000
 class LikelihoodWeighting(Method):
     name = "lw"
     exact = False
+    continuous = True
+    fallback = True
+
+    def why_not(self, plan: QuestionPlan) -> str | None:
+        real = [v for v in plan.searched if not plan.program.variables[v].is_discrete]
+        if real:
+            return (f"{', '.join(real)} is real: likelihood weighting answers discrete searched "
+                    "variables (it draws the unknown real ones)")
+        return None
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
+        if self.why_not(plan) is not None:
+            return None
         n = plan.options.get("samples", DEFAULT_SAMPLES)
         cards = [plan.card(t.child.name) for t in plan.terms if t.child.is_discrete] or [1]
         draws = float(plan.bound.size) * n

@@ -1,0 +1,79 @@
+"""Parameters written as formulas of the parents, evaluated for a question's evidence, and the
+bins of a discretised variable, which take the probability of their interval from its term.
+
+>>> import bayesprog
+>>> p = bayesprog.loads('''
+... bayesprog: 1
+... variables:
+...   Pos: {continuous: [-.inf, .inf]}
+...   Reading: {continuous: [-.inf, .inf]}
+... decomposition:
+...   - {term: P(Pos), form: normal, mean: 0, sigma: 1}
+...   - {term: P(Reading | Pos), form: normal, mean: "2*Pos + 1", sigma: 0.5}
+... ''')
+>>> round(float(p.ask("P(Reading)", method="gaussian").mean("Reading")), 12)
+1.0
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from bayesprog.errors import QuestionError
+from bayesprog.forms import Form, FormulaParam, ParamValue, TermContext
+from bayesprog.formula import Formula
+from bayesprog.inference.binding import Bound
+from bayesprog.variables import Discrete, Variable
+
+
+def formula_value(variables: Mapping[str, Variable], param: FormulaParam, bound: Bound,
+                  what: str) -> ParamValue:
+    """The values of ``param`` for the question's evidence: over the table's axes and the
+    discrete parents the formulas name, with a batch axis when an observed parent is batched.
+    """
+    extra = tuple(n for n in param.names
+                  if isinstance(variables[n], Discrete) and n not in param.axes)
+    axes = param.axes + extra
+    cards = [variables[a].card for a in extra]  # type: ignore[union-attr]
+    batched = any(n in bound.continuous and bound.continuous[n].batched for n in param.names)
+    rows = bound.size if batched else 1
+    values: dict[str, np.ndarray] = {}
+    for name in param.names:
+        var = variables[name]
+        if isinstance(var, Discrete):
+            shape = [1] * (1 + len(extra))
+            shape[1 + extra.index(name)] = var.card
+            values[name] = np.asarray(var.values, float).reshape(shape)
+        elif name in bound.continuous:
+            pv = bound.continuous[name]
+            values[name] = np.asarray(pv.array, float).reshape((-1,) + (1,) * len(extra))
+        else:
+            raise QuestionError(f"{what}: {name} is neither known nor summed out here")
+    table = param.formulas
+    out = np.empty((rows,) + table.shape + tuple(cards))
+    for index in np.ndindex(*table.shape):
+        formula: Formula = table.item(index)
+        result = formula.evaluate({n: values[n] for n in formula.names})
+        out[(slice(None),) + index] = np.broadcast_to(result, (rows, *cards))
+    return ParamValue(axes, out if batched else out[0], batched)
+
+
+def bins_log_factor(form: Form, ctx: TermContext) -> np.ndarray:
+    """The log-probability of each bin of a discretised child: its term's CDF at the bin's
+    upper edge minus at its lower edge; the outer bins also take the tails."""
+    child = ctx.child
+    assert isinstance(child, Discrete) and child.edges is not None
+    edges = child.edges.copy()
+    edges[0], edges[-1] = -np.inf, np.inf
+    parts = []
+    for bound in (edges[1:], edges[:-1]):
+        ctx.value = ParamValue((child.name,), bound)
+        cdf = form.cdf(ctx)
+        if cdf is None:
+            raise ValueError(f"form {form.name!r} cannot give the bins of {child.name} their "
+                             "probability (it has no CDF here)")
+        parts.append(np.asarray(cdf, float))
+    with np.errstate(divide="ignore"):
+        return np.log(np.clip(parts[0] - parts[1], 0.0, None))
