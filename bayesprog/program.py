@@ -287,7 +287,7 @@ class Program:
         ...   - {term: P(A), form: table, table: [0.3, 0.7]}
         ...   - {term: P(B | A), form: table, table: [[0.9, 0.1], [0.2, 0.8]]}
         ... ''')
-        >>> p.ablate("P(B | A)").ask("P(A | B=b0)").probabilities.tolist()
+        >>> p.ablate("P(B | A)").ask("P(A | B=b0)").probabilities.round(12).tolist()
         [0.3, 0.7]
         """
         names: list[str] = []

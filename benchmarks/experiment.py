@@ -7,6 +7,9 @@ Measured in one run on this machine:
   into a fresh folder (median of ``--repeats``);
 * the split of one process's time into perception, cue fields, shape matching, decision and
   storage (from the explorer's own timers);
+* the decision step beside a direct numpy implementation of the same decision (eq. 13 with the
+  shape cue), written only for this benchmark: the same runs decided both ways, the seconds
+  spent deciding, and the share of decisions that agree;
 * a naive reference: one run at a time (one decision per engine call), no incremental updates
   (uncertainty of every cell and inhibition recomputed each step, a cold multi-start ICP at every
   step). It is measured on a sample of runs of one task and configuration and extrapolated to
@@ -28,6 +31,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from scipy.special import betaln, logsumexp
 
 from runner.cues import inhibition, uncertainty
 from runner.experiment import load_experiment, run_experiment, simulate
@@ -53,18 +57,120 @@ class NaiveExplorer(Explorer):
         return registration, counts >= MIN_POINTS
 
 
-def whole(workers: int, repeats: int) -> tuple[float, dict]:
+class DirectExplorer(Explorer):
+    """The same decisions without the engine: pi_tar's terms evaluated by hand in numpy (their
+    parameters read from the program), summed in log space, the MAP taken with the same tie
+    rule and the same generators."""
+
+    def decide(self):
+        start = time.perf_counter()
+        i, s, u = self.cue_fields()
+        shape_start = time.perf_counter()
+        self.timings["cues"] += shape_start - start
+        shape = "P(R | O)" not in self.target.ablated
+        reg, ready = (self.shape_cue() if shape else (None, np.zeros(self.runs, bool)))
+        self.registration = reg
+        ask_start = time.perf_counter()
+        self.timings["shape"] += ask_start - shape_start
+        terms = {t.label: t for t in self.target.active_terms}
+        log = np.zeros((self.runs, len(self.centres)))
+        for label, x in (("P(I | O)", i), ("P(S | O, T)", s), ("P(U | O)", u)):
+            term = terms[label]
+            if term.form.name != "beta":
+                continue  # ablated: uniform
+            a, b = float(term.params["a"].array), float(term.params["b"].array)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                # the log density, its terms with an exponent of 0 left out
+                part = np.full(x.shape, -betaln(a, b))
+                if a != 1:
+                    part += (a - 1) * np.log(x)
+                if b != 1:
+                    part += (b - 1) * np.log1p(-x)
+            log += np.where(np.isnan(x), 0.0, part)  # a NaN field value is not observed
+        if shape and ready.any():
+            log[ready] += self._shape_log(terms["P(R | O)"], reg, ready)
+        nxt = np.empty(self.runs, dtype=np.int64)
+        p = np.exp(log - log.max(axis=1, keepdims=True))
+        p /= p.sum(axis=1, keepdims=True)
+        best = p.max(axis=1)
+        for r in range(self.runs):
+            tied = np.flatnonzero(p[r] >= best[r] * (1 - 1e-12))
+            nxt[r] = tied[self.rngs[r].integers(tied.size)] if tied.size > 1 else tied[0]
+        self.target_probabilities = p
+        self.timings["decision"] += time.perf_counter() - ask_start
+        from runner.explorer import Decision
+
+        self.last = Decision(len(self.path), i, s, u, None if reg is None else reg.error,
+                             None if reg is None else reg.points, nxt, ready)
+        return nxt
+
+    def _shape_log(self, term, reg, ready):
+        """log sum_R P(R | L1, L2) gmm_R(cell): the isotropic mixtures factor along the grid's
+        two axes, so each is a product of per-axis Gaussians (one matrix product)."""
+        sigma, floor = float(term.params["sigma"].array), float(term.params["floor"].array)
+        nx, ny = self.scenario.shape
+        centre = self.centres.mean(axis=0)
+        xs = self.centres.reshape(nx, ny, 2)[:, 0, 0] - centre[0]
+        ys = self.centres.reshape(nx, ny, 2)[0, :, 1] - centre[1]
+        m = reg.points[ready] - centre  # [runs, R, K, 2]
+        gx = np.exp(-0.5 * ((xs - m[..., 0:1]) / sigma) ** 2)  # [runs, R, K, nx]
+        gy = np.exp(-0.5 * ((ys - m[..., 1:2]) / sigma) ** 2)  # [runs, R, K, ny]
+        mix = (np.swapaxes(gx, -1, -2) @ gy).reshape(m.shape[:2] + (nx * ny,))
+        mix /= m.shape[2] * 2 * np.pi * sigma**2
+        gmm = np.log((1 - floor) * mix + floor / (nx * ny * self.scenario.cell**2))
+        # pi_obj (models/pi_obj.yaml): P(L1 | R) is Beta(1, 4.5) for the rectangle, uniform
+        # for the triangle, and the reverse for L2; the share of agreeing decisions checks it
+        error = reg.error[ready]
+        log_r = np.stack([np.log(4.5) + 3.5 * np.log1p(-error[:, 0]),
+                          np.log(4.5) + 3.5 * np.log1p(-error[:, 1])], axis=1)
+        log_r -= logsumexp(log_r, axis=1, keepdims=True)
+        return logsumexp(gmm + log_r[..., None], axis=1)
+
+
+def decision_ratio(runs: int = 100) -> dict:
+    """The seconds spent deciding, through the engine and directly, on the same runs of the
+    paper scenario (every task, the full model and the model without the shape cue)."""
     experiment = load_experiment(PAPER)
-    times = []
+    spec = experiment.spec
+    starts = experiment.start_cells()[:runs]
+    ids = np.arange(runs)
+    out: dict = {"engine_s": 0.0, "direct_s": 0.0, "decisions": 0, "agree": 0}
+    for task in spec.tasks:
+        for conf in ("full", "without_R"):
+            paths = []
+            for kind, cls in (("engine_s", Explorer), ("direct_s", DirectExplorer)):
+                explorer = cls(experiment.scenario, task, ablate=CONFIGURATIONS[conf], runs=runs)
+                result = simulate(experiment.scenario, task, conf, starts, ids, spec.seed,
+                                  spec.iterations, explorer=explorer)
+                out[kind] += explorer.timings["decision"]
+                paths.append(result["paths"])
+            out["decisions"] += paths[0].size
+            out["agree"] += int((paths[0] == paths[1]).all(axis=1).sum() * paths[0].shape[1])
+    out["ratio"] = out["engine_s"] / out["direct_s"]
+    out["agreeing_runs_share"] = out["agree"] / out["decisions"]
+    return out
+
+
+def whole(workers: int, repeats: int, report: bool = False) -> tuple[float, float | None]:
+    """Median wall seconds of the experiment, and of its report (with the animation) when
+    ``report``, each into a fresh folder."""
+    from runner.report import build_report
+
+    experiment = load_experiment(PAPER)
+    times, reports = [], []
     for _ in range(repeats):
         out = Path(tempfile.mkdtemp())
         try:
             start = time.perf_counter()
             run_experiment(experiment, out, workers=workers, progress=False)
             times.append(time.perf_counter() - start)
+            if report:
+                start = time.perf_counter()
+                build_report(out)
+                reports.append(time.perf_counter() - start)
         finally:
             shutil.rmtree(out)
-    return statistics.median(times), {}
+    return statistics.median(times), statistics.median(reports) if reports else None
 
 
 def split() -> dict[str, float]:
@@ -126,15 +232,22 @@ def main(argv: list[str] | None = None) -> int:
     simulate(load_experiment(PAPER).scenario, "T1", "full", np.array([[3, 3]]), np.array([0]),
              0, 15)
     one, _ = whole(1, args.repeats)
-    two, _ = whole(2, args.repeats)
+    two, report = whole(2, args.repeats, report=True)
     parts = split()
+    decision = decision_ratio()
     ref = naive(args.naive_runs)
     lines = [
         f"paper experiment (150,000 decisions), median of {args.repeats}:",
         f"  one process      {one:8.1f} s",
         f"  --workers 2      {two:8.1f} s",
+        f"  its report       {report:8.1f} s (figures, tables and the animation of Fig. 11)",
         "split of one process (seconds):",
         *(f"  {k:<28}{v:8.1f}" for k, v in parts.items()),
+        f"decision step through the engine: {decision['engine_s']:.2f} s; the direct numpy "
+        f"implementation of the same decisions: {decision['direct_s']:.2f} s; ratio "
+        f"{decision['ratio']:.2f} ({decision['decisions']:,} decisions, every task, full and "
+        f"without_R; {100 * decision['agreeing_runs_share']:.0f}% in runs whose paths agree "
+        "step for step)",
         f"naive reference: {ref['seconds_per_run']:.2f} s per run of 100 iterations, measured on "
         f"{ref['sample_runs']} run(s) and extrapolated to 1,500 runs: "
         f"{ref['extrapolated_seconds']:.0f} s",
@@ -144,8 +257,9 @@ def main(argv: list[str] | None = None) -> int:
     print("\n".join(lines))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"one_process_s": one, "two_workers_s": two, "split_s": parts,
-                               "naive": ref}, indent=2))
+    out.write_text(json.dumps({"one_process_s": one, "two_workers_s": two, "report_s": report,
+                               "split_s": parts, "decision": decision, "naive": ref},
+                              indent=2))
     print(f"written to {out}")
     return 0
 

@@ -88,6 +88,48 @@ def icp(path, counts, outlines, nverts, angle, shift, iterations):
     return dist
 
 
+@njit(cache=True, inline="always")
+def _sobel_cell(d, mask, r, x, y):
+    """The saliency of cell (x, y) of run r (see perceived_sobel_2d)."""
+    nx, ny = d.shape[1], d.shape[2]
+    best = 0.0
+    compared = False
+    near = False
+    for axis in range(2):
+        m0 = m1 = m2 = 0.0
+        h0 = h1 = h2 = False
+        for line in range(3):
+            num = 0.0
+            den = 0.0
+            for k in range(3):
+                if axis == 0:
+                    cx, cy = x + line - 1, y + k - 1
+                else:
+                    cx, cy = x + k - 1, y + line - 1
+                if 0 <= cx < nx and 0 <= cy < ny and mask[r, cx, cy]:
+                    w = 2.0 if k == 1 else 1.0
+                    num += w * d[r, cx, cy]
+                    den += w
+            if den > 0.0:
+                near = True
+                if line == 0:
+                    m0, h0 = num / den, True
+                elif line == 1:
+                    m1, h1 = num / den, True
+                else:
+                    m2, h2 = num / den, True
+        if h0 + h1 + h2 >= 2:
+            hi = m2 if h2 else m1
+            lo = m0 if h0 else m1
+            best = max(best, abs(hi - lo))
+            compared = True
+    if compared:
+        return min(best, 1.0)
+    if near:
+        return np.nan
+    return 0.0
+
+
 @njit(cache=True, parallel=True)
 def perceived_sobel_2d(d, mask):
     """Saliency of the perceived stimulus on 2-D grids [R, nx, ny] (see runner.cues.saliency):
@@ -96,41 +138,24 @@ def perceived_sobel_2d(d, mask):
     nearby, 0 where nothing is perceived nearby."""
     runs, nx, ny = d.shape
     out = np.empty((runs, nx, ny))
-    weights = (1.0, 2.0, 1.0)
     for job in prange(runs * nx):
         r = job // nx
         x = job % nx
         for y in range(ny):
-            best = 0.0
-            compared = False
-            near = False
-            for axis in range(2):
-                means = np.zeros(3)
-                has = np.zeros(3, np.bool_)
-                for line in range(3):
-                    num = 0.0
-                    den = 0.0
-                    for k in range(3):
-                        if axis == 0:
-                            cx, cy = x + line - 1, y + k - 1
-                        else:
-                            cx, cy = x + k - 1, y + line - 1
-                        if 0 <= cx < nx and 0 <= cy < ny and mask[r, cx, cy]:
-                            num += weights[k] * d[r, cx, cy]
-                            den += weights[k]
-                    if den > 0.0:
-                        means[line] = num / den
-                        has[line] = True
-                        near = True
-                if has[0] + has[1] + has[2] >= 2:
-                    hi = means[2] if has[2] else means[1]
-                    lo = means[0] if has[0] else means[1]
-                    best = max(best, abs(hi - lo))
-                    compared = True
-            if compared:
-                out[r, x, y] = min(best, 1.0)
-            elif near:
-                out[r, x, y] = np.nan
-            else:
-                out[r, x, y] = 0.0
+            out[r, x, y] = _sobel_cell(d, mask, r, x, y)
     return out
+
+
+@njit(cache=True)
+def perceived_sobel_2d_around(d, mask, out, cells):
+    """``out`` (a saliency map from perceived_sobel_2d) brought up to date after the stimulus
+    or the mask changed at one cell per run (flat index ``cells[r]``, -1 for none): a cell's
+    saliency reads its 3 x 3 neighbourhood, so only the 3 x 3 cells around it change."""
+    runs, nx, ny = d.shape
+    for r in range(runs):
+        if cells[r] < 0:
+            continue
+        x0, y0 = cells[r] // ny, cells[r] % ny
+        for x in range(max(x0 - 1, 0), min(x0 + 2, nx)):
+            for y in range(max(y0 - 1, 0), min(y0 + 2, ny)):
+                out[r, x, y] = _sobel_cell(d, mask, r, x, y)

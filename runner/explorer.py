@@ -19,7 +19,8 @@ from scipy import ndimage
 
 import bayesprog
 from bayesprog import Program
-from runner.cues import inhibition, perceived_border, saliency, uncertainty
+from runner._kernels import perceived_sobel_2d_around
+from runner.cues import inhibition, perceived_border, uncertainty
 from runner.scenario import Scenario
 from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
 
@@ -120,6 +121,14 @@ class Explorer:
         self.path: list[np.ndarray] = []
         self.expected = self.flat(start)
         self.visits = np.zeros((self.runs, len(self.centres)), dtype=int)
+        # the perceived stimulus (see percept), kept up to date one probed cell per step
+        self._target = np.zeros((self.runs, len(self.centres)), bool)
+        self._perceived = np.zeros((self.runs, len(self.centres)), bool)
+        # and its saliency (eq. 12), brought up to date around the cells probed since the last
+        # decision (a cell's saliency reads its 3 x 3 neighbourhood); nothing perceived: 0
+        self._stimulus = np.zeros((self.runs, *self.scenario.shape))
+        self._saliency = np.zeros((self.runs, *self.scenario.shape))
+        self._changed: list[np.ndarray] = []
         self.tracker.reset()
         self._border = np.zeros((self.runs, len(self.centres)), bool)
         self.last = None
@@ -128,10 +137,11 @@ class Explorer:
         """Eq. (10) around the last probed cells [runs] -> [runs, cells], by lookup in the table
         of I over every offset between two cells (I depends only on the offset)."""
         nx, ny = self.scenario.shape
-        ix, iy = np.divmod(np.arange(nx * ny), ny)
         lx, ly = np.divmod(np.asarray(last), ny)
-        return self._inhibition_table[ix[None] - lx[:, None] + nx - 1,
-                                      iy[None] - ly[:, None] + ny - 1]
+        # the map around cell (lx, ly) is the window of the table that starts at offset
+        # (-lx, -ly): one block copy per run
+        windows = np.lib.stride_tricks.sliding_window_view(self._inhibition_table, (nx, ny))
+        return windows[nx - 1 - lx, ny - 1 - ly].reshape(len(lx), nx * ny)
 
     def flat(self, cells: np.ndarray) -> np.ndarray:
         """Flat cell indices of ``cells`` [..., 2] (ix, iy), checked against the grid."""
@@ -156,6 +166,12 @@ class Explorer:
                                      soft={"M": prior})
         self.posterior[rows, cells] = answer.probabilities
         self.uncertainty[rows, cells] = uncertainty(answer.probabilities)
+        target = answer.probabilities[:, self.target_material] >= 0.5
+        other = answer.probabilities[:, self.counter_materials].sum(axis=-1) >= 0.5
+        self._target[rows, cells] = target
+        self._perceived[rows, cells] = target | other
+        self._stimulus.reshape(self.runs, -1)[rows, cells] = target
+        self._changed.append(np.asarray(cells, dtype=np.int64))
         self.path.append(cells)
         self.visits[rows, cells] += 1
         self.timings["perception"] += time.perf_counter() - start
@@ -173,15 +189,15 @@ class Explorer:
         neither (a misperception, another material than any of the task) says nothing about
         the task's discontinuity: it counts as not perceived."""
         shape = (self.runs, *self.scenario.shape)
-        target = self.posterior[..., self.target_material] >= 0.5
-        other = self.posterior[..., self.counter_materials].sum(axis=-1) >= 0.5
-        perceived = (self.visits > 0) & (target | other)
-        return target.reshape(shape), perceived.reshape(shape)
+        return self._target.reshape(shape), self._perceived.reshape(shape)
 
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
-        target, perceived = self.percept()
-        s = saliency(target.astype(float), perceived).reshape(self.runs, -1)
+        perceived = self._perceived.reshape(self._saliency.shape)
+        for cells in self._changed:
+            perceived_sobel_2d_around(self._stimulus, perceived, self._saliency, cells)
+        self._changed.clear()
+        s = self._saliency.reshape(self.runs, -1).copy()
         # a run where no cell has any saliency (nothing left to compare: the probed region is
         # homogeneous and has no unprobed tip) learns nothing from S: it is not observed there
         vetoed = ~np.any(np.isnan(s) | (s > 0), axis=1)
@@ -246,7 +262,9 @@ class Explorer:
         for group, with_shape in ((np.flatnonzero(ready), True), (np.flatnonzero(~ready), False)):
             if not group.size:
                 continue
-            rows = {k: (v[group] if isinstance(v, np.ndarray) else v) for k, v in evidence.items()}
+            everyone = group.size == self.runs
+            rows = {k: (v[group] if isinstance(v, np.ndarray) and not everyone else v)
+                    for k, v in evidence.items()}
             if with_shape:
                 assert reg is not None
                 inputs = {"templates": reg.points[group], "l_rectangle": reg.error[group, 0],

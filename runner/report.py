@@ -3,10 +3,15 @@ findings (Sec. 6.3) beside what was measured. Built from stored results only."""
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
 import html
 import json
+import multiprocessing
+import os
 import warnings
 from collections import defaultdict
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -220,8 +225,15 @@ class DecisionFigure:
         self.lines: list = []
         self.fixed = False
         flat[7].axis("off")
-        self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8, wrap=True,
+        # the caption's first lines change with the step; the legend below them does not (a
+        # video redraws only the first)
+        self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8,
                                     transform=flat[7].transAxes)
+        flat[7].text(0.0, 0.84, "white line: the path so far\nwhite circle: the start cell\n"
+                     f"magenta (black in the first panel):\n  the ground-truth border of {task}"
+                     "\n\ngrey: a cell not probed (belief),\n  or a saliency with nothing "
+                     "perceived\n  to compare (the term is left out)", va="top", fontsize=8,
+                     transform=flat[7].transAxes)
         figures.axes_in_cm(axes)
         self.fig.suptitle(title, fontsize=10)
         self.fig.tight_layout()
@@ -249,7 +261,7 @@ class DecisionFigure:
         writer = imageio_ffmpeg.write_frames(
             str(out), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgba",
             pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
-            output_params=["-crf", "26"])
+            output_params=["-crf", "26", "-preset", "ultrafast"])
         writer.send(None)
         bar = progress_bar(len(frames), "Fig. 11 animation")
         try:
@@ -268,9 +280,6 @@ class DecisionFigure:
         self.fixed = False
 
     def show(self, frame: dict, k: int) -> None:
-        for line in self.lines:
-            line.remove()
-        self.lines = []
         for key, _, _, limits in self.PANELS:
             values = np.asarray(frame[key], float)
             image = self.images[key]
@@ -278,24 +287,35 @@ class DecisionFigure:
             if limits is None and not self.fixed:
                 finite = values[np.isfinite(values)]
                 image.set_clim(0, float(finite.max()) if finite.size and finite.max() > 0 else 1)
-        for ax in self.path_axes:
-            before = len(ax.lines)
-            figures.draw_path(ax, self.scenario, frame["path"], frame["next"])
-            self.lines += ax.lines[before:]
+        if not self.lines:  # the path, its start and the next cell: three lines per panel
+            for ax in self.path_axes:
+                before = len(ax.lines)
+                figures.draw_path(ax, self.scenario, frame["path"], frame["next"])
+                self.lines += ax.lines[before:]
+        else:  # moved, not drawn anew
+            px, py = figures.centre_cm(self.scenario, frame["path"])
+            nx_, ny_ = figures.centre_cm(self.scenario, [frame["next"]])
+            for i in range(0, len(self.lines), 3):
+                path, start, chosen = self.lines[i : i + 3]
+                path.set_data(px, py)
+                start.set_data(px[:1], py[:1])
+                chosen.set_data(nx_, ny_)
         for line in self.lines:
             line.set_animated(self.fixed)  # in a video, never part of the static background
         x, y = figures.centre_cm(self.scenario, [frame["next"]])
         self.caption.set_text(
-            f"step k = {k}\n\nwhite line: the path so far\nwhite circle: the start cell\n"
-            f"red star: the next cell, the MAP of\n  P(O | ...), at ({x[0]:.1f}, {y[0]:.1f}) cm\n"
-            f"magenta (black in the first panel):\n  the ground-truth border of {self.task}\n\n"
-            "grey: a cell not probed (belief),\n  or a saliency with nothing perceived\n"
-            "  to compare (the term is left out)")
+            f"step k = {k}\nred star: the next cell, the MAP of\n  P(O | ...), at "
+            f"({x[0]:.1f}, {y[0]:.1f}) cm")
+
+
+#: The animation's resolution: 1,040 x 770 pixels for the paper's grid (the PNG has 110 dpi);
+#: 100 frames are drawn and encoded in about a second and a half.
+VIDEO_DPI = 80
 
 
 def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
                   out_png: Path, out_video: Path | None, steps: int) -> None:
-    """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run at the same resolution."""
+    """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run (``VIDEO_DPI``)."""
     bar = progress_bar(steps, "Fig. 11 replay")
     frames = []
     for frame in replay(experiment, task, configuration, run, steps):
@@ -308,7 +328,7 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     figure.show(frames[min(step, len(frames) - 1)], step)
     figure.fig.savefig(out_png, dpi=110)
     if out_video is not None:
-        figure.fig.set_dpi(110)
+        figure.fig.set_dpi(VIDEO_DPI)
         figure.video(frames, out_video)
 
 
@@ -473,12 +493,6 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
     borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
-    rows = statistics_table(results, spec, borders, scenario)
-    bar = progress_bar(3, "report figures")
-    plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
-    bar.update(1)
-    plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png", experiment.start_cells())
-    bar.update(1)
     task = spec.tasks[0]
     shown = "full" if "full" in spec.configurations else spec.configurations[0]
     run, step = following_step(results[f"{task}/{shown}"]["paths"], scenario.border(task),
@@ -487,10 +501,21 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     (folder / "fig11_decision.gif").unlink(missing_ok=True)  # an animation of earlier reports
     if video is None:
         (folder / "fig11_decision.mp4").unlink(missing_ok=True)  # not this report's
-    plot_decision(experiment, task, shown, run, step, folder / "fig11_decision.png",
-                  folder / video if video else None, max(spec.iterations - 1, 1))
-    bar.update(1)
-    bar.close()
+    fig11 = (out, task, shown, run, step, folder / "fig11_decision.png",
+             folder / video if video else None, max(spec.iterations - 1, 1))
+    # Fig. 11 (a replay and an animation, the longest part) is drawn by a second process
+    # while this one draws the rest, where there is a second core
+    with _beside(fig11) as pending:
+        rows = statistics_table(results, spec, borders, scenario)
+        bar = progress_bar(3, "report figures")
+        plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
+        bar.update(1)
+        plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png",
+                      experiment.start_cells())
+        bar.update(1)
+        pending()
+        bar.update(1)
+        bar.close()
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(_json_safe(rows), indent=1,
                                                         allow_nan=False).encode())
@@ -502,6 +527,27 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, video).encode())
     return folder
+
+
+def _plot_stored_decision(out: Path, task: str, configuration: str, run: int, step: int,
+                          png: Path, video: Path | None, steps: int) -> None:
+    plot_decision(stored_experiment(out), task, configuration, run, step, png, video, steps)
+
+
+@contextlib.contextmanager
+def _beside(fig11: tuple) -> Iterator[Callable[[], None]]:
+    """Draw Fig. 11 in a second process (one core: here, when waited for); yields the wait."""
+    if (os.cpu_count() or 1) < 2:
+        yield lambda: _plot_stored_decision(*fig11)
+        return
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+        future = pool.submit(_plot_stored_decision, *fig11)
+        try:
+            yield future.result
+        except BaseException:
+            future.cancel()
+            raise
 
 
 def following_step(paths: np.ndarray, border: np.ndarray, iterations: int) -> tuple[int, int]:

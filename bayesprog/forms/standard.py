@@ -145,8 +145,13 @@ class Beta(Form):
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         x, a, b = ctx.child_value(), ctx.param("a"), ctx.param("b")
         with np.errstate(divide="ignore", invalid="ignore"):
-            out = xlogy(a - 1, x) + xlog1py(b - 1, -x) - betaln(a, b)
-        return np.where((x < 0) | (x > 1), -np.inf, out)
+            out = np.broadcast_to(-betaln(a, b), np.broadcast_shapes(a.shape, b.shape, x.shape))
+            # a shape parameter of 1 contributes nothing: its log term is skipped (cue profiles
+            # such as Beta(1, 2.5) and Beta(4, 1) halve their work)
+            out = _plus_xlog(out, a - 1, x, np.log, xlogy)
+            out = _plus_xlog(out, b - 1, -x, np.log1p, xlog1py)
+        outside = (x < 0) | (x > 1)
+        return np.where(outside, -np.inf, out) if outside.any() else out
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
         return betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
@@ -154,6 +159,16 @@ class Beta(Form):
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
         return betaincinv(params["a"], params["b"], u[..., 0])
+
+
+def _plus_xlog(out: np.ndarray, c: np.ndarray, v: np.ndarray, log: Any, xlog: Any) -> np.ndarray:
+    """``out + c * log(v)`` with ``0 * log(0) = 0``: nothing to add where every ``c`` is 0,
+    numpy's (vectorised) log where none is, scipy's ``xlogy``/``xlog1py`` for a mix."""
+    if not np.any(c):
+        return out
+    if np.all(c):
+        return out + c * log(v)
+    return out + xlog(c, v)
 
 
 @register_form

@@ -174,6 +174,14 @@ def _continuous_values(var: Continuous, value: Any, variables: Mapping) -> np.nd
             raise QuestionError(f"evidence for field {var.name}: expected a last dimension of "
                                 f"{card} (one value per state of {var.index}), found shape "
                                 f"{arr.shape}")
+    if not arr.size:
+        return arr
+    # one pass for the usual case: the smallest and largest values inside the support (NaN,
+    # a field's missing value, is skipped by fmin/fmax unless every value is NaN)
+    low, high = np.fmin.reduce(arr, axis=None), np.fmax.reduce(arr, axis=None)
+    if var.index is not None and low >= var.low and high <= var.high and np.isfinite(low) \
+            and np.isfinite(high):
+        return arr
     missing = np.isnan(arr)
     if missing.any() and var.index is None:
         raise QuestionError(f"evidence for {var.name}: expected numbers, found NaN (a variable "

@@ -120,6 +120,10 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
                 log = np.asarray(bins_log_factor(term.form, ctx), dtype=float)
             else:
                 log = np.asarray(term.form.log_factor(ctx), dtype=float)
+        if missing is not None:
+            # a field value that is not observed: the density integrates to one over it
+            # (masked before broadcasting over the axes the value does not vary with)
+            log = np.where(missing.aligned(axes, 0), 0.0, log)
         full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None
@@ -127,9 +131,6 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
         value is not None and value.batched
     )
     log = np.broadcast_to(log, full)
-    if missing is not None:
-        # a field value that is not observed: the density integrates to one over it
-        log = np.where(missing.aligned(axes, 0), 0.0, log)
     if not batched:
         log = log[0]
     elif log.shape[0] != bound.size:
@@ -169,23 +170,60 @@ def question_factors(program: ProgramLike, terms: list[Term], bound: Bound) -> l
     return factors
 
 
-def rescaled(factors: list[Factor], size: int) -> tuple[list[Factor], np.ndarray]:
+def _row_max(f: Factor) -> np.ndarray:
+    red = tuple(range(1 if f.batched else 0, f.log.ndim))
+    with np.errstate(invalid="ignore"):
+        return np.max(f.log, axis=red, keepdims=True) if red else f.log
+
+
+def _same_axes_summed(factors: list[Factor]) -> list[tuple[Factor, list[Factor]]]:
+    """Factors over the same set of axes added in log space (one exponential instead of one
+    per factor: cue fields over the same grid become one factor), each with its parts."""
+    groups: dict[frozenset[str], list[Factor]] = {}
+    for f in factors:
+        groups.setdefault(frozenset(f.axes), []).append(f)
+    out: list[tuple[Factor, list[Factor]]] = []
+    for group in groups.values():
+        if len(group) == 1 or not group[0].axes:
+            out.extend((f, [f]) for f in group)
+            continue
+        axes = group[0].axes
+        total: np.ndarray | None = None
+        for f in group:
+            lead = 1 if f.batched else 0
+            log = f.log if f.axes == axes else np.transpose(
+                f.log, list(range(lead)) + [lead + f.axes.index(a) for a in axes])
+            if not f.batched and any(g.batched for g in group):
+                log = log[np.newaxis]
+            total = log if total is None else total + log
+        assert total is not None
+        out.append((Factor(axes, total, any(f.batched for f in group)), group))
+    return out
+
+
+def rescaled(factors: list[Factor], size: int, merge: bool = True
+             ) -> tuple[list[Factor], np.ndarray]:
     """Each factor with axes in the probability domain, divided by its largest value (per
     row when batched), and the logs of those divisors and of the factors without axes summed
-    per row (``[size]``)."""
+    per row (``[size]``). With ``merge``, factors over the same axes are added in log space
+    first (a product that contraction would form anyway; loopy belief propagation keeps the
+    factor graph as it is)."""
     offset = np.zeros(size)
     operands: list[Factor] = []
-    for f in factors:
-        red = tuple(range(1 if f.batched else 0, f.log.ndim))
-        with np.errstate(invalid="ignore"):
-            m = np.max(f.log, axis=red, keepdims=True) if red else f.log
-        if np.any(m == np.inf):
-            raise QuestionError(f"an infinite density over {', '.join(f.axes) or 'the evidence'}: "
-                                "a value sits on a singular point of its density")
-        m = np.where(np.isfinite(m), m, 0.0)
-        if not red:
+    pairs = _same_axes_summed(factors) if merge else [(f, [f]) for f in factors]
+    for f, parts in pairs:
+        m = _row_max(f)
+        # +inf in a part (shows as +inf, or NaN where another part is -inf)
+        if np.any(m == np.inf) or (len(parts) > 1 and np.isnan(m).any()):
+            for part in parts:
+                if np.any(_row_max(part) == np.inf):
+                    raise QuestionError(f"an infinite density over "
+                                        f"{', '.join(part.axes) or 'the evidence'}: a value "
+                                        "sits on a singular point of its density")
+        if not f.axes:
             offset += np.broadcast_to(f.log, (size,)) if f.batched else f.log
             continue
+        m = np.where(np.isfinite(m), m, 0.0)
         offset += m.reshape(-1) if f.batched else m.reshape(())
         operands.append(Factor(f.axes, np.exp(f.log - m), f.batched))
     return operands, offset

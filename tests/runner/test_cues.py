@@ -8,6 +8,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -305,3 +307,15 @@ def test_nan_at_a_perceived_cell_is_refused_and_ignored_elsewhere():
     d[1, 1] = np.nan
     with pytest.raises(ValueError, match="perceived"):
         saliency(d, probed)
+
+
+def test_the_explorers_inhibition_lookup_is_the_direct_formula():
+    """The explorer reads I from a table of offsets (a window per run): the same numbers."""
+    from runner.explorer import Explorer
+    from runner.scenario import load_scenario
+
+    scenario = load_scenario(Path(__file__).parents[2] / "models" / "scenarios" / "paper.yaml")
+    explorer = Explorer(scenario, "T1", runs=5)
+    last = np.array([0, 61, 1799, 59, 1740])  # corners and an inner cell
+    direct = inhibition(scenario.centres, scenario.centres[last], explorer.diagonal)
+    np.testing.assert_allclose(explorer.inhibition_at(last), direct, atol=1e-12)

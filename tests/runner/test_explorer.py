@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 import bayesprog
+from runner.cues import saliency
 from runner.experiment import simulate
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.scenario import load_scenario
@@ -153,3 +154,38 @@ def test_explorer_rejects_cells_outside_the_grid(scenario):
     explorer.reset((0, 0))
     with pytest.raises(bayesprog.QuestionError, match="outside the 30 x 60 grid"):
         explorer.observe((30, 2), 0.5, 0.5)
+
+
+def test_the_perceived_stimulus_kept_per_probe_is_the_one_read_from_the_map():
+    """percept() is updated at the probed cell only; it equals the definition read from the
+    whole perceptual map, after probes that change a cell's perceived material."""
+    scenario = load_scenario(MODELS / "scenarios" / "paper.yaml")
+    explorer = Explorer(scenario, "T3", runs=3)
+    explorer.reset(np.array([[2, 2], [10, 30], [29, 59]]), seed=4)
+    rng = np.random.default_rng(4)
+    normals = material_normals(explorer.perception)
+    ny = scenario.shape[1]
+    compared = 0
+    for _ in range(60):
+        # probes packed in a corner of 6 x 6 cells (edges of the grid included), so that
+        # neighbours are probed, cells probed again, and percepts flip
+        cells = rng.integers(0, 6, 3) * ny + rng.integers(0, 6, 3)
+        material = rng.integers(0, explorer.materials, 3)
+        # a reading of that material, with noise: some probes flip a cell's percept
+        texture = normals["E"][0][material] + rng.normal(0, 2, 3) * normals["E"][1][material]
+        compliance = normals["C"][0][material] + rng.normal(0, 2, 3) * normals["C"][1][material]
+        explorer.perceive(cells, texture, compliance)
+        target, perceived = explorer.percept()
+        p = explorer.posterior
+        want_target = p[..., explorer.target_material] >= 0.5
+        want_other = p[..., explorer.counter_materials].sum(-1) >= 0.5
+        want = (explorer.visits > 0) & (want_target | want_other)
+        assert np.array_equal(perceived.reshape(3, -1), want)
+        assert np.array_equal((target & perceived).reshape(3, -1), want_target & want)
+        # and the saliency kept around the probed cells is the one of the whole map
+        _, s, _ = explorer.cue_fields()
+        whole = saliency(target.astype(float), perceived).reshape(3, -1)
+        whole[~np.any(np.isnan(whole) | (whole > 0), axis=1)] = np.nan  # the veto of a run
+        np.testing.assert_array_equal(s, whole)
+        compared += int(np.sum(s > 0))
+    assert compared > 100  # the maps had salient cells to agree on

@@ -38,7 +38,7 @@ class LoopyBeliefPropagation(Method):
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched
         rows = bound.size
-        operands, _ = rescaled(question_factors(program, plan.terms, bound), rows)
+        operands, _ = rescaled(question_factors(program, plan.terms, bound), rows, merge=False)
         # every table with the batch axis of rows, in the probability domain, largest value 1
         tables = [(f.axes, np.broadcast_to(f.log if f.batched else f.log[np.newaxis],
                                            (rows,) + f.log.shape[f.batched:]))
