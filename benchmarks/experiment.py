@@ -10,12 +10,18 @@ Measured in one run on this machine:
 * the decision step beside a direct numpy implementation of the same decision (eq. 13 with the
   shape cue), written only for this benchmark: the same runs decided both ways, the seconds
   spent deciding, and the share of decisions that agree;
+* scaling: one (task, configuration) of the paper (T1, the full model, 100 iterations), each
+  point in a fresh process, for 25, 100 and 400 runs on the paper's 30 x 60 grid and for 100
+  runs on the same workspace cut into 30 x 60, 60 x 120 and 120 x 240 cells: wall seconds,
+  peak resident memory, and the cost per run x cell relative to the smallest point (``--plot``
+  draws them);
 * a naive reference: one run at a time (one decision per engine call), no incremental updates
   (uncertainty of every cell and inhibition recomputed each step, a cold multi-start ICP at every
   step). It is measured on a sample of runs of one task and configuration and extrapolated to
   the 15,000 runs x iterations of the experiment; the output says so.
 
     python benchmarks/experiment.py [--repeats 3] [--naive-runs 2] [--out results/...json]
+        [--plot docs/performance.png]
 """
 
 from __future__ import annotations
@@ -151,6 +157,103 @@ def decision_ratio(runs: int = 100) -> dict:
     return out
 
 
+SCALING_RUNS = [25, 100, 400]
+SCALING_GRIDS = [(30, 60), (60, 120), (120, 240)]
+
+
+def _memory_mib(field: str) -> float:
+    """This process's resident memory (VmRSS) or its peak (VmHWM), from /proc (Linux; the peak
+    of ``getrusage`` elsewhere, which a spawned process may inherit from its parent)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _scaling_point(runs: int, shape: tuple[int, int]) -> dict:
+    """One point, in its own process: T1 with the full model on the paper's workspace cut into
+    ``shape`` cells (the same 30 x 60 cm), ``runs`` runs in lockstep."""
+    import yaml
+
+    from runner.scenario import load_scenario
+
+    text = yaml.safe_load((ROOT / "models" / "scenarios" / "paper.yaml").read_text())
+    cell = 0.30 / shape[0]
+    text["grid"] = {"shape": list(shape), "cell": cell}
+    text["programs"] = {k: str((ROOT / "models" / "scenarios" / v).resolve())
+                        for k, v in text["programs"].items()}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "scaled.yaml"
+        path.write_text(yaml.safe_dump(text))
+        scenario = load_scenario(path)
+    rng = np.random.default_rng(7)
+    starts = np.stack([rng.integers(0, shape[0], runs), rng.integers(0, shape[1], runs)], 1)
+    simulate(scenario, "T1", "full", starts[:2], np.arange(2), 1, 3)  # kernels loaded
+    before = _memory_mib("VmRSS")
+    start = time.perf_counter()
+    simulate(scenario, "T1", "full", starts, np.arange(runs), 1, 100)
+    seconds = time.perf_counter() - start
+    peak = _memory_mib("VmHWM")
+    return {"runs": runs, "grid": list(shape), "cells": shape[0] * shape[1],
+            "seconds": seconds, "peak_mib": peak, "before_mib": before}
+
+
+def scaling() -> list[dict]:
+    """Every scaling point, each in a fresh process (its own peak memory)."""
+    import concurrent.futures
+    import multiprocessing
+
+    points = [(r, SCALING_GRIDS[0]) for r in SCALING_RUNS]
+    points += [(100, g) for g in SCALING_GRIDS[1:]]
+    out = []
+    context = multiprocessing.get_context("spawn")
+    for runs, shape in points:
+        with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+            out.append(pool.submit(_scaling_point, runs, shape).result())
+    base = out[0]["seconds"] / (out[0]["runs"] * out[0]["cells"])
+    for point in out:
+        point["cost_per_run_cell_relative"] = (point["seconds"] / (point["runs"] * point["cells"])
+                                               / base)
+    return out
+
+
+def plot_scaling(points: list[dict], path: Path) -> None:
+    from runner import figures
+
+    fig = figures.figure(figsize=(9, 3.4))
+    axes = fig.subplots(1, 2)
+    by_runs = [p for p in points if p["cells"] == points[0]["cells"]]
+    by_grid = [p for p in points if p["runs"] == 100]
+    def added(p):  # the memory the simulation adds to the process
+        return p["peak_mib"] - p["before_mib"]
+
+    for ax, value, label in ((axes[0], lambda p: p["seconds"],
+                              "wall seconds (T1, full model, 100 steps)"),
+                             (axes[1], added, "peak memory added (MiB)")):
+        for group, name, marker in ((by_runs, "runs 25 / 100 / 400 on 30 x 60", "o"),
+                                    (by_grid, "100 runs on 30 x 60 / 60 x 120 / 120 x 240",
+                                     "s")):
+            x = [p["runs"] * p["cells"] for p in group]
+            ax.plot(x, [value(p) for p in group], marker=marker, label=name)
+        # linear growth from the smallest point: the measured points stay at or below it
+        low = min(points, key=lambda p: p["runs"] * p["cells"])
+        x = np.array([low["runs"] * low["cells"], max(p["runs"] * p["cells"] for p in points)])
+        ax.plot(x, value(low) * x / x[0], ":", color="0.5", label="linear from the smallest")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("runs x cells")
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def whole(workers: int, repeats: int, report: bool = False) -> tuple[float, float | None]:
     """Median wall seconds of the experiment, and of its report (with the animation) when
     ``report``, each into a fresh folder."""
@@ -227,7 +330,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--naive-runs", type=int, default=2)
     parser.add_argument("--out", default="results/benchmarks/experiment.json")
+    parser.add_argument("--plot", default=None, help="a PNG of the scaling points")
+    parser.add_argument("--only-scaling", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.only_scaling:
+        points = scaling()
+        print(json.dumps(points, indent=1))
+        if args.plot:
+            plot_scaling(points, Path(args.plot))
+        return 0
     load_experiment(PAPER)  # compile the kernels before timing
     simulate(load_experiment(PAPER).scenario, "T1", "full", np.array([[3, 3]]), np.array([0]),
              0, 15)
@@ -235,6 +346,9 @@ def main(argv: list[str] | None = None) -> int:
     two, report = whole(2, args.repeats, report=True)
     parts = split()
     decision = decision_ratio()
+    points = scaling()
+    if args.plot:
+        plot_scaling(points, Path(args.plot))
     ref = naive(args.naive_runs)
     lines = [
         f"paper experiment (150,000 decisions), median of {args.repeats}:",
@@ -248,6 +362,11 @@ def main(argv: list[str] | None = None) -> int:
         f"{decision['ratio']:.2f} ({decision['decisions']:,} decisions, every task, full and "
         f"without_R; {100 * decision['agreeing_runs_share']:.0f}% in runs whose paths agree "
         "step for step)",
+        "scaling (T1, full model, 100 steps, one process):",
+        *(f"  {p['runs']:>4} runs on {p['grid'][0]:>3} x {p['grid'][1]:<3} {p['seconds']:7.2f} s"
+          f"  peak {p['peak_mib']:6.0f} MiB ({p['peak_mib'] - p['before_mib']:5.0f} MiB added)"
+          f"  cost per run x cell "
+          f"{p['cost_per_run_cell_relative']:.2f}x the smallest" for p in points),
         f"naive reference: {ref['seconds_per_run']:.2f} s per run of 100 iterations, measured on "
         f"{ref['sample_runs']} run(s) and extrapolated to 1,500 runs: "
         f"{ref['extrapolated_seconds']:.0f} s",
@@ -258,7 +377,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"one_process_s": one, "two_workers_s": two, "report_s": report,
-                               "split_s": parts, "decision": decision, "naive": ref},
+                               "split_s": parts, "decision": decision, "scaling": points,
+                               "naive": ref},
                               indent=2))
     print(f"written to {out}")
     return 0
