@@ -364,6 +364,101 @@ def approximate_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _network_question(name: str, tmp: Path) -> tuple[Path, str, dict]:
+    """The benchmark's question on network ``name`` and one evidence set (first states)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bif = tmp / f"{name}.bif"
+        bif.write_text(gzip.open(EXAMPLES / f"{name}.bif.gz", "rt").read())
+        model = read_network(bif)
+    path = tmp / f"{name}.yaml"
+    path.write_text(dump_document(network_to_document(model, name)))
+    rng = np.random.default_rng(sum(map(ord, name)))
+    names = sorted(model.nodes())
+    chosen = rng.choice(len(names), size=5, replace=False)
+    target, observed = names[chosen[0]], [names[i] for i in chosen[1:]]
+    cpds = {c.variable: c for c in model.get_cpds()}
+    evidence = {v: str(cpds[v].state_names[v][0]) for v in observed}
+    return path, f"P({target} | {', '.join(observed)})", evidence
+
+
+def cost_model(networks: list[str], grids: list[int], repeats: int, tmp: Path) -> dict:
+    """The cost model's estimates beside measured times: for each network and grid, the
+    contraction of one question (warm) and the compilation of its table, in operations
+    (``Cost.operations + fixed``, ``Cost.setup``) and seconds. One rate (operations per second,
+    the median over every measurement) turns estimates into predicted seconds; the ratio of
+    measured to predicted says how far the model is from the clock. Also the first query of
+    each grid (the method the cost model chose, and its seconds)."""
+    from bayesprog.inference.binding import bind
+    from bayesprog.inference.cost import ranked
+    from bayesprog.inference.methods import registered_methods
+    from bayesprog.inference.plan import QuestionPlan
+
+    cases = [(name, *_network_question(name, tmp)) for name in networks]
+    for n in grids:
+        _, path = grid_network(n, tmp)
+        cases.append((f"grid {n} x {n}", path, f"P(X{n // 2}_{n // 2} | X0_0, X{n - 1}_{n - 1})",
+                      {"X0_0": 1, f"X{n - 1}_{n - 1}": 0}))
+    points, first = [], {}
+    for name, path, question, evidence in cases:
+        program = bayesprog.load(path)
+        if name.startswith("grid"):
+            start = time.perf_counter()
+            answer = program.ask(question, evidence)
+            first[name] = {"seconds": time.perf_counter() - start, "method": answer.method}
+        plan = QuestionPlan(program, program.question(question),
+                            bind(program, program.question(question), evidence, None, None), {})
+        costs = {method.name: cost for method, cost in ranked(plan)}
+        program.ask(question, evidence, method="contraction")
+        seconds = median_time(lambda p=program, q=question, e=evidence:
+                              p.ask(q, e, method="contraction"), repeats)
+        c = costs["contraction"]
+        points.append({"case": name, "what": "contraction", "operations": c.operations + c.fixed,
+                       "seconds": seconds})
+        if "table" in costs:
+            def compile_table(p=path, q=question, e=evidence):
+                fresh = bayesprog.load(p)
+                plan = QuestionPlan(fresh, fresh.question(q),
+                                    bind(fresh, fresh.question(q), e, None, None), {})
+                start = time.perf_counter()
+                table_method._compile(plan)
+                return time.perf_counter() - start
+            points.append({"case": name, "what": "table compilation",
+                           "operations": costs["table"].setup,
+                           "seconds": statistics.median(compile_table() for _ in range(repeats))})
+        if name.startswith("grid"):  # the approximate methods, where they would be asked
+            for method in ("lbp", "lw"):
+                estimate = registered_methods()[method].estimate(plan)
+                seconds = median_time(lambda p=program, q=question, e=evidence, m=method:
+                                      p.ask(q, e, method=m, rng=0), repeats)
+                points.append({"case": name, "what": method,
+                               "operations": estimate.operations + estimate.fixed,
+                               "seconds": seconds})
+    rate = statistics.median(p["operations"] / p["seconds"] for p in points)
+    for p in points:
+        p["measured_over_predicted"] = p["seconds"] / (p["operations"] / rate)
+    worst = max(max(p["measured_over_predicted"], 1 / p["measured_over_predicted"])
+                for p in points)
+    return {"operations_per_second": rate, "points": points, "worst_factor": worst,
+            "first_query": first}
+
+
+def cost_model_table(result: dict) -> str:
+    lines = [f"{'case':<16} {'estimate':<18} {'operations':>11} {'seconds':>9} "
+             f"{'measured / predicted':>21}"]
+    lines.append("-" * len(lines[0]))
+    for p in result["points"]:
+        lines.append(f"{p['case']:<16} {p['what']:<18} {p['operations']:>11.3g} "
+                     f"{p['seconds']:>9.5f} {p['measured_over_predicted']:>21.2f}")
+    lines.append(f"one rate for every estimate: {result['operations_per_second']:.3g} operations "
+                 f"per second; the estimates are within {result['worst_factor']:.1f}x of the "
+                 "clock")
+    for name, f in result["first_query"].items():
+        lines.append(f"{name}: first query {f['seconds']:.3f} s ({f['method']}, chosen by the "
+                     "cost model)")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--networks", nargs="+", default=NETWORKS)
@@ -382,14 +477,20 @@ def main(argv: list[str] | None = None) -> int:
         for n in args.grids:
             approximate.append(bench_approximate(n, min(args.repeats, 3), Path(tmp)))
             print(f"measured the {n} x {n} grid", file=sys.stderr)
+        table_method.TABLE_LIMIT = TABLE_LIMIT
+        model = cost_model(args.networks, [n for n in args.grids if n <= 16] or [12, 16],
+                           min(args.repeats, 3), Path(tmp))
+        print("measured the cost model", file=sys.stderr)
     print(table(rows))
     if approximate:
         print()
         print(approximate_table(approximate))
+    print()
+    print(cost_model_table(model))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"repeats": args.repeats, "rows": rows,
-                               "approximate": approximate}, indent=2))
+                               "approximate": approximate, "cost_model": model}, indent=2))
     print(f"written to {out}")
     return 0
 

@@ -84,12 +84,28 @@ def test_the_methods_agree_on_a_batch():
                                    brute(tables["joint"], "A", {"B": b, "C": c}), rtol=1e-12)
 
 
-def test_cost_model_picks_the_table_where_it_applies():
+def test_cost_model_compiles_the_table_once_it_pays():
+    """A table's compilation is a setup: the table is chosen once the questions of its layout
+    have spent as much on contraction (ski rental), at once for a large batch."""
     program, _ = chain(1)
     question = program.question("P(A | C)")
     plan = QuestionPlan(program, question, bind(program, question, {"C": 0}, None, None))
-    order = [method.name for method, _ in ranked(plan)]
-    assert order == ["table", "contraction"]
+    costs = {method.name: cost for method, cost in ranked(plan)}
+    assert list(costs) == ["contraction", "table"]  # one question: no table yet
+    per_call = costs["contraction"].operations + costs["contraction"].fixed
+    table = costs["table"]
+    assert table.setup > per_call
+    expected = next(k for k in range(1000) if table.operations + table.fixed
+                    + max(table.setup - k * per_call, 0.0) < per_call)
+    used = [program.ask("P(A | C)", {"C": k % 2}).method for k in range(expected + 5)]
+    assert used == ["contraction"] * expected + ["table"] * 5
+    # a batch large enough pays for the table at once
+    rows = 100_000
+    contraction = costs["contraction"]
+    assert (rows * contraction.operations + contraction.fixed
+            > rows * table.operations + table.fixed + table.setup)
+    fresh, _ = chain(1)
+    assert fresh.ask("P(A | C)", {"C": [0, 1] * (rows // 2)}).method == "table"
 
 
 def test_cost_model_skips_the_table_with_continuous_evidence():

@@ -14,6 +14,7 @@ joint table, exact) and ``contraction`` (scaled tensor contraction, exact).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -65,6 +66,12 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     ranked_size, methods = found
     cap = limit("entries")
     fitting = [(m, c) for m, c in methods if c.memory / ranked_size * bound.size <= cap]
+    # a method with a setup (a table compiled once) is chosen once the questions of this
+    # layout have spent as much on the others as the setup costs: never more than twice the
+    # cost of the better choice in hindsight (ski rental)
+    spent = program.inference_cache.spent.get(key[2:], 0.0)
+    fitting.sort(key=lambda mc: mc[1].operations / ranked_size * bound.size + mc[1].fixed
+                 + max(mc[1].setup - spent, 0.0))
     if not fitting:
         method_, cost = methods[0]
         approximate = ", ".join(name for name, m in registered_methods().items()
@@ -73,10 +80,13 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                    f"{question.expression} (by {method_.name}, the exact method that needs "
                    "least)", hint=f"; or ask an approximate method ({approximate}): method=... "
                    "in Python, --method on the command line" if approximate else "")
-    for method_, _ in fitting:
+    for method_, cost in fitting:
         answer = method_.posterior(plan)
         if answer is not None:
             answer.method = answer.method or method_.name
+            program.inference_cache.spent[key[2:]] = (
+                math.inf if cost.setup else
+                spent + cost.operations / ranked_size * bound.size + cost.fixed)
             return answer
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 

@@ -19,6 +19,81 @@ class Factor:
     batched: bool
 
 
+#: Above this many operations, opt_einsum's greedy path is set beside a min-fill elimination
+#: order and the cheaper one taken.
+SECOND_OPINION = 1e6
+
+
+def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any]:
+    """The contraction path for ``equation`` (opt_einsum's notation) over ``shapes``, and
+    opt_einsum's account of it (``opt_cost``, ``largest_intermediate``).
+
+    opt_einsum's greedy path, or where it costs more than ``SECOND_OPINION`` operations, the
+    cheaper of it and the path of a min-fill elimination order (variable elimination's classic
+    heuristic: eliminate the index whose neighbours need the fewest new links). On grid-like
+    networks greedy contraction is several times costlier than min-fill (16 x 16 binary grid:
+    6.8e8 against 1.9e8 operations); both are deterministic."""
+    path, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize="greedy")
+    if len(shapes) < 3 or info.opt_cost <= SECOND_OPINION:
+        return path, info
+    other = _min_fill_path(equation, shapes)
+    other_path, other_info = opt_einsum.contract_path(equation, *shapes, shapes=True,
+                                                      optimize=other)
+    if other_info.opt_cost < info.opt_cost:
+        return other_path, other_info
+    return path, info
+
+
+def _min_fill_path(equation: str, shapes: list[tuple[int, ...]]) -> list[tuple[int, ...]]:
+    """A contraction path from a min-fill elimination order: for each index in turn, the
+    operands that hold it contracted pairwise, smallest first (the output's indices stay)."""
+    inputs, output = equation.split("->")
+    operands = [frozenset(term) for term in inputs.split(",")]
+    card: dict[str, int] = {}  # in order of first appearance: ties go to the earliest index
+    for text, shape in zip(inputs.split(","), shapes, strict=True):
+        card.update(zip(text, shape, strict=True))
+    first = {a: i for i, a in enumerate(card)}
+    adjacent: dict[str, set[str]] = {a: set() for a in card}
+    for operand in operands:
+        for a in operand:
+            adjacent[a] |= operand - {a}
+
+    def score(v: str) -> tuple[int, float, int]:
+        around = list(adjacent[v])
+        fill = sum(1 for i, x in enumerate(around) for y in around[i + 1:]
+                   if y not in adjacent[x])
+        return fill, float(np.prod([card[x] for x in around])), first[v]
+
+    todo = set(card) - set(output)
+    scores: dict[str, tuple[int, float, int]] = {v: score(v) for v in todo}
+    path: list[tuple[int, ...]] = []
+    current = list(operands)
+
+    def size(term: frozenset[str]) -> float:
+        return float(np.prod([card[a] for a in term]))
+
+    while todo:
+        v = min(todo, key=scores.__getitem__)
+        todo.discard(v)
+        holding = [i for i, term in enumerate(current) if v in term]
+        while len(holding) > 1:
+            i, j = sorted(holding, key=lambda k: size(current[k]))[:2]
+            path.append((i, j))
+            merged = current[i] | current[j]
+            current = [t for k, t in enumerate(current) if k not in (i, j)] + [merged]
+            holding = [k for k, term in enumerate(current) if v in term]
+        around = adjacent.pop(v)
+        for x in around:
+            adjacent[x].discard(v)
+            adjacent[x] |= around - {x}
+        touched = set(around).union(*(adjacent[x] for x in around)) if around else set()
+        for x in touched & todo:
+            scores[x] = score(x)
+    if len(current) > 1:
+        path.append(tuple(range(len(current))))
+    return path
+
+
 class Plans:
     """A cache of opt_einsum contraction expressions keyed by the operands' layout."""
 
@@ -39,7 +114,9 @@ class Plans:
                      for f in operands]
             out = (batch if batched_out else "") + "".join(sym[a] for a in output)
             eq = ",".join(terms) + "->" + out
-            expr = opt_einsum.contract_expression(eq, *(f.log.shape for f in operands))
+            shapes = [f.log.shape for f in operands]
+            path, _ = contraction_path(eq, shapes)
+            expr = opt_einsum.contract_expression(eq, *shapes, optimize=path)
             self._cache[key] = expr
         return expr
 
@@ -57,6 +134,8 @@ class InferenceCache:
     #: the methods that apply to a layout of question, cheapest first, with their estimates
     #: and the batch size they were made for
     rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
+    #: operations spent so far on a layout of question (inf once a method's setup is paid)
+    spent: dict[Any, float] = field(default_factory=dict)
     #: a named method's estimate for a layout of question, and the batch size it was made for
     estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
     #: programs derived from this one for a method (its real variables on bins, ...)

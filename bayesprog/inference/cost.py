@@ -17,7 +17,8 @@ def ranked(plan: QuestionPlan, exact: bool = True) -> list[tuple[Method, Cost]]:
             continue
         cost = method.estimate(plan)
         if cost is not None:
-            found.append((cost.operations, cost.memory, order, method, cost))
+            found.append((cost.operations + cost.fixed + cost.setup, cost.memory, order, method,
+                          cost))
     found.sort(key=lambda item: item[:3])
     if exact and not found:
         # no exact method: one that answers approximately and states its error

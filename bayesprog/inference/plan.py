@@ -12,6 +12,7 @@ import opt_einsum
 
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
+from bayesprog.inference.core import contraction_path
 from bayesprog.inference.factors import latent_continuous, relevant_terms
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
@@ -65,5 +66,5 @@ class QuestionPlan:
                       + [float(np.prod([self.card(v) for v in output]))])
         if len(operands) < 2:
             return largest, largest
-        _, info = opt_einsum.contract_path(equation, *shapes, shapes=True)
+        _, info = contraction_path(equation, shapes)
         return float(info.opt_cost), max(float(info.largest_intermediate), largest)

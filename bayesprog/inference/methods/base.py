@@ -20,10 +20,21 @@ from bayesprog.inference.plan import QuestionPlan
 @dataclass(frozen=True)
 class Cost:
     """A method's estimate for one question over its whole batch: arithmetic operations and
-    the largest array it allocates (entries)."""
+    the largest array it allocates (entries); ``fixed``: operations a call costs whatever its
+    batch size (the handling of each factor, in ``PER_FACTOR`` units); ``setup``: operations
+    paid once for every later question of the same layout (a compiled table), not per call."""
 
     operations: float
     memory: float
+    fixed: float = 0.0
+    setup: float = 0.0
+
+
+#: What handling one factor costs a call (binding, slicing, rescaling, one step of the
+#: contraction: about 20 microseconds), in arithmetic operations (about 1e9 per second on the
+#: benchmark's machine), so that a cost model in operations also ranks small questions, whose
+#: time this overhead dominates.
+PER_FACTOR = 2e4
 
 
 class Method:

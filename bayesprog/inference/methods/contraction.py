@@ -11,7 +11,7 @@ from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import question_factors, rescaled
-from bayesprog.inference.methods.base import Cost, Method, answer, register_method
+from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
 
@@ -23,7 +23,9 @@ class ContractionMethod(Method):
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         operations, largest = plan.contraction_cost(plan.searched)
-        return Cost(operations=plan.bound.size * operations, memory=plan.bound.size * largest)
+        factors = len(plan.terms) + len(plan.bound.soft)
+        return Cost(operations=plan.bound.size * operations, memory=plan.bound.size * largest,
+                    fixed=PER_FACTOR * factors)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         return contract_question(plan)

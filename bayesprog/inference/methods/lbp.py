@@ -16,11 +16,13 @@ from scipy.special import logsumexp
 from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.factors import question_factors, rescaled
-from bayesprog.inference.methods.base import Cost, Method, answer, register_method
+from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
 #: Sweeps over all messages at most, and the change of a message that counts as converged.
 MAX_ITERATIONS, TOLERANCE = 200, 1e-10
+#: Sweeps the cost model counts on (grids of binary variables converge in 20 to 25)
+EXPECTED_ITERATIONS = 25
 
 
 @register_method
@@ -30,10 +32,14 @@ class LoopyBeliefPropagation(Method):
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         sizes = [plan.free_size(t.axes) for t in plan.terms] or [1]
-        iterations = plan.options.get("max_iterations", MAX_ITERATIONS)
+        iterations = min(plan.options.get("max_iterations", MAX_ITERATIONS), EXPECTED_ITERATIONS)
         size = float(plan.bound.size)
+        # a sweep handles each group of factors of one shape in a few array operations: about
+        # 16 x PER_FACTOR per group and sweep (measured on grids, benchmarks/engine.py)
+        groups = len({tuple(plan.card(a) for a in t.axes if a not in plan.bound.discrete)
+                      for t in plan.terms})
         return Cost(operations=size * iterations * sum(sizes) * 4,
-                    memory=size * max(sizes))
+                    memory=size * max(sizes), fixed=iterations * 16 * PER_FACTOR * groups)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.methods.base import Cost, Method, answer, register_method
+from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.sampling import draw, generators
 
@@ -39,7 +39,10 @@ class LikelihoodWeighting(Method):
         n = plan.options.get("samples", DEFAULT_SAMPLES)
         cards = [plan.card(t.child.name) for t in plan.terms if t.child.is_discrete] or [1]
         draws = float(plan.bound.size) * n
-        return Cost(operations=draws * sum(cards), memory=draws * max(cards))
+        # a draw of a term gathers its row, sums and compares it: about 60 operations per
+        # state (measured on grids, benchmarks/engine.py)
+        return Cost(operations=60 * draws * sum(cards), memory=draws * max(cards),
+                    fixed=PER_FACTOR * len(plan.terms))
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched
