@@ -47,22 +47,26 @@ def border_band(border: np.ndarray) -> np.ndarray:
     return ndimage.maximum_filter(border, size=3, mode="constant")
 
 
-def behaviour(paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
+def behaviour(paths: np.ndarray, border: np.ndarray,
+              centres: np.ndarray | None = None) -> dict[str, float]:
     """How the walker moved, over runs ``paths`` [runs, K] (flat cells) for a task's ``border``
-    (grid-shaped, bool).
+    (grid-shaped, bool); ``centres`` [cells, 2] (metres) for the path length.
 
     * ``enrichment``: share of visits within one cell of the border / that band's share of cells
       (1 for visits spread evenly, higher when they concentrate on the border);
     * ``reached``: share of runs that probe a border cell; ``reach_step``: median step of the
       first such probe among them;
-    * ``border_probed``: mean share of the border's cells probed per run;
+    * ``border_probed``: mean share of the border's cells probed per run (border recall);
+    * ``precision``: share of the probes that fall on a border cell;
+    * ``path_length``: mean distance travelled per run, metres, from probe to probe (with
+      ``centres``);
     * ``distinct``: mean number of distinct cells probed per run;
     * ``returns``: share of steps that go back to the cell of two steps before (oscillation).
 
     >>> border = np.zeros((3, 3), bool); border[1, 1] = True
     >>> b = behaviour(np.array([[0, 4, 0, 4]]), border)
-    >>> b["reached"], b["reach_step"], b["distinct"], b["returns"]
-    (1.0, 1.0, 2.0, 1.0)
+    >>> b["reached"], b["reach_step"], b["distinct"], b["returns"], b["precision"]
+    (1.0, 1.0, 2.0, 1.0, 0.5)
     """
     flat_border = border.ravel()
     band = border_band(border).ravel()
@@ -70,7 +74,13 @@ def behaviour(paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
     reached = on.any(axis=1)
     first = np.argmax(on, axis=1)
     probed_share = [flat_border[np.unique(p)].sum() / max(flat_border.sum(), 1) for p in paths]
+    length = {}
+    if centres is not None:
+        steps = np.linalg.norm(np.diff(centres[paths], axis=1), axis=-1)  # [runs, K - 1]
+        length["path_length"] = float(steps.sum(axis=1).mean())
     return {
+        "precision": float(on.mean()),
+        **length,
         "enrichment": float(band[paths].mean() / band.mean()),
         "reached": float(reached.mean()),
         "reach_step": float(np.median(first[reached])) if reached.any() else float("nan"),

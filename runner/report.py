@@ -64,7 +64,8 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
                                                 if borders[task] else float("nan")),
                    "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
             if scenario is not None:
-                row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task)))
+                row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task),
+                                     scenario.centres))
             if full is not None and conf != "full":
                 row["p_final"] = paired_test(final, full["gamma"][:, -1])
                 row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
@@ -572,14 +573,16 @@ def following_step(paths: np.ndarray, border: np.ndarray, iterations: int) -> tu
 
 def _behaviour_lines(rows: list[dict]) -> list[str]:
     lines = ["| task | configuration | enrichment near the border | runs reaching it | median "
-             "step of first reach | border cells probed | distinct cells per run | returns "
-             "to the cell of two steps before |", "|---|---|---|---|---|---|---|---|"]
+             "step of first reach | border cells probed (recall) | probes on the border "
+             "(precision) | path length per run (m) | distinct cells per run | returns to the "
+             "cell of two steps before |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "enrichment" in r:
+            length = f"{r['path_length']:.2f}" if "path_length" in r else "-"
             lines.append(f"| {r['task']} | {r['configuration']} | {r['enrichment']:.2f}x | "
                          f"{100 * r['reached']:.0f}% | {r['reach_step']:.0f} | "
-                         f"{100 * r['border_probed']:.0f}% | {r['distinct']:.1f} | "
-                         f"{100 * r['returns']:.0f}% |")
+                         f"{100 * r['border_probed']:.0f}% | {100 * r['precision']:.0f}% | "
+                         f"{length} | {r['distinct']:.1f} | {100 * r['returns']:.0f}% |")
     return lines
 
 

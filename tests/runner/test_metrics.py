@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
-from runner.metrics import BorderDistance, gamma_brute_force
+from runner.metrics import BorderDistance, behaviour, gamma_brute_force
 from runner.scenario import inside, load_scenario, outline_points
 
 MODELS = Path(__file__).parents[2] / "models"
@@ -239,3 +239,29 @@ def test_paper_templates_are_centred_outline_points():
         # the centred polygon is the YAML polygon shifted by the same vector as the points
         raw = np.asarray(scenario.spec.templates[name], float)
         np.testing.assert_allclose(poly - poly[0], raw - raw[0], atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), steps=st.integers(2, 30))
+def test_behaviour_metrics_by_brute_force(seed, runs, steps):
+    """Recall, precision, first reach and path length, counted probe by probe."""
+    rng = np.random.default_rng(seed)
+    nx, ny, cell = 5, 7, 0.01
+    border = rng.random((nx, ny)) < 0.3
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    centres = (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * cell
+    paths = rng.integers(0, nx * ny, (runs, steps))
+    got = behaviour(paths, border, centres)
+    flat = border.ravel()
+    on = [[bool(flat[c]) for c in run] for run in paths]
+    assert got["precision"] == pytest.approx(sum(map(sum, on)) / (runs * steps))
+    if flat.any():
+        recall = [len({c for c in run if flat[c]}) / flat.sum() for run in paths]
+        assert got["border_probed"] == pytest.approx(np.mean(recall))
+    firsts = [row.index(True) for row in on if any(row)]
+    assert got["reached"] == pytest.approx(len(firsts) / runs)
+    if firsts:
+        assert got["reach_step"] == pytest.approx(np.median(firsts))
+    lengths = [sum(float(np.hypot(*(centres[b] - centres[a]))) for a, b in zip(run, run[1:]))
+               for run in paths]
+    assert got["path_length"] == pytest.approx(np.mean(lengths))
