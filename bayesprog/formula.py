@@ -76,6 +76,17 @@ class Formula:
         with np.errstate(all="ignore"):
             return np.asarray(_evaluate(self.tree, values), dtype=float)
 
+    def affine_in(self, targets: Collection[str]) -> bool:
+        """Whether the formula is affine in ``targets``, its other names taken as constants
+        (``"gain*X + 1"`` is affine in X; its coefficient is then known once gain is).
+
+        >>> parse_formula("gain*X + Y/2").affine_in(["X", "Y"]), parse_formula("X*Y").affine_in(["X"])
+        (True, True)
+        >>> parse_formula("X*Y").affine_in(["X", "Y"]), parse_formula("exp(X)").affine_in(["X"])
+        (False, False)
+        """
+        return _degree(self.tree, targets) is not None
+
     def affine(self) -> tuple[float, dict[str, float]] | None:
         """``(intercept, {name: coefficient})`` when the formula is affine in its names (every
         name kept, with 0.0 where its terms cancel), else None (also when a coefficient is
@@ -88,6 +99,29 @@ class Formula:
         if not np.all(np.isfinite([intercept, *coefficients.values()])):
             return None
         return intercept, {n: coefficients.get(n, 0.0) for n in self.names}
+
+
+def _degree(node: ast.AST, targets: Collection[str]) -> int | None:
+    """0 where ``node`` holds none of ``targets``, 1 where it is affine in them, else None."""
+    names = {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
+    if not names & set(targets):
+        return 0
+    if isinstance(node, ast.Name):
+        return 1
+    if isinstance(node, ast.UnaryOp):
+        return _degree(node.operand, targets)
+    if not isinstance(node, ast.BinOp):
+        return None  # a call or a power of a target
+    left, right = _degree(node.left, targets), _degree(node.right, targets)
+    if left is None or right is None:
+        return None
+    if isinstance(node.op, (ast.Add, ast.Sub)):
+        return max(left, right)
+    if isinstance(node.op, ast.Mult):
+        return left + right if left + right <= 1 else None
+    if isinstance(node.op, ast.Div):
+        return left if right == 0 else None
+    return None
 
 
 def parse_formula(text: str, names: Collection[str] | None = None) -> Formula:

@@ -250,6 +250,57 @@ decomposition:
     assert "not affine" in str(err.value) and "unbounded support" in str(err.value)
 
 
+def test_a_formula_may_use_runtime_inputs():
+    """mean: "gain*X + offset" with gain and offset given per question (batched): the
+    coefficient of X is known once gain is, so the answer is still exact Gaussian algebra."""
+    p = program("""
+variables:
+  X: {continuous: [-.inf, .inf]}
+  Z: {continuous: [-.inf, .inf]}
+inputs:
+  gain: {}
+  offset: {}
+decomposition:
+  - {term: P(X), form: normal, mean: 1, sigma: 2}
+  - {term: P(Z | X), form: normal, mean: "gain*X + offset", sigma: 0.5}
+""")
+    gain, offset, z = np.array([0.5, 2.0, -1.0]), np.array([0.0, 1.0, 3.0]), 2.0
+    d = p.ask("P(X | Z)", {"Z": z}, inputs={"gain": gain, "offset": offset})
+    assert d.method == "gaussian"
+    for r in range(3):  # Z = g X + o + noise: the closed form per row
+        m, c, loglik = gaussian_condition(
+            np.array([1.0, gain[r] * 1.0 + offset[r]]),
+            np.array([[4.0, 4.0 * gain[r]], [4.0 * gain[r], 4.0 * gain[r] ** 2 + 0.25]]),
+            [1], [z])
+        assert float(d.mean("X")[r]) == pytest.approx(m[0], abs=1e-12)
+        assert float(d.sd("X")[r]) == pytest.approx(np.sqrt(c[0, 0]), abs=1e-12)
+        assert float(d.log_evidence[r]) == pytest.approx(loglik, abs=1e-10)
+    # drawn: Z follows its formula with the inputs of the draw
+    draws = p.sample(4000, inputs={"gain": 2.0, "offset": 1.0}, rng=2)
+    assert stats.kstest((draws["Z"] - 2 * draws["X"] - 1) / 0.5, stats.norm.cdf).pvalue > 1e-3
+    with pytest.raises(QuestionError, match="missing input 'gain'"):
+        p.ask("P(X | Z=1)", inputs={"offset": 0.0})
+
+
+def test_a_formula_refuses_an_input_with_a_shape(tmp_path):
+    path = tmp_path / "shaped.yaml"
+    path.write_text("""bayesprog: 1
+variables:
+  X: {continuous: [-.inf, .inf]}
+  Z: {continuous: [-.inf, .inf]}
+inputs:
+  gains: {shape: [3]}
+decomposition:
+  - {term: P(X), form: normal, mean: 0, sigma: 1}
+  - {term: P(Z | X), form: normal, mean: "gains*X", sigma: 1}
+""")
+    with pytest.raises(SpecError) as err:
+        bayesprog.load(path)
+    (diag,) = err.value.diagnostics
+    assert (diag.line, diag.column) == (9, 42)
+    assert "a formula takes scalar inputs" in diag.message
+
+
 # discretised variables --------------------------------------------------------------------------
 def test_discretised_variable_bins_take_the_integral_and_may_have_discrete_children():
     p = program("""
@@ -369,6 +420,24 @@ def test_terms_with_formulas_are_kept_when_fitting_the_others():
     data.loc[3, "East"] = np.nan
     with pytest.raises(DataError, match="uses East in its 'mean'"):
         p.fit(data, freeze=formulas)
+
+
+def test_a_data_column_of_a_discretised_variable_holds_numbers():
+    p = program("""
+variables:
+  T: {continuous: [-.inf, .inf], discretise: {bins: [10, 15, 20, 25]}}
+  Fan: {states: ["on", "off"]}
+decomposition:
+  - {term: P(T), form: normal, mean: 18, sigma: 4, learn: false}
+  - {term: P(Fan | T), form: table, table: [0.5, 0.5]}
+""")
+    data = {"T": [12.0, 16.0, 21.0, 22.0, "[10, 15)", 30.0], "Fan": ["off", "on", "on", "on",
+                                                                      "off", "off"]}
+    fitted = p.fit(data).estimate.params["P(Fan | T)"]["table"].array
+    # 30 is in the last bin (the outer bins take the tails)
+    np.testing.assert_array_equal(fitted, [[0, 1], [1, 0], [2 / 3, 1 / 3]])
+    with pytest.raises(DataError, match="'hot' is neither a number"):
+        p.fit({"T": ["hot"], "Fan": ["on"]})
 
 
 # errors at their place --------------------------------------------------------------------------

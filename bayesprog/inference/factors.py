@@ -43,11 +43,12 @@ def latent_continuous(program: ProgramLike, terms: list[Term], bound: Bound) -> 
 
 def is_static(term: Term) -> bool:
     """A term whose factor does not depend on the question's evidence or inputs."""
+    discrete = {p.name for p in term.parents if p.is_discrete}
     return (
         term.child.is_discrete
         and term.form.name != "program"
         and not any(isinstance(v, InputRef) or (isinstance(v, FormulaParam) and any(
-            not term_var.is_discrete for term_var in term.parents if term_var.name in v.names))
+            name not in discrete for name in v.names))  # a real parent, or an input
             for v in term.params.values())
     )
 

@@ -30,24 +30,30 @@ from bayesprog.variables import Discrete, Variable
 
 def formula_value(variables: Mapping[str, Variable], param: FormulaParam, bound: Bound,
                   what: str) -> ParamValue:
-    """The values of ``param`` for the question's evidence: over the table's axes and the
-    discrete parents the formulas name, with a batch axis when an observed parent is batched.
+    """The values of ``param`` for the question's evidence and inputs: over the table's axes
+    and the discrete parents the formulas name, with a batch axis when an observed parent or an
+    input is batched. A name that is not a variable is a (scalar) runtime input.
     """
     extra = tuple(n for n in param.names
-                  if isinstance(variables[n], Discrete) and n not in param.axes)
+                  if isinstance(variables.get(n), Discrete) and n not in param.axes)
     axes = param.axes + extra
     cards = [variables[a].card for a in extra]  # type: ignore[union-attr]
-    batched = any(n in bound.continuous and bound.continuous[n].batched for n in param.names)
+    known = {n: bound.continuous[n] if n in variables else bound.inputs[n]
+             for n in param.names if n in bound.continuous or
+             (n not in variables and n in bound.inputs)}
+    batched = any(pv.batched for pv in known.values())
     rows = bound.size if batched else 1
     values: dict[str, np.ndarray] = {}
     for name in param.names:
-        var = variables[name]
+        var = variables.get(name)
+        if var is None and name not in known:
+            raise QuestionError(f"missing input {name!r}, needed by {what}")
         if isinstance(var, Discrete):
             shape = [1] * (1 + len(extra))
             shape[1 + extra.index(name)] = var.card
             values[name] = np.asarray(var.values, float).reshape(shape)
-        elif name in bound.continuous:
-            pv = bound.continuous[name]
+        elif name in known:
+            pv = known[name]
             values[name] = np.asarray(pv.array, float).reshape((-1,) + (1,) * len(extra))
         else:
             raise QuestionError(f"{what}: {name} is neither known nor summed out here")

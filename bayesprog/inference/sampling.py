@@ -187,16 +187,13 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
 
 def _drawn_parents(term: Term, bound: Bound) -> tuple[str, ...]:
     """The real variables that a formula of ``term`` names and that are drawn, not known."""
+    real = {p.name for p in term.parents if not p.is_discrete}
     names: dict[str, None] = {}
     for param in term.params.values():
         if isinstance(param, FormulaParam):
             names.update({n: None for n in param.names
-                          if not _is_discrete(term, n) and n not in bound.continuous})
+                          if n in real and n not in bound.continuous})
     return tuple(names)
-
-
-def _is_discrete(term: Term, name: str) -> bool:
-    return any(p.name == name and p.is_discrete for p in term.parents)
 
 
 def _per_draw(bound: Bound, values: dict[str, np.ndarray], drawn: tuple[str, ...], rows: int,

@@ -402,10 +402,12 @@ class _Checker:
 
     def formula_param(self, term: Term, param: Param, raw: Any, path: YPath, keyable: list,
                       what: str) -> FormulaParam | ParamValue | None:
-        """A parameter given as formulas of the parents (``mean: "2*X + 1"``), possibly one per
-        state of discrete parents (``mean: {a: "X", b: "-X"}``); numbers are formulas too."""
+        """A parameter given as formulas of the parents and the runtime inputs
+        (``mean: "gain*X + 1"``), possibly one per state of discrete parents
+        (``mean: {a: "X", b: "-X"}``); numbers are formulas too."""
         formulas: list[Formula] = []
         parents = {p.name: p for p in term.parents}
+        inputs = {n: d for n, d in self.inputs.items() if n not in parents}
         failed = False
 
         def leaf(value: Any, where: YPath) -> Any:
@@ -420,12 +422,19 @@ class _Checker:
                 failed = True
                 return 0.0
             try:
-                formula = parse_formula(str(value), names=list(parents))
+                formula = parse_formula(str(value), names=list(parents) + list(inputs))
             except FormulaError as exc:
                 self.error(where, f"{what}: {exc}")
                 failed = True
                 return 0.0
             for name in formula.names:
+                if name in inputs:
+                    if inputs[name].ndim:
+                        self.error(where, f"{what}: formula {str(value)!r} uses the input "
+                                   f"{name}, which has a shape; a formula takes scalar inputs "
+                                   f"(declared as {name}: {{}})")
+                        failed = True
+                    continue
                 var = parents[name]
                 if isinstance(var, Discrete) and var.kind not in ("range", "bins"):
                     self.error(where, f"{what}: formula {str(value)!r} uses {name}, whose "

@@ -148,6 +148,14 @@ def _codes(values: np.ndarray, var: Discrete, data: Data, column: str) -> np.nda
     for row, value in enumerate(values):
         if _missing(value):
             continue
+        if var.kind == "bins":  # a number falls in its bin; a bin's name is accepted too
+            try:
+                out[row] = var.index_of(value)
+            except KeyError:
+                raise DataError(f"{data.where(row, column)}: {short_repr(value)} is neither a "
+                                f"number inside the support of {var.name} nor one of its bins "
+                                f"{var.describe_states(10)}") from None
+            continue
         key = str(value).strip()
         if isinstance(value, (bool, np.bool_)):
             key = key if key in lookup else key.lower()

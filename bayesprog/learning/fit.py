@@ -199,7 +199,9 @@ class _Em:
                           for n in discrete], axis=1) if discrete else np.zeros((self.data.rows, 0))
         self.codes = {n: codes[:, i] for i, n in enumerate(discrete)}
         for term in model:
-            inputs = [n for n, v in term.params.items() if isinstance(v, InputRef)]
+            parents = {p.name for p in term.parents}
+            inputs = [n for n, v in term.params.items() if isinstance(v, InputRef) or (
+                isinstance(v, FormulaParam) and any(x not in parents for x in v.names))]
             if inputs:
                 raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
                                 "input, so the program cannot be evaluated on data rows")

@@ -262,6 +262,6 @@ def test_behaviour_metrics_by_brute_force(seed, runs, steps):
     assert got["reached"] == pytest.approx(len(firsts) / runs)
     if firsts:
         assert got["reach_step"] == pytest.approx(np.median(firsts))
-    lengths = [sum(float(np.hypot(*(centres[b] - centres[a]))) for a, b in zip(run, run[1:]))
-               for run in paths]
+    lengths = [sum(float(np.hypot(*(centres[b] - centres[a])))
+                   for a, b in zip(run[:-1], run[1:], strict=True)) for run in paths]
     assert got["path_length"] == pytest.approx(np.mean(lengths))

@@ -91,7 +91,7 @@ def _block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
             if key != ("mean" if t.form.name == "normal" else "value") and real:
                 return [], f"{t.label}: its {key} depends on {', '.join(real)}"
             for formula in param.formulas.flat:
-                if formula.affine() is None and any(n in names for n in formula.names):
+                if not formula.affine_in(names):
                     return [], (f"{t.label}: {key} \"{formula}\" is not affine in "
                                 f"{', '.join(n for n in formula.names if n in names)}")
     order: list[Term] = []
@@ -157,13 +157,23 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
         param = t.params[key]
         if isinstance(param, FormulaParam):
             what = f"term {t.label}"
-            intercept = put(intercept, (i,), grid(formula_value(program.variables, param, zeros, what)))
+            base = formula_value(program.variables, param, zeros, what)
+            intercept = put(intercept, (i,), grid(base))
+            exact = all(f.affine() is not None for f in param.formulas.flat)
             for j, other in enumerate(names):
                 if other not in param.names:
                     continue
-                coef = np.vectorize(lambda f, o=other: f.affine()[1].get(o, 0.0),
-                                    otypes=[float])(param.formulas)
-                coefficient = put(coefficient, (i, j), grid(ParamValue(param.axes, coef)))
+                if exact:  # numbers only: the coefficients as written
+                    coef = ParamValue(param.axes, np.vectorize(
+                        lambda f, o=other: f.affine()[1].get(o, 0.0), otypes=[float])(
+                            param.formulas))
+                else:  # known names (inputs, observed parents) in a coefficient: per row
+                    unit = Bound(zeros.batch_shape, zeros.discrete,
+                                 {**zeros.continuous, other: ParamValue((), np.ones(()))},
+                                 zeros.inputs, zeros.soft)
+                    shifted = formula_value(program.variables, param, unit, what)
+                    coef = ParamValue(base.axes, shifted.array - base.array, base.batched)
+                coefficient = put(coefficient, (i, j), grid(coef))
         else:
             value = _bound_param(t, key, param, bound) if isinstance(param, InputRef) else param
             intercept = put(intercept, (i,), grid(value))
