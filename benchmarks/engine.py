@@ -105,8 +105,10 @@ def agrum_net(model) -> gum.BayesNet:
     return bn
 
 
-def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> dict:
-    table_method.TABLE_LIMIT = TABLE_LIMIT if tables else 0
+def load_network(name: str, tmp: Path):
+    """The bnlearn network ``name`` (pgmpy's model, its tables normalised), written as a
+    program file, and the benchmark's question on it: a seeded target and four observed
+    variables; returns (model, path, target, observed, the generator that chose them)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         bif = tmp / f"{name}.bif"
@@ -119,7 +121,13 @@ def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> di
     rng = np.random.default_rng(sum(map(ord, name)))
     names = sorted(model.nodes())
     chosen = rng.choice(len(names), size=5, replace=False)
-    target, observed = names[chosen[0]], [names[i] for i in chosen[1:]]
+    return model, path, names[chosen[0]], [names[i] for i in chosen[1:]], rng
+
+
+def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> dict:
+    table_method.TABLE_LIMIT = TABLE_LIMIT if tables else 0
+    model, path, target, observed, rng = load_network(name, tmp)
+    names = sorted(model.nodes())
     samples = forward_sample(model, max(BATCHES), rng)
     cpds = {c.variable: c for c in model.get_cpds()}
 
@@ -366,17 +374,7 @@ def approximate_table(rows: list[dict]) -> str:
 
 def _network_question(name: str, tmp: Path) -> tuple[Path, str, dict]:
     """The benchmark's question on network ``name`` and one evidence set (first states)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        bif = tmp / f"{name}.bif"
-        bif.write_text(gzip.open(EXAMPLES / f"{name}.bif.gz", "rt").read())
-        model = read_network(bif)
-    path = tmp / f"{name}.yaml"
-    path.write_text(dump_document(network_to_document(model, name)))
-    rng = np.random.default_rng(sum(map(ord, name)))
-    names = sorted(model.nodes())
-    chosen = rng.choice(len(names), size=5, replace=False)
-    target, observed = names[chosen[0]], [names[i] for i in chosen[1:]]
+    model, path, target, observed, _ = load_network(name, tmp)
     cpds = {c.variable: c for c in model.get_cpds()}
     evidence = {v: str(cpds[v].state_names[v][0]) for v in observed}
     return path, f"P({target} | {', '.join(observed)})", evidence
