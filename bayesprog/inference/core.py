@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import opt_einsum
+from opt_einsum import helpers
 
 
 @dataclass
@@ -22,26 +23,48 @@ class Factor:
 #: Above this many operations, opt_einsum's greedy path is set beside a min-fill elimination
 #: order and the cheaper one taken.
 SECOND_OPINION = 1e6
+#: A step that is a matrix product (BLAS) does this many operations in the time numpy's einsum
+#: does one (measured: about 5e10 against 1e9 per second on large steps, both paths of the
+#: benchmark's networks and grids); costs are counted in einsum operations.
+BLAS_SPEED = 40.0
+#: In choosing between two paths, an einsum step that sums out an index (outside BLAS) counts
+#: this many times a product: on large batched steps its loops are that much slower (insurance,
+#: 10,000 rows: greedy 0.06 s, min-fill 0.16 s); the estimate of the time counts it once
+#: (small steps, as on grids, run at the product's speed).
+EINSUM_SUM = 4.0
 
 
-def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any]:
-    """The contraction path for ``equation`` (opt_einsum's notation) over ``shapes``, and
-    opt_einsum's account of it (``opt_cost``, ``largest_intermediate``).
+def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
+    """The contraction path for ``equation`` (opt_einsum's notation) over ``shapes``,
+    opt_einsum's account of it (``largest_intermediate``, ...) and its cost in operations, a
+    matrix product's counting ``1 / BLAS_SPEED``.
 
     opt_einsum's greedy path, or where it costs more than ``SECOND_OPINION`` operations, the
     cheaper of it and the path of a min-fill elimination order (variable elimination's classic
     heuristic: eliminate the index whose neighbours need the fewest new links). On grid-like
-    networks greedy contraction is several times costlier than min-fill (16 x 16 binary grid:
-    6.8e8 against 1.9e8 operations); both are deterministic."""
+    networks the greedy path is several times costlier (16 x 16 binary grid: 6.8e8 against
+    1.9e8 operations); on batched questions over networks such as insurance, min-fill's steps
+    fall outside matrix products and greedy is faster. Both are deterministic."""
     path, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize="greedy")
-    if len(shapes) < 3 or info.opt_cost <= SECOND_OPINION:
-        return path, info
+    if len(shapes) < 3 or _weighted_cost(info) <= SECOND_OPINION:
+        return path, info, _weighted_cost(info)
     other = _min_fill_path(equation, shapes)
     other_path, other_info = opt_einsum.contract_path(equation, *shapes, shapes=True,
                                                       optimize=other)
-    if other_info.opt_cost < info.opt_cost:
-        return other_path, other_info
-    return path, info
+    if _weighted_cost(other_info, EINSUM_SUM) < _weighted_cost(info, EINSUM_SUM):
+        return other_path, other_info, _weighted_cost(other_info)
+    return path, info, _weighted_cost(info)
+
+
+def _weighted_cost(info: Any, summing: float = 1.0) -> float:
+    """A path's operations, a matrix product's counting 1 / BLAS_SPEED and an einsum step
+    that sums out an index ``summing``."""
+    total = 0.0
+    for inds, removed, einsum_str, _, blas in info.contraction_list:
+        involved = set(einsum_str.split("->")[0].replace(",", ""))
+        flops = helpers.flop_count(involved, bool(removed), len(inds), info.size_dict)
+        total += flops / BLAS_SPEED if blas else flops * (summing if removed else 1.0)
+    return total
 
 
 def _min_fill_path(equation: str, shapes: list[tuple[int, ...]]) -> list[tuple[int, ...]]:
@@ -115,7 +138,7 @@ class Plans:
             out = (batch if batched_out else "") + "".join(sym[a] for a in output)
             eq = ",".join(terms) + "->" + out
             shapes = [f.log.shape for f in operands]
-            path, _ = contraction_path(eq, shapes)
+            path, _, _ = contraction_path(eq, shapes)
             expr = opt_einsum.contract_expression(eq, *shapes, optimize=path)
             self._cache[key] = expr
         return expr

@@ -66,5 +66,5 @@ class QuestionPlan:
                       + [float(np.prod([self.card(v) for v in output]))])
         if len(operands) < 2:
             return largest, largest
-        _, info = contraction_path(equation, shapes)
-        return float(info.opt_cost), max(float(info.largest_intermediate), largest)
+        _, info, cost = contraction_path(equation, shapes)
+        return cost, max(float(info.largest_intermediate), largest)
