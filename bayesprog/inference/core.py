@@ -124,10 +124,12 @@ class Plans:
         self._cache: dict[Any, Any] = {}
 
     def get(self, operands: list[Factor], output: tuple[str, ...], batched_out: bool) -> Any:
-        # the batch size is left out of the key: a plan serves every batch size (opt_einsum
-        # checks ranks, not sizes), so batches that vary from call to call are not replanned
+        # the batch size enters the key by its order of magnitude only (powers of 4): a plan
+        # serves batches of similar sizes (opt_einsum checks ranks, not sizes), and the best
+        # path for 10,000 rows is not the best for one
+        rows = max((f.log.shape[0] for f in operands if f.batched), default=1)
         key = (tuple((f.axes, f.batched, f.log.shape[f.batched:]) for f in operands), output,
-               batched_out)
+               batched_out, rows.bit_length() // 2)
         expr = self._cache.get(key)
         if expr is None:
             names = sorted({a for f in operands for a in f.axes} | set(output))
