@@ -149,7 +149,7 @@ def perceived_sobel_2d(d, mask):
 @njit(cache=True)
 def perceived_sobel_2d_around(d, mask, out, cells):
     """``out`` (a saliency map from perceived_sobel_2d) brought up to date after the stimulus
-    or the mask changed at one cell per run (flat index ``cells[r]``, -1 for none): a cell's
+    ``d`` (numbers, or booleans read as 0 and 1) or the mask changed at one cell per run (flat index ``cells[r]``, -1 for none): a cell's
     saliency reads its 3 x 3 neighbourhood, so only the 3 x 3 cells around it change."""
     runs, nx, ny = d.shape
     for r in range(runs):

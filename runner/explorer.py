@@ -126,7 +126,6 @@ class Explorer:
         self._perceived = np.zeros((self.runs, len(self.centres)), bool)
         # and its saliency (eq. 12), brought up to date around the cells probed since the last
         # decision (a cell's saliency reads its 3 x 3 neighbourhood); nothing perceived: 0
-        self._stimulus = np.zeros((self.runs, *self.scenario.shape))
         self._saliency = np.zeros((self.runs, *self.scenario.shape))
         self._changed: list[np.ndarray] = []
         self.tracker.reset()
@@ -170,7 +169,6 @@ class Explorer:
         other = answer.probabilities[:, self.counter_materials].sum(axis=-1) >= 0.5
         self._target[rows, cells] = target
         self._perceived[rows, cells] = target | other
-        self._stimulus.reshape(self.runs, -1)[rows, cells] = target
         self._changed.append(np.asarray(cells, dtype=np.int64))
         self.path.append(cells)
         self.visits[rows, cells] += 1
@@ -193,9 +191,9 @@ class Explorer:
 
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
-        perceived = self._perceived.reshape(self._saliency.shape)
+        target, perceived = self.percept()
         for cells in self._changed:
-            perceived_sobel_2d_around(self._stimulus, perceived, self._saliency, cells)
+            perceived_sobel_2d_around(target, perceived, self._saliency, cells)
         self._changed.clear()
         s = self._saliency.reshape(self.runs, -1).copy()
         # a run where no cell has any saliency (nothing left to compare: the probed region is

@@ -46,14 +46,15 @@ def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list
     1.9e8 operations); on batched questions over networks such as insurance, min-fill's steps
     fall outside matrix products and greedy is faster. Both are deterministic."""
     path, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize="greedy")
-    if len(shapes) < 3 or _weighted_cost(info) <= SECOND_OPINION:
-        return path, info, _weighted_cost(info)
+    cost = _weighted_cost(info)
+    if len(shapes) < 3 or cost <= SECOND_OPINION:
+        return path, info, cost
     other = _min_fill_path(equation, shapes)
     other_path, other_info = opt_einsum.contract_path(equation, *shapes, shapes=True,
                                                       optimize=other)
     if _weighted_cost(other_info, EINSUM_SUM) < _weighted_cost(info, EINSUM_SUM):
         return other_path, other_info, _weighted_cost(other_info)
-    return path, info, _weighted_cost(info)
+    return path, info, cost
 
 
 def _weighted_cost(info: Any, summing: float = 1.0) -> float:

@@ -7,10 +7,10 @@ import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.expressions import Question
-from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_binned
+from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
-from bayesprog.inference.formulas import bins_log_factor, formula_value
+from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
 from bayesprog.variables import Continuous, discrete
@@ -117,10 +117,7 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
     try:
         # a value far out in a tail overflows to a log density of -inf: its exact limit
         with np.errstate(over="ignore"):
-            if is_binned(term.child) and "continuous" in term.form.child_kinds:
-                log = np.asarray(bins_log_factor(term.form, ctx), dtype=float)
-            else:
-                log = np.asarray(term.form.log_factor(ctx), dtype=float)
+            log = log_factor(term.form, ctx)
         if missing is not None:
             # a field value that is not observed: the density integrates to one over it
             # (masked before broadcasting over the axes the value does not vary with)

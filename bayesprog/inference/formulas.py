@@ -22,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import Form, FormulaParam, ParamValue, TermContext
+from bayesprog.forms import Form, FormulaParam, ParamValue, TermContext, is_binned
 from bayesprog.formula import Formula
 from bayesprog.inference.binding import Bound
 from bayesprog.variables import Discrete, Variable
@@ -64,6 +64,14 @@ def formula_value(variables: Mapping[str, Variable], param: FormulaParam, bound:
         result = formula.evaluate({n: values[n] for n in formula.names})
         out[(slice(None),) + index] = np.broadcast_to(result, (rows, *cards))
     return ParamValue(axes, out if batched else out[0], batched)
+
+
+def log_factor(form: Form, ctx: TermContext) -> np.ndarray:
+    """The term's log values: the form's own, or for a discretised child of a density, the
+    probability of each bin (:func:`bins_log_factor`)."""
+    if is_binned(ctx.child) and "continuous" in form.child_kinds:
+        return np.asarray(bins_log_factor(form, ctx), dtype=float)
+    return np.asarray(form.log_factor(ctx), dtype=float)
 
 
 def bins_log_factor(form: Form, ctx: TermContext) -> np.ndarray:

@@ -129,23 +129,12 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
         drawn = _drawn_parents(term, bound)
         if term.soft or name in bound.discrete or name in bound.continuous:
             given = bound if not child.is_discrete or term.soft else inputs_only
-            if drawn:
-                factor = term_factor(program, term, _per_draw(given, values, drawn, rows, n))
-                log_w = log_w + _gather_draws(factor, values, rows, n)
-            else:
-                factor = term_factor(program, term, given)
-                log_w = log_w + _gather(factor.log, factor.batched, factor.axes, values, rows, n)
+            log_w = log_w + _at_draws(program, term, given, drawn, values, rows, n)
             continue
         if isinstance(child, Discrete):
             check_size(float(rows) * n * child.card, f"drawing {name} ({child.card:,} states) "
                        f"{n:,} times")
-            if drawn:
-                factor = term_factor(program, term, _per_draw(inputs_only, values, drawn, rows, n))
-                row = _gather_draws(factor, values, rows, n, keep=name)
-            else:
-                factor = term_factor(program, term, inputs_only)
-                row = _gather(factor.log, factor.batched, factor.axes, values, rows, n,
-                              keep=name)
+            row = _at_draws(program, term, inputs_only, drawn, values, rows, n, keep=name)
             total = logsumexp(row, axis=-1)
             if not np.all(np.isfinite(total)):
                 raise QuestionError(f"term {term.label} gives no state of {name} a positive "
@@ -183,6 +172,19 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
         with np.errstate(divide="ignore"):
             log_w = log_w + _gather(np.log(pv.array), pv.batched, (name,), values, rows, n)
     return Draws(values, log_w)
+
+
+def _at_draws(program: ProgramLike, term: Term, given: Bound, drawn: tuple[str, ...],
+              values: dict[str, np.ndarray], rows: int, n: int,
+              keep: str | None = None) -> np.ndarray:
+    """The term's log-factor at each draw's states -> ``[rows, n]`` (``[rows, n, card]``
+    with ``keep`` whole): evaluated once for ``given``, or draw by draw where its formulas name
+    the drawn real variables ``drawn``."""
+    if not drawn:
+        factor = term_factor(program, term, given)
+        return _gather(factor.log, factor.batched, factor.axes, values, rows, n, keep=keep)
+    factor = term_factor(program, term, _per_draw(given, values, drawn, rows, n))
+    return _gather_draws(factor, values, rows, n, keep=keep)
 
 
 def _drawn_parents(term: Term, bound: Bound) -> tuple[str, ...]:

@@ -25,7 +25,7 @@ from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_binned
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
-from bayesprog.inference.formulas import bins_log_factor, formula_value
+from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.language.check import LearnOptions, Term
 from bayesprog.language.document import FitRecord
 from bayesprog.learning.data import Data, DataError, load_data
@@ -413,10 +413,7 @@ class _Em:
         ctx = TermContext(term.child, term.parents, axes, cards,
                           {**params, **formulas}, value, self.variables, term.extra)
         with np.errstate(divide="ignore", invalid="ignore"):
-            if is_binned(term.child):
-                log = np.asarray(bins_log_factor(term.form, ctx), float)
-            else:
-                log = np.asarray(term.form.log_factor(ctx), float)
+            log = log_factor(term.form, ctx)
         log = np.broadcast_to(log, np.broadcast_shapes(log.shape, (log.shape[0],) + cards))
         if missing is not None:
             log = np.where(missing.aligned(axes, 0), 0.0, log)
