@@ -80,7 +80,7 @@ def to_factor_graph(
     # pgmpy merges equal factors into one node, so factors over the same variables are
     # multiplied together first.
     merged: dict[frozenset[str], Any] = {}
-    for term in relevant_terms(program, q, bound):
+    for term in relevant_terms(program, q.expression.left, [*bound.discrete, *bound.continuous]):
         f = slice_factor(term_factor(program, term, bound), bound)
         if not f.axes:
             continue

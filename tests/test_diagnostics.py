@@ -946,7 +946,27 @@ def test_zero_evidence_in_a_batch(zero):
     assert result.assignment["A"][0] == "a3" and result.assignment["A"][2] == "a3"
 
 
-def test_zero_evidence_map_from_a_zero_prior_is_uniform():
+def test_impossible_evidence_that_bears_on_the_answer_is_refused_and_map_draws_uniformly():
+    # no state of A gives B=b3: P(A | B=b3) does not exist
+    program = bayesprog.loads("""\
+bayesprog: 1
+variables:
+  A: {states: [a0, a1, a2]}
+  B: {states: [b0, b1, b2, b3]}
+decomposition:
+  - {term: P(A), form: table, table: [0.5, 0.3, 0.2]}
+  - {term: P(B | A), form: table, table: [[0.4, 0.3, 0.3, 0], [0.1, 0.2, 0.7, 0], [1, 0, 0, 0]]}
+""", FILE)
+    with pytest.raises(bayesprog.ZeroEvidenceError):
+        program.ask("P(A | B=b3)")
+    results = [program.ask("P(A | B=b3)", kind="map", rng=seed) for seed in range(16)]
+    assert all(bool(r.zero_evidence) for r in results)
+    assert len({r.assignment["A"] for r in results}) > 1
+
+
+def test_impossible_evidence_that_does_not_bear_on_the_answer_is_left_out():
+    # P(A=a1) = 0, but P(B | A=a1) is the term's row: the answer does not depend on P(A)
+    # (as pyAgrum's relevance reasoning answers); the evidence's probability is still zero
     program = bayesprog.loads("""\
 bayesprog: 1
 variables:
@@ -956,11 +976,11 @@ decomposition:
   - {term: P(A), form: table, table: [1.0, 0.0]}
   - {term: P(B | A), form: table, table: [[0.4, 0.3, 0.2, 0.1], [0.1, 0.2, 0.3, 0.4]]}
 """, FILE)
-    with pytest.raises(bayesprog.ZeroEvidenceError):
-        program.ask("P(B | A=a1)")
-    results = [program.ask("P(B | A=a1)", kind="map", rng=seed) for seed in range(16)]
-    assert all(bool(r.zero_evidence) for r in results)
-    assert len({r.assignment["B"] for r in results}) > 1
+    answer = program.ask("P(B | A=a1)")
+    np.testing.assert_allclose(answer.probabilities, [0.1, 0.2, 0.3, 0.4], atol=1e-15)
+    assert answer.log_evidence == -np.inf
+    result = program.ask("P(B | A=a1)", kind="map", rng=0)
+    assert result.assignment["B"] == "b3" and not bool(result.zero_evidence)
 
 
 def test_second_term_reported_even_if_the_first_is_bad():

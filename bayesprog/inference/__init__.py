@@ -18,8 +18,10 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from bayesprog.errors import QuestionError
-from bayesprog.expressions import Question
+from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.core import InferenceCache
@@ -55,7 +57,7 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
            *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
                                                bound.soft)))
     if method is not None:
-        return _by(method, plan, key)
+        return _with_evidence(plan, _by(method, plan, key))
     rankings = program.inference_cache.rankings
     found = rankings.get(key)
     if found is None:
@@ -87,8 +89,30 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
             program.inference_cache.spent[key[2:]] = (
                 math.inf if cost.setup else
                 spent + cost.operations / ranked_size * bound.size + cost.fixed)
-            return answer
+            return _with_evidence(plan, answer)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+
+
+def _with_evidence(plan: QuestionPlan, answer: Posterior | Density) -> Posterior | Density:
+    """``answer`` with the log-probability of all its evidence: where the plan left out
+    evidence that does not bear on the answer, its normaliser is not that probability, which
+    is then computed at the first read of ``log_evidence`` (by the same method when it is
+    approximate, else by the cheapest exact one)."""
+    if not plan.layout.pruned or not isinstance(answer, Posterior):
+        return answer
+    normaliser = np.asarray(answer.log_evidence)
+    if np.isnan(normaliser).all():  # a method that estimates no evidence (lbp)
+        return answer
+    program, bound, expr = plan.program, plan.bound, plan.question.expression
+    answer.impossible = normaliser == -np.inf
+    method = None if registered_methods()[answer.method].exact else answer.method
+
+    def log_evidence() -> np.ndarray:
+        question = Question(Expression((), expr.right, expr.values))
+        return compute_posterior(program, question, bound, method, plan.options).log_evidence
+
+    answer.log_evidence = log_evidence  # type: ignore[assignment]
+    return answer
 
 
 def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior | Density:

@@ -7,7 +7,7 @@ by a seeded generator (one per batch row, when given), never by index order.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,9 +20,31 @@ from bayesprog.inference.density import Density
 TIE_RTOL = 1e-12
 
 
+class Deferred:
+    """A dataclass field that may be given as a function of no arguments, called at its first
+    read (a value the answer can give but seldom needs)."""
+
+    def __init__(self, name: str) -> None:
+        self.name, self.slot = name, "_" + name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        value = obj.__dict__[self.slot]
+        if callable(value):
+            value = obj.__dict__[self.slot] = value()
+        return value
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        obj.__dict__[self.slot] = value
+
+
 @dataclass
 class Posterior:
-    """``P(searched | evidence)``: ``probabilities`` has shape ``batch + cards of variables``."""
+    """``P(searched | evidence)``: ``probabilities`` has shape ``batch + cards of variables``.
+
+    ``log_evidence`` is the log-probability of the evidence per row; where the question left
+    out evidence that does not bear on its answer, it is computed at its first read."""
 
     question: str
     variables: tuple[str, ...]
@@ -41,6 +63,9 @@ class Posterior:
     ess: np.ndarray | None = None
     iterations: int | None = None
     residual: float | None = None
+    #: the rows without an answer (the evidence that bears on it has probability zero), when
+    #: ``log_evidence`` is not computed yet; None: the rows where it is -inf
+    impossible: np.ndarray | None = field(default=None, repr=False)
 
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
@@ -69,6 +94,9 @@ class Posterior:
             out["iterations"] = self.iterations
             out["residual"] = self.residual
         return out
+
+
+Posterior.log_evidence = Deferred("log_evidence")  # type: ignore[assignment]
 
 
 @dataclass
@@ -173,7 +201,7 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
         candidates = np.flatnonzero(tied[row])
         choice[row] = candidates[gens[row].integers(candidates.size)]
     indices = np.stack(np.unravel_index(choice, cards), axis=-1).reshape(shape + (len(cards),))
-    zero = ~(posterior.log_evidence > -np.inf)
+    zero = impossible_rows(posterior)
     return MapResult(
         question=question,
         variables=posterior.variables,
@@ -187,8 +215,14 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     )
 
 
+def impossible_rows(posterior: Posterior | Density) -> np.ndarray:
+    """Where the answer does not exist: the evidence that bears on it has probability zero."""
+    known = getattr(posterior, "impossible", None)
+    return known if known is not None else np.asarray(posterior.log_evidence) == -np.inf
+
+
 def zero_rows_message(posterior: Posterior | Density) -> str:
-    zero = np.argwhere(~(posterior.log_evidence > -np.inf))
+    zero = np.argwhere(impossible_rows(posterior))
     where = ", ".join(str(tuple(int(i) for i in row)) for row in zero[:5]) if posterior.batch_shape else ""
     return (f"the evidence has probability zero under the program for {posterior.question}"
             + (f" (batch rows {where}{', ...' if len(zero) > 5 else ''})" if where else "")
@@ -196,5 +230,7 @@ def zero_rows_message(posterior: Posterior | Density) -> str:
 
 
 def check_zero(posterior: Posterior | Density) -> None:
-    if np.any(posterior.log_evidence == -np.inf):  # NaN: a method that estimates no evidence
+    known = getattr(posterior, "impossible", None)
+    # NaN in log_evidence: a method that estimates no evidence
+    if np.any(known) if known is not None else np.any(posterior.log_evidence == -np.inf):
         raise ZeroEvidenceError(zero_rows_message(posterior))

@@ -153,6 +153,8 @@ class InferenceCache:
     is a new program with a cache of its own)."""
 
     plans: Plans = field(default_factory=Plans)
+    #: layouts of questions (searched and known variables by name), by their key
+    layouts: dict[Any, Any] = field(default_factory=dict)
     #: factors of terms that depend on no evidence nor input, by id of the term
     static_factors: dict[int, Factor] = field(default_factory=dict)
     #: compiled tables of the table method, by (searched, observed)

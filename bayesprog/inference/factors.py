@@ -3,10 +3,11 @@ question's unobserved discrete variables, for bound evidence (batched or not).""
 
 from __future__ import annotations
 
+from collections.abc import Collection, Iterable
+
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.expressions import Question
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
@@ -16,14 +17,14 @@ from bayesprog.language.check import Term
 from bayesprog.variables import Continuous, discrete
 
 
-def relevant_terms(program: ProgramLike, question: Question, bound: Bound) -> list[Term]:
-    """The terms that matter: those of ancestors of searched, observed or soft-evidence variables.
+def relevant_terms(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
+                   soft: Iterable[str] = ()) -> list[Term]:
+    """The terms of ancestors of searched, observed or soft-evidence variables.
 
     A barren variable (no observed descendant, not searched) sums out to one with its term,
     unless a term is unnormalised (a potential): those children are always kept.
     """
-    targets = set(question.expression.left) | set(bound.discrete) | set(bound.continuous)
-    targets |= set(bound.soft)
+    targets = set(searched) | set(observed) | set(soft)
     terms = program.active_terms
     for t in terms:
         if t.soft or not t.form.is_normalized(t.child):
@@ -34,11 +35,12 @@ def relevant_terms(program: ProgramLike, question: Question, bound: Bound) -> li
     return [t for t in terms if t.child.name in keep]
 
 
-def latent_continuous(program: ProgramLike, terms: list[Term], bound: Bound) -> list[str]:
-    """The continuous variables of ``terms`` that the question neither knows nor sums out by
-    itself (searched, or parents of a relevant term): the discrete methods cannot answer."""
+def latent_continuous(terms: list[Term], observed: Collection[str]) -> list[str]:
+    """The continuous variables of ``terms`` that the question neither knows (``observed``)
+    nor sums out by itself (searched, or parents of a relevant term): the discrete methods
+    cannot answer."""
     return [t.child.name for t in terms
-            if not t.child.is_discrete and t.child.name not in bound.continuous]
+            if not t.child.is_discrete and t.child.name not in observed]
 
 
 def is_static(term: Term) -> bool:

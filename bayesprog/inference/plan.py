@@ -1,5 +1,9 @@
 """The plan of one question: the program, the question, its bound evidence, and the terms that
-matter for it; every method answers from a plan, and the cost model estimates from one."""
+matter for it; every method answers from a plan, and the cost model estimates from one.
+
+What does not depend on the evidence's values (which terms matter, what a method compiles for
+them) is a :class:`Layout`, kept per program for each combination of searched and known
+variables: a question asked again with other values finds it ready."""
 
 from __future__ import annotations
 
@@ -15,7 +19,74 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import contraction_path
 from bayesprog.inference.factors import latent_continuous, relevant_terms
 from bayesprog.inference.protocol import ProgramLike
+from bayesprog.inference.relevance import requisite_terms
 from bayesprog.language.check import Term
+
+#: (searched, observed discrete, observed continuous, inputs, soft evidence): names only
+LayoutKey = tuple[tuple[str, ...], ...]
+
+
+def layout_key(question: Question, bound: Bound) -> LayoutKey:
+    return (question.expression.left,
+            *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
+                                               bound.soft)))
+
+
+@dataclass
+class Layout:
+    """Which variables a question searches and which it knows (by name, not value), and what
+    follows from that alone: the terms that matter, and what methods compile for them."""
+
+    program: ProgramLike
+    key: LayoutKey
+    #: what the methods compile for this layout (a contraction's sliceable tables, ...)
+    prepared: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def searched(self) -> tuple[str, ...]:
+        return self.key[0]
+
+    @cached_property
+    def ancestral_terms(self) -> list[Term]:
+        """The terms of the ancestors of searched, observed and soft-evidence variables."""
+        searched, observed, continuous, _, soft = self.key
+        return relevant_terms(self.program, searched, observed + continuous, soft)
+
+    @cached_property
+    def latent(self) -> list[str]:
+        """The unknown continuous variables that matter (searched, or parents of a relevant
+        term): only the methods for continuous variables answer when there are some."""
+        return latent_continuous(self.ancestral_terms, set(self.key[2]))
+
+    @cached_property
+    def terms(self) -> list[Term]:
+        """The requisite terms (:mod:`~bayesprog.inference.relevance`) when every unknown
+        variable is discrete, else the ancestral ones."""
+        searched, observed, continuous, _, soft = self.key
+        if self.latent or not searched:
+            return self.ancestral_terms
+        found = requisite_terms(self.program, searched, observed + continuous, soft)
+        return self.ancestral_terms if found is None else found
+
+    @cached_property
+    def pruned(self) -> bool:
+        """Whether the requisite terms leave out some the evidence depends on: the answer's
+        normaliser is then not the evidence's probability, which is computed when asked."""
+        if self.terms is self.ancestral_terms:
+            return False
+        touched = {v.name for t in self.terms for v in (t.child, *t.parents)}
+        return len(self.terms) < len(self.ancestral_terms) or any(
+            name not in touched for name in self.key[1] + self.key[2] + self.key[4])
+
+
+def layout_of(program: ProgramLike, question: Question, bound: Bound) -> Layout:
+    """The program's layout for ``question`` with ``bound``'s variables known (made once)."""
+    key = layout_key(question, bound)
+    layouts = program.inference_cache.layouts
+    found = layouts.get(key)
+    if found is None:
+        found = layouts[key] = Layout(program, key)
+    return found
 
 
 @dataclass
@@ -31,15 +102,17 @@ class QuestionPlan:
         return self.question.expression.left
 
     @cached_property
-    def terms(self) -> list[Term]:
-        """The relevant terms: ancestors of searched, observed and soft-evidence variables."""
-        return relevant_terms(self.program, self.question, self.bound)
+    def layout(self) -> Layout:
+        return layout_of(self.program, self.question, self.bound)
 
-    @cached_property
+    @property
+    def terms(self) -> list[Term]:
+        """The terms that matter (see :attr:`Layout.terms`)."""
+        return self.layout.terms
+
+    @property
     def latent(self) -> list[str]:
-        """The unknown continuous variables that matter (searched, or parents of a relevant
-        term): only the methods for continuous variables answer when there are some."""
-        return latent_continuous(self.program, self.terms, self.bound)
+        return self.layout.latent
 
     def card(self, name: str) -> int:
         return int(self.program.variables[name].card)  # type: ignore[union-attr]

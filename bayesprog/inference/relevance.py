@@ -1,0 +1,74 @@
+"""What a question needs of its program: the requisite terms, found by the Bayes-ball algorithm.
+
+``P(searched | evidence)`` depends on the term of a variable only when a parameter of that term
+is not d-separated from the searched variables by the evidence (Shachter, "Bayes-Ball: The
+Rational Pastime", UAI 1998). The others are left out before a question is planned: barren
+variables (no observed descendant), evidence that the observed variables screen off from the
+searched ones, and the ancestors behind that evidence. A searched variable independent of the
+evidence is answered from its own ancestors only.
+
+Soft evidence on a variable (given with a question, or written in the program) is a virtual
+observed child of that variable. A program with an unnormalised term (a potential) keeps every
+ancestor of what the question touches: its terms are not conditional distributions, and
+d-separation does not say what they change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from bayesprog.inference.protocol import ProgramLike
+from bayesprog.language.check import Term
+
+
+def requisite(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
+              soft: Iterable[str] = ()) -> set[str] | None:
+    """The variables whose terms ``P(searched | observed)`` needs (soft evidence on ``soft``),
+    or None when the program's terms are not all conditional distributions (then a question
+    keeps the ancestors of what it touches)."""
+    terms = program.active_terms
+    if any(not t.soft and not t.form.is_normalized(t.child) for t in terms):
+        return None
+    parents: dict[str, list[str]] = {}
+    children: dict[str, list[str]] = {}
+    virtual = set(soft)  # variables with an observed virtual child (their soft evidence)
+    for t in terms:
+        if t.soft:
+            virtual.add(t.child.name)
+            continue
+        parents[t.child.name] = [p.name for p in t.parents]
+        for p in t.parents:
+            children.setdefault(p.name, []).append(t.child.name)
+    known = set(observed)
+    top: set[str] = set()
+    bottom: set[str] = set()
+    # (variable, whether the ball comes from a child): searched variables start as if from one
+    schedule = [(name, True) for name in searched]
+    while schedule:
+        name, from_child = schedule.pop()
+        if name in known:
+            # an observed variable passes a ball from a parent up to its own parents; one
+            # from a child stops here
+            if not from_child and name not in top:
+                top.add(name)
+                schedule.extend((p, True) for p in parents.get(name, ()))
+            continue
+        if from_child and name not in top:
+            top.add(name)
+            schedule.extend((p, True) for p in parents.get(name, ()))
+        if name not in bottom:
+            bottom.add(name)
+            schedule.extend((c, False) for c in children.get(name, ()))
+            if name in virtual:  # the virtual child is observed: the ball comes back up
+                schedule.append((name, True))
+    return top
+
+
+def requisite_terms(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
+                    soft: Iterable[str] = ()) -> list[Term] | None:
+    """The terms of :func:`requisite` in the program's order (soft-evidence terms of the
+    program on requisite variables with them), or None as it returns."""
+    names = requisite(program, searched, observed, soft)
+    if names is None:
+        return None
+    return [t for t in program.active_terms if t.child.name in names]
