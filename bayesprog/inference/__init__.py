@@ -50,35 +50,38 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     """The posterior of ``question`` for bound evidence (a density when it searches real
     variables): by ``method`` when it is named, else by the cheapest exact method that answers
     (or, when none does, the cheapest approximate one that states its error)."""
-    plan = QuestionPlan(program, question, bound, dict(options or {}))
+    plan = QuestionPlan(program, question, bound, dict(options) if options else {})
+    layout = plan.layout
+    if method is not None:
+        return _with_evidence(plan, _by(method, plan))
+    size, version, cap = bound.size, registry_version(), limit("entries")
+    settled = layout.settled.get((version, size, cap))
+    if settled is not None:
+        answer = settled.posterior(plan)
+        if answer is not None:
+            answer.method = answer.method or settled.name
+            return _with_evidence(plan, answer, settled.exact)
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
-    key = (registry_version(), bound.size.bit_length(), question.expression.left,
-           *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
-                                               bound.soft)))
-    if method is not None:
-        return _with_evidence(plan, _by(method, plan, key))
-    rankings = program.inference_cache.rankings
-    found = rankings.get(key)
+    found = layout.rankings.get((version, size.bit_length()))
     if found is None:
         methods = ranked(plan)
         if not methods:
             raise QuestionError(unanswerable(plan))
-        found = rankings[key] = (bound.size, methods)
+        found = layout.rankings[(version, size.bit_length())] = (size, methods)
     ranked_size, methods = found
-    cap = limit("entries")
-    fitting = [(m, c) for m, c in methods if c.memory / ranked_size * bound.size <= cap]
+    fitting = [(m, c) for m, c in methods if c.memory / ranked_size * size <= cap]
     # a method with a setup (a table compiled once) is chosen once the questions of this
     # layout have spent as much on the others as the setup costs: never more than twice the
     # cost of the better choice in hindsight (ski rental)
-    spent = program.inference_cache.spent.get(key[2:], 0.0)
-    fitting.sort(key=lambda mc: mc[1].operations / ranked_size * bound.size + mc[1].fixed
+    spent = layout.spent
+    fitting.sort(key=lambda mc: mc[1].operations / ranked_size * size + mc[1].fixed
                  + max(mc[1].setup - spent, 0.0))
     if not fitting:
         method_, cost = methods[0]
         approximate = ", ".join(name for name, m in registered_methods().items()
                                 if not m.exact and m.estimate(plan) is not None)
-        check_size(cost.memory / ranked_size * bound.size,
+        check_size(cost.memory / ranked_size * size,
                    f"{question.expression} (by {method_.name}, the exact method that needs "
                    "least)", hint=f"; or ask an approximate method ({approximate}): method=... "
                    "in Python, --method on the command line" if approximate else "")
@@ -86,14 +89,18 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
         answer = method_.posterior(plan)
         if answer is not None:
             answer.method = answer.method or method_.name
-            program.inference_cache.spent[key[2:]] = (
-                math.inf if cost.setup else
-                spent + cost.operations / ranked_size * bound.size + cost.fixed)
-            return _with_evidence(plan, answer)
+            if method_ is fitting[0][0] and spent >= max(c.setup for _, c in fitting):
+                # no setup left to weigh: this choice is the one for every later batch of
+                # this size
+                layout.settled[(version, size, cap)] = method_
+            layout.spent = (math.inf if cost.setup else
+                            spent + cost.operations / ranked_size * size + cost.fixed)
+            return _with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 
 
-def _with_evidence(plan: QuestionPlan, answer: Posterior | Density) -> Posterior | Density:
+def _with_evidence(plan: QuestionPlan, answer: Posterior | Density,
+                   exact: bool = True) -> Posterior | Density:
     """``answer`` with the log-probability of all its evidence: where the plan left out
     evidence that does not bear on the answer, its normaliser is not that probability, which
     is then computed at the first read of ``log_evidence`` (by the same method when it is
@@ -103,31 +110,32 @@ def _with_evidence(plan: QuestionPlan, answer: Posterior | Density) -> Posterior
     normaliser = np.asarray(answer.log_evidence)
     if np.isnan(normaliser).all():  # a method that estimates no evidence (lbp)
         return answer
-    program, bound, expr = plan.program, plan.bound, plan.question.expression
+    program, bound, expr, options = plan.program, plan.bound, plan.question.expression, plan.options
     answer.impossible = normaliser == -np.inf
-    method = None if registered_methods()[answer.method].exact else answer.method
+    method = None if exact else answer.method
 
     def log_evidence() -> np.ndarray:
         question = Question(Expression((), expr.right, expr.values))
-        return compute_posterior(program, question, bound, method, plan.options).log_evidence
+        return compute_posterior(program, question, bound, method, options).log_evidence
 
     answer.log_evidence = log_evidence  # type: ignore[assignment]
     return answer
 
 
-def _by(name: str, plan: QuestionPlan, key: tuple) -> Posterior | Density:
+def _by(name: str, plan: QuestionPlan) -> Posterior | Density:
     """The answer of the method ``name``, which the question asks for (its estimate kept per
     layout of question, like a ranking)."""
     methods = registered_methods()
     method = methods.get(name)
     if method is None:
         raise QuestionError(f"method {name!r}: expected one of {', '.join(methods)}")
-    estimates = plan.program.inference_cache.estimates
+    estimates = plan.layout.estimates
     options = tuple(sorted((k, v) for k, v in plan.options.items() if k != "rng"))
-    found = estimates.get((name, options, *key))
+    key = (name, options, registry_version(), plan.bound.size.bit_length())
+    found = estimates.get(key)
     if found is None:
         cost = None if plan.latent and not method.continuous else method.estimate(plan)
-        found = estimates[(name, options, *key)] = (plan.bound.size, cost)
+        found = estimates[key] = (plan.bound.size, cost)
     size, cost = found
     if cost is not None:
         cost = Cost(cost.operations / size * plan.bound.size, cost.memory / size * plan.bound.size)

@@ -53,6 +53,10 @@ def bind(
     soft: Mapping[str, Any] | None,
 ) -> Bound:
     expr = question.expression
+    if not inputs and not soft:
+        named = _named_states(program, expr, evidence)
+        if named is not None:
+            return named
     variables = program.variables
     evidence = expect_mapping(evidence, "evidence", "variable names to values")
     inputs = expect_mapping(inputs, "inputs", "input names to arrays")
@@ -122,6 +126,32 @@ def bind(
         else:
             bound.soft[name] = ParamValue((name,), flat, batched)
     return bound
+
+
+def _named_states(program: ProgramLike, expr: Any, evidence: Any) -> Bound | None:
+    """The common case in one pass: each known variable discrete and given one state by name
+    (in the evidence or the question's text). None for anything else, which :func:`bind`
+    checks and explains."""
+    if evidence is None:
+        evidence = {}
+    elif type(evidence) is not dict:
+        return None
+    right, fixed = expr.right, expr.values
+    if len(evidence) + len(fixed) != len(right):
+        return None
+    variables = program.variables
+    found: dict[str, np.ndarray | int] = {}
+    for values in (evidence, fixed):
+        for name, value in values.items():
+            var = variables.get(name)
+            if type(value) is not str or not isinstance(var, Discrete) or name in found \
+                    or name not in right:
+                return None
+            index = var._lookup.get(value)
+            if index is None:
+                return None
+            found[name] = index
+    return Bound((), found)
 
 
 def _state_indices(var: Discrete, value: Any) -> np.ndarray:

@@ -159,12 +159,5 @@ class InferenceCache:
     static_factors: dict[int, Factor] = field(default_factory=dict)
     #: compiled tables of the table method, by (searched, observed)
     tables: dict[Any, Any] = field(default_factory=dict)
-    #: the methods that apply to a layout of question, cheapest first, with their estimates
-    #: and the batch size they were made for
-    rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
-    #: operations spent so far on a layout of question (inf once a method's setup is paid)
-    spent: dict[Any, float] = field(default_factory=dict)
-    #: a named method's estimate for a layout of question, and the batch size it was made for
-    estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
     #: programs derived from this one for a method (its real variables on bins, ...)
     derived: dict[Any, Any] = field(default_factory=dict)

@@ -41,6 +41,16 @@ class Layout:
     key: LayoutKey
     #: what the methods compile for this layout (a contraction's sliceable tables, ...)
     prepared: dict[str, Any] = field(default_factory=dict)
+    #: the methods that apply, cheapest first, with their estimates and the batch size they
+    #: were made for, by (registry version, order of magnitude of the batch)
+    rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
+    #: operations spent so far on questions of this layout (inf once a method's setup is paid)
+    spent: float = 0.0
+    #: the method chosen for a batch size once no setup is left to weigh, by (registry
+    #: version, batch size, memory limit)
+    settled: dict[Any, Any] = field(default_factory=dict)
+    #: a named method's estimate, and the batch size it was made for
+    estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
 
     @property
     def searched(self) -> tuple[str, ...]:
