@@ -4,13 +4,16 @@ space. Answers every discrete question, with any evidence, inputs and soft evide
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contract import TINY, contract, log_contract
+from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import question_factors, rescaled
+from bayesprog.inference.factors import is_static, question_factors, rescaled, term_factor
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 
@@ -33,37 +36,105 @@ class ContractionMethod(Method):
 
 def contract_question(plan: QuestionPlan) -> Posterior:
     """The posterior by scaled contraction, with exact log-space rows where it underflows."""
-    factors = question_factors(plan.program, plan.terms, plan.bound)
-    return answer(plan, *contract_factors(plan, factors, plan.searched))
+    prepared = plan.layout.prepared.get("contraction")
+    if prepared is None:
+        prepared = plan.layout.prepared["contraction"] = Sliceable(plan)
+    operands, offset = prepared.operands(plan)
+    return answer(plan, *_normalised(plan, operands, offset, plan.searched,
+                                     lambda: question_factors(plan.program, plan.terms,
+                                                              plan.bound)))
+
+
+class Sliceable:
+    """A layout's terms made ready for every call: each term that depends on no evidence
+    value nor input, in the probability domain, divided by its largest entry, with the axes
+    the evidence fixes first, so that a call slices it by indexing; the other terms are
+    computed at each call."""
+
+    def __init__(self, plan: QuestionPlan) -> None:
+        program, observed = plan.program, set(plan.layout.key[1])
+        self.tables: list[tuple[tuple[str, ...], tuple[str, ...], np.ndarray]] = []
+        self.others = []
+        self.log_scale = 0.0
+        for term in plan.terms:
+            if not is_static(term):
+                self.others.append(term)
+                continue
+            f = term_factor(program, term, Bound(()))
+            top = float(np.max(f.log)) if f.log.size else 0.0
+            top = top if np.isfinite(top) else 0.0
+            fixed = tuple(a for a in f.axes if a in observed)
+            rest = tuple(a for a in f.axes if a not in observed)
+            order = [f.axes.index(a) for a in fixed + rest]
+            self.tables.append((fixed, rest, np.ascontiguousarray(
+                np.exp(f.log - top).transpose(order))))
+            self.log_scale += top
+
+    def operands(self, plan: QuestionPlan) -> tuple[list[Factor], np.ndarray | float]:
+        """The rescaled operands for ``plan``'s evidence, and the log of what they were
+        divided by (per row when it varies)."""
+        bound = plan.bound
+        values = bound.discrete
+        operands: list[Factor] = []
+        scale: np.ndarray | float = 1.0
+        for fixed, rest, table in self.tables:
+            if not fixed:
+                operands.append(Factor(rest, table, False))
+                continue
+            sliced = table[tuple(values[a] for a in fixed)]
+            if rest:
+                operands.append(Factor(rest, sliced, sliced.ndim > len(rest)))
+            else:  # every axis fixed: a number per row
+                scale = scale * sliced
+        with np.errstate(divide="ignore"):
+            offset = self.log_scale + np.log(scale)
+        if self.others or bound.soft:
+            more, more_offset = rescaled(question_factors(plan.program, self.others, bound),
+                                         bound.size)
+            operands += more
+            offset = offset + more_offset
+        return operands, offset
 
 
 def contract_factors(plan: QuestionPlan, factors: list[Factor], searched: tuple[str, ...]
                      ) -> tuple[np.ndarray, np.ndarray]:
     """``factors`` contracted to a normalised table over ``searched`` (``[rows] + cards``),
     and the log of the normaliser per row (``[rows]``)."""
+    operands, offset = rescaled(factors, plan.bound.size)
+    return _normalised(plan, operands, offset, searched, lambda: factors)
+
+
+def _normalised(plan: QuestionPlan, operands: list[Factor], offset: np.ndarray | float,
+                searched: tuple[str, ...], exact: Callable[[], list[Factor]]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The rescaled ``operands`` contracted to a normalised table over ``searched``, and the
+    log of the normaliser per row (``offset``: the log of what they were divided by); rows
+    that underflow are redone in log space from the log-factors ``exact()`` gives."""
     program, bound = plan.program, plan.bound
     size = bound.size
-    operands, offset = rescaled(factors, size)
-    batched_out = any(f.batched for f in factors) or bool(bound.batch_shape)
+    batched_out = any(f.batched for f in operands) or bool(bound.batch_shape)
     table = contract(program, operands, searched, batched_out, size)
     if not batched_out:
         table = table[np.newaxis]
     table = np.broadcast_to(table, (size,) + table.shape[1:])
     axes = tuple(range(1, table.ndim))
     z = table.sum(axis=axes)
+    offset = np.broadcast_to(offset, (size,))
     with np.errstate(divide="ignore"):
         log_z = np.log(z) + offset
     # a row is bad when its scaled contraction underflowed, or an observed value's own
     # probability (folded into the offset) is zero: both are redone exactly in log space
     bad = ~(z > TINY) | ~np.isfinite(z) | ~np.isfinite(offset)
+    if not bad.any():
+        return table / z.reshape((-1,) + (1,) * len(axes)), log_z
     probs = np.empty_like(table)
     good = ~bad
     probs[good] = table[good] / z[good].reshape((-1,) + (1,) * len(axes))
-    if np.any(bad):
-        for row in np.flatnonzero(bad):
-            logs = [(f.axes, f.log[row] if f.batched else f.log) for f in factors]
-            lt = log_contract(logs, searched)
-            total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
-            log_z[row] = total
-            probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
+    factors = exact()
+    for row in np.flatnonzero(bad):
+        logs = [(f.axes, f.log[row] if f.batched else f.log) for f in factors]
+        lt = log_contract(logs, searched)
+        total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
+        log_z[row] = total
+        probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
     return probs, log_z
