@@ -29,6 +29,7 @@ from bayesprog.inference.cost import ranked, unanswerable
 from bayesprog.inference.density import Density
 from bayesprog.inference.methods import (
     Cost,
+    base,
     Method,
     register_method,
     registered_methods,
@@ -54,6 +55,12 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     layout = plan.layout
     if method is not None:
         return _with_evidence(plan, _by(method, plan))
+    if layout.fixed is not None:  # the same answer whatever the evidence's values
+        probabilities, normaliser, name = layout.fixed
+        shape = (bound.size,) + probabilities.shape
+        answer = base.answer(plan, np.broadcast_to(probabilities, shape).copy(),
+                             np.full(bound.size, normaliser), method=name)
+        return _with_evidence(plan, answer)
     size, version, cap = bound.size, registry_version(), limit("entries")
     settled = layout.settled.get((version, size, cap))
     if settled is not None:
@@ -95,6 +102,11 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                 layout.settled[(version, size, cap)] = method_
             layout.spent = (math.inf if cost.setup else
                             spent + cost.operations / ranked_size * size + cost.fixed)
+            if layout.constant and isinstance(answer, Posterior):
+                rows = answer.probabilities.reshape((size, -1))
+                layout.fixed = (rows[0].reshape(answer.probabilities.shape[
+                    len(answer.batch_shape):]).copy(), float(answer.log_evidence.flat[0]),
+                    answer.method)
             return _with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 
@@ -107,7 +119,7 @@ def _with_evidence(plan: QuestionPlan, answer: Posterior | Density,
     approximate, else by the cheapest exact one)."""
     if not plan.layout.pruned or not isinstance(answer, Posterior):
         return answer
-    normaliser = np.asarray(answer.log_evidence)
+    normaliser = answer.log_evidence
     if np.isnan(normaliser).all():  # a method that estimates no evidence (lbp)
         return answer
     program, bound, expr, options = plan.program, plan.bound, plan.question.expression, plan.options

@@ -232,5 +232,5 @@ def zero_rows_message(posterior: Posterior | Density) -> str:
 def check_zero(posterior: Posterior | Density) -> None:
     known = getattr(posterior, "impossible", None)
     # NaN in log_evidence: a method that estimates no evidence
-    if np.any(known) if known is not None else np.any(posterior.log_evidence == -np.inf):
+    if (known if known is not None else np.asarray(posterior.log_evidence) == -np.inf).any():
         raise ZeroEvidenceError(zero_rows_message(posterior))

@@ -17,7 +17,7 @@ import opt_einsum
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import contraction_path
-from bayesprog.inference.factors import latent_continuous, relevant_terms
+from bayesprog.inference.factors import is_static, latent_continuous, relevant_terms
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import requisite_terms
 from bayesprog.language.check import Term
@@ -51,6 +51,9 @@ class Layout:
     settled: dict[Any, Any] = field(default_factory=dict)
     #: a named method's estimate, and the batch size it was made for
     estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
+    #: when the answer is :attr:`constant`: its one row of probabilities, the log of its
+    #: normaliser, and the method that made it
+    fixed: tuple[np.ndarray, float, str] | None = None
 
     @property
     def searched(self) -> tuple[str, ...]:
@@ -87,6 +90,32 @@ class Layout:
         touched = {v.name for t in self.terms for v in (t.child, *t.parents)}
         return len(self.terms) < len(self.ancestral_terms) or any(
             name not in touched for name in self.key[1] + self.key[2] + self.key[4])
+
+
+    @cached_property
+    def constant(self) -> bool:
+        """Whether the answer is the same whatever the evidence's values: no requisite term
+        reads an observed variable, an input or soft evidence (the searched variables are
+        independent of the evidence)."""
+        searched, observed, continuous, inputs, soft = self.key
+        if inputs or soft or not searched or self.latent:
+            return False
+        touched = {v.name for t in self.terms for v in (t.child, *t.parents)}
+        return all(is_static(t) for t in self.terms) and not any(
+            name in touched for name in observed + continuous)
+
+    @cached_property
+    def cards(self) -> tuple[int, ...]:
+        """The number of states of each searched variable."""
+        return tuple(int(self.program.variables[v].card)  # type: ignore[union-attr]
+                     for v in self.searched)
+
+    @cached_property
+    def named_states(self) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[Any, ...]]]:
+        """The searched variables' state names and typed values, for the answers."""
+        variables = self.program.variables
+        return ({v: variables[v].states for v in self.searched},  # type: ignore[union-attr]
+                {v: variables[v].typed_states for v in self.searched})  # type: ignore[union-attr]
 
 
 def layout_of(program: ProgramLike, question: Question, bound: Bound) -> Layout:

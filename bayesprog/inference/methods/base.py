@@ -69,22 +69,22 @@ def answer(plan: QuestionPlan, probabilities: np.ndarray, log_evidence: np.ndarr
     """The posterior of ``plan``'s question from flat rows (``[rows] + cards`` and ``[rows]``),
     shaped to the question's batch; ``extra``: the method's own fields (``method``,
     ``stderr`` shaped like the probabilities, ...)."""
-    program, searched = plan.program, plan.searched
     shape = plan.bound.batch_shape
-    cards = tuple(plan.card(v) for v in searched)
+    cards = plan.layout.cards
     if "stderr" in extra:
         extra["stderr"] = extra["stderr"].reshape(shape + cards)
     if "ess" in extra:
         extra["ess"] = extra["ess"].reshape(shape)
+    states, values = plan.layout.named_states
     return Posterior(
         question=str(plan.question.expression),
-        variables=searched,
-        states={v: program.variables[v].states for v in searched},  # type: ignore[union-attr]
-        values={v: program.variables[v].typed_states for v in searched},  # type: ignore[union-attr]
+        variables=plan.searched,
+        states=dict(states),
+        values=dict(values),
         probabilities=probabilities.reshape(shape + cards),
         log_evidence=np.asarray(log_evidence).reshape(shape),
         batch_shape=shape,
-        ablated=program.ablated,
+        ablated=plan.program.ablated,
         **extra,
     )
 

@@ -4,6 +4,7 @@ space. Answers every discrete question, with any evidence, inputs and soft evide
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -76,7 +77,7 @@ class Sliceable:
         bound = plan.bound
         values = bound.discrete
         operands: list[Factor] = []
-        scale: np.ndarray | float = 1.0
+        scale: np.ndarray | float | None = None  # the product of the fully fixed tables
         for fixed, rest, table in self.tables:
             if not fixed:
                 operands.append(Factor(rest, table, False))
@@ -85,9 +86,12 @@ class Sliceable:
             if rest:
                 operands.append(Factor(rest, sliced, sliced.ndim > len(rest)))
             else:  # every axis fixed: a number per row
-                scale = scale * sliced
-        with np.errstate(divide="ignore"):
-            offset = self.log_scale + np.log(scale)
+                scale = sliced if scale is None else scale * sliced
+        if scale is None:
+            offset: np.ndarray | float = self.log_scale
+        else:
+            with np.errstate(divide="ignore"):
+                offset = self.log_scale + np.log(scale)
         if self.others or bound.soft:
             more, more_offset = rescaled(question_factors(plan.program, self.others, bound),
                                          bound.size)
@@ -114,6 +118,10 @@ def _normalised(plan: QuestionPlan, operands: list[Factor], offset: np.ndarray |
     size = bound.size
     batched_out = any(f.batched for f in operands) or bool(bound.batch_shape)
     table = contract(program, operands, searched, batched_out, size)
+    if not batched_out and np.ndim(offset) == 0:  # one row: in scalars
+        total = float(table.sum())
+        if TINY < total < math.inf and math.isfinite(offset):
+            return (table / total)[np.newaxis], np.array([math.log(total) + offset])
     if not batched_out:
         table = table[np.newaxis]
     table = np.broadcast_to(table, (size,) + table.shape[1:])
