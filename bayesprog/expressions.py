@@ -30,11 +30,14 @@ class Expression:
     values: dict[str, str] = field(default_factory=dict, compare=False)
 
     def __str__(self) -> str:
-        left = " ".join(self.left)
-        if not self.right:
-            return f"P({left})"
-        right = ", ".join(f"{n}={self.values[n]}" if n in self.values else n for n in self.right)
-        return f"P({left} | {right})"
+        text = self.__dict__.get("_text")  # written once: every answer carries it
+        if text is None:
+            left = " ".join(self.left)
+            right = ", ".join(f"{n}={self.values[n]}" if n in self.values else n
+                              for n in self.right)
+            text = f"P({left} | {right})" if self.right else f"P({left})"
+            object.__setattr__(self, "_text", text)
+        return text
 
     @property
     def key(self) -> tuple[tuple[str, ...], frozenset[str]]:

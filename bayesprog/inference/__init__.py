@@ -54,20 +54,21 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     plan = QuestionPlan(program, question, bound, dict(options) if options else {})
     layout = plan.layout
     if method is not None:
-        return _with_evidence(plan, _by(method, plan))
+        return _with_evidence(plan, _by(method, plan), registered_methods()[method].exact)
     if layout.fixed is not None:  # the same answer whatever the evidence's values
-        probabilities, normaliser, name = layout.fixed
-        shape = (bound.size,) + probabilities.shape
-        answer = base.answer(plan, np.broadcast_to(probabilities, shape).copy(),
-                             np.full(bound.size, normaliser), method=name)
-        return _with_evidence(plan, answer)
+        row, normaliser, name = layout.fixed
+        if bound.size == 1:
+            rows, logs = row.copy(), np.array([normaliser])
+        else:
+            rows, logs = np.repeat(row, bound.size, axis=0), np.full(bound.size, normaliser)
+        return _with_evidence(plan, base.answer(plan, rows, logs, method=name))
     size, version, cap = bound.size, registry_version(), limit("entries")
     settled = layout.settled.get((version, size, cap))
     if settled is not None:
-        answer = settled.posterior(plan)
-        if answer is not None:
-            answer.method = answer.method or settled.name
-            return _with_evidence(plan, answer, settled.exact)
+        found_answer = settled.posterior(plan)
+        if found_answer is not None:
+            found_answer.method = found_answer.method or settled.name
+            return _with_evidence(plan, found_answer, settled.exact)
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
     found = layout.rankings.get((version, size.bit_length()))
@@ -103,10 +104,8 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
             layout.spent = (math.inf if cost.setup else
                             spent + cost.operations / ranked_size * size + cost.fixed)
             if layout.constant and isinstance(answer, Posterior):
-                rows = answer.probabilities.reshape((size, -1))
-                layout.fixed = (rows[0].reshape(answer.probabilities.shape[
-                    len(answer.batch_shape):]).copy(), float(answer.log_evidence.flat[0]),
-                    answer.method)
+                first = answer.probabilities.reshape((size,) + layout.cards)[:1].copy()
+                layout.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
             return _with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
 
@@ -120,10 +119,11 @@ def _with_evidence(plan: QuestionPlan, answer: Posterior | Density,
     if not plan.layout.pruned or not isinstance(answer, Posterior):
         return answer
     normaliser = answer.log_evidence
-    if np.isnan(normaliser).all():  # a method that estimates no evidence (lbp)
+    impossible = normaliser == -np.inf
+    if not exact and np.isnan(normaliser).all():  # lbp: it estimates no evidence
         return answer
     program, bound, expr, options = plan.program, plan.bound, plan.question.expression, plan.options
-    answer.impossible = normaliser == -np.inf
+    answer.impossible = impossible
     method = None if exact else answer.method
 
     def log_evidence() -> np.ndarray:

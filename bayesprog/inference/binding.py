@@ -139,19 +139,27 @@ def _named_states(program: ProgramLike, expr: Any, evidence: Any) -> Bound | Non
     right, fixed = expr.right, expr.values
     if len(evidence) + len(fixed) != len(right):
         return None
-    variables = program.variables
+    lookups = _state_lookups(program)
     found: dict[str, np.ndarray | int] = {}
-    for values in (evidence, fixed):
+    for values in (evidence, fixed) if fixed else (evidence,):
         for name, value in values.items():
-            var = variables.get(name)
-            if type(value) is not str or not isinstance(var, Discrete) or name in found \
-                    or name not in right:
+            lookup = lookups.get(name)
+            if lookup is None or type(value) is not str or name in found or name not in right:
                 return None
-            index = var._lookup.get(value)
+            index = lookup.get(value)
             if index is None:
                 return None
             found[name] = index
     return Bound((), found)
+
+
+def _state_lookups(program: ProgramLike) -> dict[str, dict[str, int]]:
+    """Each discrete variable's states by name (kept with the program's compiled pieces)."""
+    cache = program.inference_cache
+    if cache.state_lookups is None:
+        cache.state_lookups = {name: var._lookup for name, var in program.variables.items()
+                               if isinstance(var, Discrete)}
+    return cache.state_lookups
 
 
 def _state_indices(var: Discrete, value: Any) -> np.ndarray:

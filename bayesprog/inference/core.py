@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 import opt_einsum
-from opt_einsum import helpers
+from opt_einsum import helpers, parser
 
 
 @dataclass
@@ -118,6 +118,49 @@ def _min_fill_path(equation: str, shapes: list[tuple[int, ...]]) -> list[tuple[i
     return path
 
 
+#: A matrix-product step with fewer operations than this runs as an einsum: its call costs
+#: less than tensordot's reshapes and transposes.
+BLAS_MIN = 4096
+
+
+class Contraction:
+    """A contraction path, run step by step with numpy: each pairwise step as an einsum, or,
+    for large matrix products, as a tensordot (BLAS) and a transpose. What opt_einsum's
+    compiled expressions do, with the per-step choices and index strings settled once, so
+    that a contraction of small tables costs a few microseconds of Python, not tens."""
+
+    def __init__(self, equation: str, shapes: list[tuple[int, ...]], path: list) -> None:
+        _, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize=path)
+        self.steps: list[tuple[tuple[int, ...], str, Any]] = []
+        for inds, removed, einsum_str, _, blas in info.contraction_list:
+            involved = set(einsum_str.split("->")[0].replace(",", ""))
+            flops = helpers.flop_count(involved, bool(removed), len(inds), info.size_dict)
+            einsum_str = parser.convert_to_valid_einsum_chars(einsum_str)
+            if blas and "EINSUM" not in blas and flops >= BLAS_MIN:
+                inputs, result = einsum_str.split("->")
+                left, right = inputs.split(",")
+                gone = [s for s in set(left) & set(right) if s not in result]
+                axes = tuple(zip(*sorted((left.find(s), right.find(s)) for s in gone))) \
+                    if gone else ((), ())
+                produced = "".join(s for s in left + right if s not in gone)
+                order = tuple(map(produced.index, result)) if produced != result else None
+                self.steps.append((tuple(inds), "tensordot", (axes, order)))
+            else:
+                self.steps.append((tuple(inds), "einsum", einsum_str))
+
+    def __call__(self, *arrays: np.ndarray) -> np.ndarray:
+        operands = list(arrays)
+        for inds, kind, how in self.steps:
+            taken = [operands.pop(i) for i in inds]
+            if kind == "einsum":
+                operands.append(np.einsum(how, *taken))
+            else:
+                axes, order = how
+                product = np.tensordot(taken[0], taken[1], axes=axes)
+                operands.append(product if order is None else product.transpose(order))
+        return operands[0]
+
+
 class Plans:
     """A cache of opt_einsum contraction expressions keyed by the operands' layout."""
 
@@ -142,7 +185,7 @@ class Plans:
             eq = ",".join(terms) + "->" + out
             shapes = [f.log.shape for f in operands]
             path, _, _ = contraction_path(eq, shapes)
-            expr = opt_einsum.contract_expression(eq, *shapes, optimize=path)
+            expr = Contraction(eq, shapes, path)
             self._cache[key] = expr
         return expr
 
@@ -161,3 +204,5 @@ class InferenceCache:
     tables: dict[Any, Any] = field(default_factory=dict)
     #: programs derived from this one for a method (its real variables on bins, ...)
     derived: dict[Any, Any] = field(default_factory=dict)
+    #: each discrete variable's states by name (binding evidence given by name)
+    state_lookups: dict[str, dict[str, int]] | None = None

@@ -7,9 +7,9 @@ variables: a question asked again with other values finds it ready."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cached_property
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 import opt_einsum
@@ -26,10 +26,33 @@ from bayesprog.language.check import Term
 LayoutKey = tuple[tuple[str, ...], ...]
 
 
+T = TypeVar("T")
+
+
+class once(Generic[T]):  # noqa: N801  (used as a decorator, like cached_property)
+    """A property computed at its first read, then a plain attribute of the instance: what
+    ``functools.cached_property`` does, without the lock it takes at every read before
+    Python 3.12 (a microsecond, which a warm question would pay several times)."""
+
+    def __init__(self, compute: Callable[[Any], T]) -> None:
+        self.compute = compute
+        self.__doc__ = compute.__doc__
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> T:
+        if obj is None:
+            return self  # type: ignore[return-value]
+        value = obj.__dict__[self.name] = self.compute(obj)
+        return value
+
+
 def layout_key(question: Question, bound: Bound) -> LayoutKey:
-    return (question.expression.left,
-            *(tuple(sorted(part)) for part in (bound.discrete, bound.continuous, bound.inputs,
-                                               bound.soft)))
+    return (question.expression.left, tuple(sorted(bound.discrete)),
+            tuple(sorted(bound.continuous)) if bound.continuous else (),
+            tuple(sorted(bound.inputs)) if bound.inputs else (),
+            tuple(sorted(bound.soft)) if bound.soft else ())
 
 
 @dataclass
@@ -59,19 +82,19 @@ class Layout:
     def searched(self) -> tuple[str, ...]:
         return self.key[0]
 
-    @cached_property
+    @once
     def ancestral_terms(self) -> list[Term]:
         """The terms of the ancestors of searched, observed and soft-evidence variables."""
         searched, observed, continuous, _, soft = self.key
         return relevant_terms(self.program, searched, observed + continuous, soft)
 
-    @cached_property
+    @once
     def latent(self) -> list[str]:
         """The unknown continuous variables that matter (searched, or parents of a relevant
         term): only the methods for continuous variables answer when there are some."""
         return latent_continuous(self.ancestral_terms, set(self.key[2]))
 
-    @cached_property
+    @once
     def terms(self) -> list[Term]:
         """The requisite terms (:mod:`~bayesprog.inference.relevance`) when every unknown
         variable is discrete, else the ancestral ones."""
@@ -81,7 +104,7 @@ class Layout:
         found = requisite_terms(self.program, searched, observed + continuous, soft)
         return self.ancestral_terms if found is None else found
 
-    @cached_property
+    @once
     def pruned(self) -> bool:
         """Whether the requisite terms leave out some the evidence depends on: the answer's
         normaliser is then not the evidence's probability, which is computed when asked."""
@@ -92,7 +115,7 @@ class Layout:
             name not in touched for name in self.key[1] + self.key[2] + self.key[4])
 
 
-    @cached_property
+    @once
     def constant(self) -> bool:
         """Whether the answer is the same whatever the evidence's values: no requisite term
         reads an observed variable, an input or soft evidence (the searched variables are
@@ -104,13 +127,13 @@ class Layout:
         return all(is_static(t) for t in self.terms) and not any(
             name in touched for name in observed + continuous)
 
-    @cached_property
+    @once
     def cards(self) -> tuple[int, ...]:
         """The number of states of each searched variable."""
         return tuple(int(self.program.variables[v].card)  # type: ignore[union-attr]
                      for v in self.searched)
 
-    @cached_property
+    @once
     def named_states(self) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[Any, ...]]]:
         """The searched variables' state names and typed values, for the answers."""
         variables = self.program.variables
@@ -140,7 +163,7 @@ class QuestionPlan:
     def searched(self) -> tuple[str, ...]:
         return self.question.expression.left
 
-    @cached_property
+    @once
     def layout(self) -> Layout:
         return layout_of(self.program, self.question, self.bound)
 
