@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from scipy.special import logsumexp
@@ -40,6 +41,11 @@ def contract_question(plan: QuestionPlan) -> Posterior:
     prepared = plan.layout.prepared.get("contraction")
     if prepared is None:
         prepared = plan.layout.prepared["contraction"] = Sliceable(plan)
+    bound = plan.bound
+    if not (prepared.others or bound.batch_shape or bound.soft):
+        one = prepared.one_row(plan)
+        if one is not None:
+            return answer(plan, *one)
     operands, offset = prepared.operands(plan)
     return answer(plan, *_normalised(plan, operands, offset, plan.searched,
                                      lambda: question_factors(plan.program, plan.terms,
@@ -70,6 +76,36 @@ class Sliceable:
             self.tables.append((fixed, rest, np.ascontiguousarray(
                 np.exp(f.log - top).transpose(order))))
             self.log_scale += top
+        self.single: Any = None  # the contraction of one row of evidence, once made
+
+    def one_row(self, plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray] | None:
+        """The answer to one row of evidence when every term is prepared, in scalars: the
+        normalised table ``[1] + cards`` and the log normaliser ``[1]``; None when it needs
+        the general path (a probability below what scaled arithmetic resolves)."""
+        values = plan.bound.discrete
+        arrays: list[np.ndarray] = []
+        scale = 1.0
+        for fixed, rest, table in self.tables:
+            sliced = table[tuple(values[a] for a in fixed)] if fixed else table
+            if rest:
+                arrays.append(sliced)
+            else:
+                scale *= float(sliced)
+        if self.single is None:
+            operands = [Factor(rest, a, False) for (_, rest, _), a in zip(
+                (t for t in self.tables if t[1]), arrays, strict=True)]
+            present = {a for f in operands for a in f.axes}
+            self.ones = [np.ones(plan.card(v)) for v in plan.searched if v not in present]
+            operands += [Factor((v,), ones, False) for v, ones in zip(
+                (v for v in plan.searched if v not in present), self.ones, strict=True)]
+            self.single = plan.program.inference_cache.plans.get(operands, plan.searched,
+                                                                 False)
+        table = self.single(*arrays, *self.ones) if arrays or self.ones else np.ones(())
+        total = float(table.sum())
+        if not (TINY < total < math.inf and scale > 0):
+            return None
+        return (table / total)[np.newaxis], np.array(
+            [math.log(total) + math.log(scale) + self.log_scale])
 
     def operands(self, plan: QuestionPlan) -> tuple[list[Factor], np.ndarray | float]:
         """The rescaled operands for ``plan``'s evidence, and the log of what they were
