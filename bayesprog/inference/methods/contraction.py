@@ -92,6 +92,11 @@ class Sliceable:
             else:
                 scale *= float(sliced)
         if self.single is None:
+            if not arrays and not any(v not in {a for t in self.tables for a in t[1]}
+                                      for v in plan.searched):
+                self.ones = []
+                self.single = lambda: np.ones(())  # nothing left to contract
+                return self.one_row(plan)
             operands = [Factor(rest, a, False) for (_, rest, _), a in zip(
                 (t for t in self.tables if t[1]), arrays, strict=True)]
             present = {a for f in operands for a in f.axes}
@@ -100,7 +105,7 @@ class Sliceable:
                 (v for v in plan.searched if v not in present), self.ones, strict=True)]
             self.single = plan.program.inference_cache.plans.get(operands, plan.searched,
                                                                  False)
-        table = self.single(*arrays, *self.ones) if arrays or self.ones else np.ones(())
+        table = self.single(*arrays, *self.ones)
         total = float(table.sum())
         if not (TINY < total < math.inf and scale > 0):
             return None
