@@ -4,6 +4,7 @@ contraction method); every later evidence set is a lookup in it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,10 +83,18 @@ class TableMethod(Method):
                     fixed=PER_FACTOR, setup=setup)
 
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
-        compiled = _compile(plan)
+        compiled = plan.layout.prepared.get("table")
+        if compiled is None:
+            compiled = plan.layout.prepared["table"] = _compile(plan)
         bound, searched = plan.bound, plan.searched
         index = tuple(bound.discrete[v] for v in compiled.observed)
         rows = compiled.table[index] if index else compiled.table
+        if not bound.batch_shape:  # one row: in scalars
+            total = float(rows.sum())
+            if not total > TINY:
+                return None
+            return answer(plan, (rows / total)[np.newaxis],
+                          np.array([math.log(total) + compiled.log_offset]))
         cards: tuple[int, ...] = tuple(rows.shape[rows.ndim - len(searched) :])
         rows = rows.reshape((-1,) + cards)
         if rows.shape[0] != bound.size:
