@@ -212,7 +212,8 @@ def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
     import sys
     import time
 
-    path = write_experiment(tmp_path, runs=8, chunk=1, iterations=25)
+    # enough work (about 2 s on two cores) that the interrupt lands while chunks remain
+    path = write_experiment(tmp_path, runs=8, chunk=1, iterations=120)
     out = tmp_path / "out"
     script = Path(sys.executable).with_name("bayesprog")
     command = [str(script), "run", str(path), "--out", str(out), "--workers", "2", "-q",
