@@ -29,8 +29,8 @@ from bayesprog.inference.cost import ranked, unanswerable
 from bayesprog.inference.density import Density
 from bayesprog.inference.methods import (
     Cost,
-    base,
     Method,
+    base,
     register_method,
     registered_methods,
     registry_version,

@@ -129,8 +129,8 @@ class Contraction:
     compiled expressions do, with the per-step choices and index strings settled once, so
     that a contraction of small tables costs a few microseconds of Python, not tens."""
 
-    def __init__(self, equation: str, shapes: list[tuple[int, ...]], path: list) -> None:
-        _, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize=path)
+    def __init__(self, info: Any) -> None:
+        """``info``: opt_einsum's account of the path (``contract_path``'s second value)."""
         self.steps: list[tuple[tuple[int, ...], str, Any]] = []
         for inds, removed, einsum_str, _, blas in info.contraction_list:
             involved = set(einsum_str.split("->")[0].replace(",", ""))
@@ -140,7 +140,8 @@ class Contraction:
                 inputs, result = einsum_str.split("->")
                 left, right = inputs.split(",")
                 gone = [s for s in set(left) & set(right) if s not in result]
-                axes = tuple(zip(*sorted((left.find(s), right.find(s)) for s in gone))) \
+                axes = tuple(zip(*sorted((left.find(s), right.find(s)) for s in gone),
+                                 strict=True)) \
                     if gone else ((), ())
                 produced = "".join(s for s in left + right if s not in gone)
                 order = tuple(map(produced.index, result)) if produced != result else None
@@ -161,11 +162,37 @@ class Contraction:
         return operands[0]
 
 
+def equation(operands: list[tuple[str, ...]], output: tuple[str, ...],
+             batched: list[bool] | None = None, batched_out: bool = False) -> str:
+    """The einsum equation (opt_einsum's symbols) contracting factors over ``operands`` axes
+    down to ``output``: each variable's symbol from its rank among the names, the batch axis
+    (of the factors that are ``batched``) the first symbol. The same factors give the same
+    equation, so that the cost model's path serves the contraction."""
+    names = sorted({a for axes in operands for a in axes} | set(output))
+    sym = {n: opt_einsum.get_symbol(i + 1) for i, n in enumerate(names)}
+    batch = opt_einsum.get_symbol(0)
+    flags = batched or [False] * len(operands)
+    terms = [(batch if b else "") + "".join(sym[a] for a in axes)
+             for axes, b in zip(operands, flags, strict=True)]
+    return ",".join(terms) + "->" + (batch if batched_out else "") + "".join(
+        sym[a] for a in output)
+
+
 class Plans:
-    """A cache of opt_einsum contraction expressions keyed by the operands' layout."""
+    """Contraction paths by equation and shapes (searched once: the cost model's estimate
+    and the contraction share them), and contraction runners by the operands' layout."""
 
     def __init__(self) -> None:
         self._cache: dict[Any, Any] = {}
+        self._paths: dict[Any, tuple[list, Any, float]] = {}
+
+    def path(self, equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
+        """:func:`contraction_path` of ``equation`` over ``shapes``, searched once."""
+        key = (equation, tuple(shapes))
+        found = self._paths.get(key)
+        if found is None:
+            found = self._paths[key] = contraction_path(equation, shapes)
+        return found
 
     def get(self, operands: list[Factor], output: tuple[str, ...], batched_out: bool) -> Any:
         # the batch size enters the key by its order of magnitude only (powers of 4): a plan
@@ -176,17 +203,10 @@ class Plans:
                batched_out, rows.bit_length() // 2)
         expr = self._cache.get(key)
         if expr is None:
-            names = sorted({a for f in operands for a in f.axes} | set(output))
-            sym = {n: opt_einsum.get_symbol(i + 1) for i, n in enumerate(names)}
-            batch = opt_einsum.get_symbol(0)
-            terms = [(batch if f.batched else "") + "".join(sym[a] for a in f.axes)
-                     for f in operands]
-            out = (batch if batched_out else "") + "".join(sym[a] for a in output)
-            eq = ",".join(terms) + "->" + out
-            shapes = [f.log.shape for f in operands]
-            path, _, _ = contraction_path(eq, shapes)
-            expr = Contraction(eq, shapes, path)
-            self._cache[key] = expr
+            eq = equation([f.axes for f in operands], output, [f.batched for f in operands],
+                          batched_out)
+            _, info, _ = self.path(eq, [f.log.shape for f in operands])
+            expr = self._cache[key] = Contraction(info)
         return expr
 
 

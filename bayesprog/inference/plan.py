@@ -12,11 +12,10 @@ from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 import numpy as np
-import opt_einsum
 
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
-from bayesprog.inference.core import contraction_path
+from bayesprog.inference.core import equation
 from bayesprog.inference.factors import is_static, latent_continuous, relevant_terms
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import requisite_terms
@@ -190,16 +189,14 @@ class QuestionPlan:
         observed = set(self.bound.discrete) if sliced else set()
         operands = [tuple(a for a in t.axes if a not in observed) for t in self.terms]
         operands += [(name,) for name in self.bound.soft if name not in observed]
+        operands = [axes for axes in operands if axes]  # the others are numbers
         present = {a for axes in operands for a in axes}
         operands += [(v,) for v in output if v not in present]
-        names = sorted({a for axes in operands for a in axes})
-        symbol = {n: opt_einsum.get_symbol(i) for i, n in enumerate(names)}
-        equation = (",".join("".join(symbol[a] for a in axes) for axes in operands) + "->"
-                    + "".join(symbol[a] for a in output))
         shapes = [tuple(self.card(a) for a in axes) for axes in operands]
         largest = max([float(np.prod(s)) for s in shapes]
                       + [float(np.prod([self.card(v) for v in output]))])
         if len(operands) < 2:
             return largest, largest
-        _, info, cost = contraction_path(equation, shapes)
+        _, info, cost = self.program.inference_cache.plans.path(equation(operands, output),
+                                                                 shapes)
         return cost, max(float(info.largest_intermediate), largest)

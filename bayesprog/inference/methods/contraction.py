@@ -12,8 +12,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.binding import Bound
+from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import is_static, question_factors, rescaled, term_factor
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
