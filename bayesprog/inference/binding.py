@@ -144,7 +144,12 @@ def _named_states(program: ProgramLike, expr: Any, evidence: Any) -> Bound | Non
     for values in (evidence, fixed) if fixed else (evidence,):
         for name, value in values.items():
             lookup = lookups.get(name)
-            if lookup is None or type(value) is not str or name in found or name not in right:
+            if lookup is None:
+                var = program.variables.get(name)
+                if not isinstance(var, Discrete):
+                    return None
+                lookup = lookups[name] = var._lookup
+            if type(value) is not str or name in found or name not in right:
                 return None
             index = lookup.get(value)
             if index is None:
@@ -154,11 +159,11 @@ def _named_states(program: ProgramLike, expr: Any, evidence: Any) -> Bound | Non
 
 
 def _state_lookups(program: ProgramLike) -> dict[str, dict[str, int]]:
-    """Each discrete variable's states by name (kept with the program's compiled pieces)."""
+    """Each discrete variable's states by name, as far as made (kept with the program's
+    compiled pieces)."""
     cache = program.inference_cache
     if cache.state_lookups is None:
-        cache.state_lookups = {name: var._lookup for name, var in program.variables.items()
-                               if isinstance(var, Discrete)}
+        cache.state_lookups = {}  # filled as variables are asked about
     return cache.state_lookups
 
 

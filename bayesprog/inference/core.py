@@ -3,6 +3,7 @@ pieces (contraction expressions, evidence-free factors, compiled tables)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +46,9 @@ def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list
     networks the greedy path is several times costlier (16 x 16 binary grid: 6.8e8 against
     1.9e8 operations); on batched questions over networks such as insurance, min-fill's steps
     fall outside matrix products and greedy is faster. Both are deterministic."""
+    small = _one_step(equation, shapes)
+    if small is not None:
+        return small
     path, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize="greedy")
     cost = _weighted_cost(info)
     if len(shapes) < 3 or cost <= SECOND_OPINION:
@@ -55,6 +59,38 @@ def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list
     if _weighted_cost(other_info, EINSUM_SUM) < _weighted_cost(info, EINSUM_SUM):
         return other_path, other_info, _weighted_cost(other_info)
     return path, info, cost
+
+
+#: A contraction whose indices span at most this many combinations is done in one einsum
+#: step, without a path search (which would cost more than the contraction).
+ONE_STEP = 1024
+
+
+@dataclass
+class _OneStep:
+    """The account of a one-step path, shaped like the part of opt_einsum's that is read."""
+
+    contraction_list: list[tuple[tuple[int, ...], frozenset[str], str, list, bool]]
+    size_dict: dict[str, int]
+    largest_intermediate: float
+
+
+def _one_step(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float] | None:
+    """A path of one step over all operands when their indices span at most ``ONE_STEP``
+    combinations (its operations: that many per operand), else None."""
+    inputs, output = equation.split("->")
+    terms = inputs.split(",")
+    sizes: dict[str, int] = {}
+    for term, shape in zip(terms, shapes, strict=True):
+        sizes.update(zip(term, shape, strict=True))
+    span = math.prod(sizes.values())
+    if span > ONE_STEP:
+        return None
+    order = tuple(range(len(terms) - 1, -1, -1))  # popped last first, as opt_einsum does
+    step = ",".join(terms[i] for i in order) + "->" + output
+    removed = frozenset(sizes) - set(output)
+    info = _OneStep([(order, removed, step, [], False)], sizes, float(span))
+    return [tuple(range(len(terms)))], info, float(span * len(terms))
 
 
 def _weighted_cost(info: Any, summing: float = 1.0) -> float:
@@ -226,3 +262,5 @@ class InferenceCache:
     derived: dict[Any, Any] = field(default_factory=dict)
     #: each discrete variable's states by name (binding evidence given by name)
     state_lookups: dict[str, dict[str, int]] | None = None
+    #: the program's graph as questions walk it (:func:`~bayesprog.inference.relevance.family`)
+    family: Any = None

@@ -13,6 +13,7 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
 from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.inference.protocol import ProgramLike
+from bayesprog.inference.relevance import family
 from bayesprog.language.check import Term
 from bayesprog.variables import Continuous, discrete
 
@@ -24,15 +25,9 @@ def relevant_terms(program: ProgramLike, searched: Iterable[str], observed: Iter
     A barren variable (no observed descendant, not searched) sums out to one with its term,
     unless a term is unnormalised (a potential): those children are always kept.
     """
-    targets = set(searched) | set(observed) | set(soft)
-    terms = program.active_terms
-    for t in terms:
-        if t.soft or not t.form.is_normalized(t.child):
-            targets.add(t.child.name)
-    keep = set(targets)
-    for name in targets:
-        keep |= program.ancestors(name)
-    return [t for t in terms if t.child.name in keep]
+    graph = family(program)
+    keep = graph.ancestors({*searched, *observed, *soft, *graph.unnormalised})
+    return [t for t in program.active_terms if t.child.name in keep]
 
 
 def latent_continuous(terms: list[Term], observed: Collection[str]) -> list[str]:

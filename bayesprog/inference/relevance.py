@@ -16,9 +16,54 @@ d-separation does not say what they change.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass, field
 
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.language.check import Term
+
+
+@dataclass
+class Family:
+    """The program's graph as the questions walk it: each variable's parents and children
+    (terms of the decomposition), the variables with soft evidence written in the program,
+    and whether every term is a conditional distribution."""
+
+    parents: dict[str, list[str]] = field(default_factory=dict)
+    children: dict[str, list[str]] = field(default_factory=dict)
+    soft: set[str] = field(default_factory=set)
+    #: variables whose term is unnormalised (a potential) or soft evidence
+    unnormalised: set[str] = field(default_factory=set)
+
+    def ancestors(self, names: Iterable[str]) -> set[str]:
+        """``names`` and all their ancestors."""
+        found = set(names)
+        todo = list(found)
+        while todo:
+            for parent in self.parents.get(todo.pop(), ()):
+                if parent not in found:
+                    found.add(parent)
+                    todo.append(parent)
+        return found
+
+
+def family(program: ProgramLike) -> Family:
+    """The program's :class:`Family` (made once per program)."""
+    cache = program.inference_cache
+    if cache.family is None:
+        found = Family()
+        for t in program.active_terms:
+            name = t.child.name
+            if t.soft:
+                found.soft.add(name)
+                found.unnormalised.add(name)
+                continue
+            if not t.form.is_normalized(t.child):
+                found.unnormalised.add(name)
+            found.parents[name] = [p.name for p in t.parents]
+            for p in t.parents:
+                found.children.setdefault(p.name, []).append(name)
+        cache.family = found
+    return cache.family
 
 
 def requisite(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
@@ -26,19 +71,11 @@ def requisite(program: ProgramLike, searched: Iterable[str], observed: Iterable[
     """The variables whose terms ``P(searched | observed)`` needs (soft evidence on ``soft``),
     or None when the program's terms are not all conditional distributions (then a question
     keeps the ancestors of what it touches)."""
-    terms = program.active_terms
-    if any(not t.soft and not t.form.is_normalized(t.child) for t in terms):
+    graph = family(program)
+    if graph.unnormalised - graph.soft:
         return None
-    parents: dict[str, list[str]] = {}
-    children: dict[str, list[str]] = {}
-    virtual = set(soft)  # variables with an observed virtual child (their soft evidence)
-    for t in terms:
-        if t.soft:
-            virtual.add(t.child.name)
-            continue
-        parents[t.child.name] = [p.name for p in t.parents]
-        for p in t.parents:
-            children.setdefault(p.name, []).append(t.child.name)
+    parents, children = graph.parents, graph.children
+    virtual = graph.soft | set(soft)  # variables with an observed virtual child
     known = set(observed)
     top: set[str] = set()
     bottom: set[str] = set()
