@@ -56,7 +56,8 @@ from bayesprog.io import dump_document, network_to_document, read_network
 
 EXAMPLES = Path(pgmpy.__file__).parent / "utils" / "example_models"
 TABLE_LIMIT = table_method.TABLE_LIMIT
-NETWORKS = ["asia", "alarm", "child", "insurance", "hepar2", "win95pts"]
+NETWORKS = ["asia", "alarm", "child", "insurance", "water", "hailfinder", "hepar2", "win95pts",
+            "pigs", "munin1"]
 BATCHES = [1, 100, 10_000]
 
 

@@ -238,3 +238,35 @@ def _letters(equation: str) -> dict[int, str]:
     """opt_einsum's symbols of ``equation`` as ASCII letters, for numpy's einsum."""
     used = sorted({c for c in equation if c not in ",->"})
     return {ord(c): "abcdefghijklmnopqrstuvwxyz"[i] for i, c in enumerate(used)}
+
+
+def test_a_batch_larger_than_the_memory_limit_is_answered_in_slices(monkeypatch):
+    import bayesprog.inference as inference
+    from bayesprog.limits import SizeError, set_limits
+
+    program, tables = chain(4)
+    rng = np.random.default_rng(0)
+    # soft evidence: only the contraction answers, with memory in proportion to the rows
+    evidence = {"B": rng.integers(0, 3, size=(50, 2)), "C": rng.integers(0, 2, size=(50, 2))}
+    soft = {"A": rng.uniform(0.1, 1.0, size=(50, 2, 2))}
+    whole = program.ask("P(A | B, C)", evidence, soft=soft)
+    slices = []
+    original = inference._in_slices
+    monkeypatch.setattr(inference, "_in_slices",
+                        lambda *args: slices.append(args[-1]) or original(*args))
+    small, _ = chain(4)
+    try:
+        set_limits(entries=60)  # a few rows of the contraction at a time
+        sliced = small.ask("P(A | B, C)", evidence, soft=soft)
+        with pytest.raises(SizeError):  # not even one row fits
+            set_limits(entries=1)
+            small.ask("P(A | B, C)", evidence, soft=soft)
+    finally:
+        set_limits(entries=None)
+    assert slices and slices[0] < 100
+    assert sliced.batch_shape == (50, 2) and sliced.probabilities.shape == (50, 2, 2)
+    np.testing.assert_allclose(sliced.probabilities, whole.probabilities, rtol=1e-12)
+    np.testing.assert_allclose(sliced.log_evidence, whole.log_evidence, rtol=1e-12)
+    b, c = evidence["B"][7, 1], evidence["C"][7, 1]
+    row = tables["joint"][:, b, c] * soft["A"][7, 1]
+    np.testing.assert_allclose(sliced.probabilities[7, 1], row / row.sum(), rtol=1e-12)

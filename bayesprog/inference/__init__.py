@@ -14,6 +14,7 @@ joint table, exact) and ``contraction`` (scaled tensor contraction, exact).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -87,6 +88,10 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                  + max(mc[1].setup - spent, 0.0))
     if not fitting:
         method_, cost = methods[0]
+        per_row = cost.memory / ranked_size
+        if size > 1 and per_row <= cap and not plan.latent:
+            # the batch does not fit at once, but its rows do: answered in slices
+            return _in_slices(program, question, bound, options, max(int(cap // per_row), 1))
         approximate = ", ".join(name for name, m in registered_methods().items()
                                 if not m.exact and m.estimate(plan) is not None)
         check_size(cost.memory / ranked_size * size,
@@ -108,6 +113,31 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                 layout.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
             return _with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+
+
+def _in_slices(program: ProgramLike, question: Question, bound: Bound,
+               options: Mapping[str, Any] | None, rows: int) -> Posterior:
+    """The answer to a batch too large to contract at once, asked ``rows`` rows at a time
+    and put together (each slice within the memory limit)."""
+    parts: list[Posterior] = []
+    for start in range(0, bound.size, rows):
+        part = compute_posterior(program, question, bound.rows(start, start + rows),
+                                 options=options)
+        assert isinstance(part, Posterior)  # the question has no unknown real variable
+        parts.append(part)
+    shape = bound.batch_shape
+
+    def log_evidence() -> np.ndarray:
+        return np.concatenate([part.log_evidence for part in parts]).reshape(shape)
+
+    impossible = [part.log_evidence == -np.inf if part.impossible is None else part.impossible
+                  for part in parts]
+    cards = parts[0].probabilities.shape[1:]
+    return dataclasses.replace(
+        parts[0], batch_shape=shape, log_evidence=log_evidence,  # type: ignore[arg-type]
+        probabilities=np.concatenate([part.probabilities for part in parts]).reshape(
+            shape + cards),
+        impossible=np.concatenate(impossible).reshape(shape))
 
 
 def _with_evidence(plan: QuestionPlan, answer: Posterior | Density,

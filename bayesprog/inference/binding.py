@@ -34,6 +34,21 @@ class Bound:
     def size(self) -> int:
         return int(np.prod(self.batch_shape)) if self.batch_shape else 1
 
+    def rows(self, start: int, stop: int) -> Bound:
+        """Rows ``start`` to ``stop`` of the flat batch (values without a batch axis kept)."""
+
+        def cut(value: ParamValue) -> ParamValue:
+            return ParamValue(value.axes, value.array[start:stop], True) if value.batched \
+                else value
+
+        return Bound(
+            (min(stop, self.size) - start,),
+            {k: v[start:stop] if isinstance(v, np.ndarray) else v
+             for k, v in self.discrete.items()},
+            {k: cut(v) for k, v in self.continuous.items()},
+            {k: cut(v) for k, v in self.inputs.items()},
+            {k: cut(v) for k, v in self.soft.items()})
+
 
 def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...],
              trailing: int) -> tuple[np.ndarray, bool]:

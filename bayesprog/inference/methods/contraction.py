@@ -42,7 +42,7 @@ def contract_question(plan: QuestionPlan) -> Posterior:
     if prepared is None:
         prepared = plan.layout.prepared["contraction"] = Sliceable(plan)
     bound = plan.bound
-    if not (prepared.others or bound.batch_shape or bound.soft):
+    if bound.size == 1 and not (prepared.others or bound.soft):
         one = prepared.one_row(plan)
         if one is not None:
             return answer(plan, *one)
@@ -82,7 +82,8 @@ class Sliceable:
         """The answer to one row of evidence when every term is prepared, in scalars: the
         normalised table ``[1] + cards`` and the log normaliser ``[1]``; None when it needs
         the general path (a probability below what scaled arithmetic resolves)."""
-        values = plan.bound.discrete
+        values = {k: v if type(v) is int else int(np.ravel(v)[0])
+                  for k, v in plan.bound.discrete.items()}
         arrays: list[np.ndarray] = []
         scale = 1.0
         for fixed, rest, table in self.tables:

@@ -89,7 +89,7 @@ class TableMethod(Method):
         bound, searched = plan.bound, plan.searched
         index = tuple(bound.discrete[v] for v in compiled.observed)
         rows = compiled.table[index] if index else compiled.table
-        if not bound.batch_shape:  # one row: in scalars
+        if bound.size == 1:  # one row: in scalars
             total = float(rows.sum())
             if not total > TINY:
                 return None
