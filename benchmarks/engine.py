@@ -374,10 +374,12 @@ def approximate_table(rows: list[dict]) -> str:
 
 
 def _network_question(name: str, tmp: Path) -> tuple[Path, str, dict]:
-    """The benchmark's question on network ``name`` and one evidence set (first states)."""
-    model, path, target, observed, _ = load_network(name, tmp)
+    """The benchmark's question on network ``name`` and one evidence set (the first forward
+    sample: evidence of probability above zero)."""
+    model, path, target, observed, rng = load_network(name, tmp)
     cpds = {c.variable: c for c in model.get_cpds()}
-    evidence = {v: str(cpds[v].state_names[v][0]) for v in observed}
+    sample = forward_sample(model, 1, rng)
+    evidence = {v: str(cpds[v].state_names[v][int(sample[v][0])]) for v in observed}
     return path, f"P({target} | {', '.join(observed)})", evidence
 
 

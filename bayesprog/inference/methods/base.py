@@ -35,6 +35,12 @@ class Cost:
 #: benchmark's machine), so that a cost model in operations also ranks small questions, whose
 #: time this overhead dominates.
 PER_FACTOR = 2e4
+#: What an exact method's call costs besides its factors (binding the evidence, the layout's
+#: lookups, the answer: about 12 microseconds, measured by benchmarks/engine.py).
+PER_CALL = 1.4e4
+#: What a factor prepared once per layout (a term that reads no evidence value) costs a
+#: contraction's call: an index into its table and one step (about 2 microseconds).
+PER_PREPARED = 2.5e3
 
 
 class Method:

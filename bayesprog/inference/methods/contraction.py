@@ -16,7 +16,15 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import is_static, question_factors, rescaled, term_factor
-from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
+from bayesprog.inference.methods.base import (
+    PER_CALL,
+    PER_FACTOR,
+    PER_PREPARED,
+    Cost,
+    Method,
+    answer,
+    register_method,
+)
 from bayesprog.inference.plan import QuestionPlan
 
 
@@ -28,9 +36,10 @@ class ContractionMethod(Method):
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         operations, largest = plan.contraction_cost(plan.searched)
-        factors = len(plan.terms) + len(plan.bound.soft)
+        prepared = sum(1 for t in plan.terms if is_static(t))
+        computed = len(plan.terms) - prepared + len(plan.bound.soft)
         return Cost(operations=plan.bound.size * operations, memory=plan.bound.size * largest,
-                    fixed=PER_FACTOR * factors)
+                    fixed=PER_CALL + PER_PREPARED * prepared + PER_FACTOR * computed)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         return contract_question(plan)

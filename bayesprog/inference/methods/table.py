@@ -14,7 +14,14 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import is_static, term_factor
-from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
+from bayesprog.inference.methods.base import (
+    PER_CALL,
+    PER_FACTOR,
+    Cost,
+    Method,
+    answer,
+    register_method,
+)
 from bayesprog.inference.plan import QuestionPlan
 
 #: Largest joint table (entries) that a compiled discrete question keeps.
@@ -73,14 +80,14 @@ class TableMethod(Method):
         lookup = int(np.prod([plan.card(v) for v in searched]))
         if (searched, observed) in plan.program.inference_cache.tables:
             return Cost(operations=float(bound.size * lookup), memory=float(joint),
-                        fixed=PER_FACTOR)
+                        fixed=PER_CALL)
         compile_ops, compile_memory = plan.contraction_cost(observed + searched, sliced=False)
         # compiling builds every factor whole and contracts them with the observed variables
         # left open, mostly outside matrix products: measured (benchmarks/engine.py) at about
         # twice the time per operation and four times the time per factor of a contraction
         setup = 2 * compile_ops + 4 * PER_FACTOR * len(plan.terms)
         return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory),
-                    fixed=PER_FACTOR, setup=setup)
+                    fixed=PER_CALL, setup=setup)
 
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         compiled = plan.layout.prepared.get("table")
