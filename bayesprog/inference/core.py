@@ -100,6 +100,8 @@ def _weighted_cost(info: Any, summing: float = 1.0) -> float:
     for inds, removed, einsum_str, _, blas in info.contraction_list:
         involved = set(einsum_str.split("->")[0].replace(",", ""))
         flops = helpers.flop_count(involved, bool(removed), len(inds), info.size_dict)
+        # the runner does matrix products below BLAS_MIN operations as einsum steps
+        blas = blas and "EINSUM" not in blas and flops >= BLAS_MIN
         total += flops / BLAS_SPEED if blas else flops * (summing if removed else 1.0)
     return total
 
