@@ -270,3 +270,13 @@ def test_a_batch_larger_than_the_memory_limit_is_answered_in_slices(monkeypatch)
     b, c = evidence["B"][7, 1], evidence["C"][7, 1]
     row = tables["joint"][:, b, c] * soft["A"][7, 1]
     np.testing.assert_allclose(sliced.probabilities[7, 1], row / row.sum(), rtol=1e-12)
+
+
+def test_an_answer_with_a_deferred_evidence_probability_pickles_with_it():
+    import pickle
+
+    program, joint = independent()
+    answer = program.ask("P(A | D)", {"D": "d2"})
+    copy = pickle.loads(pickle.dumps(answer))
+    np.testing.assert_allclose(copy.probabilities, answer.probabilities, rtol=0)
+    np.testing.assert_allclose(copy.log_evidence, np.log(joint[..., 2].sum()), rtol=1e-12)

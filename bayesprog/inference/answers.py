@@ -70,6 +70,11 @@ class Posterior:
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
 
+    def __getstate__(self) -> dict[str, Any]:
+        # a pickled answer carries its evidence's probability, not the way to compute it
+        self.log_evidence  # noqa: B018  (computed where it was deferred)
+        return dict(self.__dict__)
+
     def typed(self, variable: str) -> tuple[Any, ...]:
         return (self.values or {}).get(variable, self.states[variable])
 
