@@ -280,3 +280,102 @@ def test_an_answer_with_a_deferred_evidence_probability_pickles_with_it():
     copy = pickle.loads(pickle.dumps(answer))
     np.testing.assert_allclose(copy.probabilities, answer.probabilities, rtol=0)
     np.testing.assert_allclose(copy.log_evidence, np.log(joint[..., 2].sum()), rtol=1e-12)
+
+
+def test_a_path_account_matches_opt_einsums():
+    """The account of a contraction path (its steps, operations, matrix products and
+    largest intermediate) against opt_einsum's ``contract_path`` on the same path."""
+    import opt_einsum
+
+    from bayesprog.inference.core import Account, equation
+
+    rng = np.random.default_rng(5)
+    names = "ABCDEFGHIJ"
+    for _ in range(60):
+        cards = {n: int(rng.integers(2, 9)) for n in names}
+        operands = [tuple(rng.choice(list(names), size=int(rng.integers(1, 4)), replace=False))
+                    for _ in range(int(rng.integers(3, 9)))]
+        output = tuple(rng.choice(sorted({a for axes in operands for a in axes}),
+                                  size=int(rng.integers(0, 3)), replace=False))
+        eq = equation(operands, output)
+        shapes = [tuple(cards[a] for a in axes) for axes in operands]
+        terms, out = eq.split("->")[0].split(","), eq.split("->")[1]
+        sizes = {s: n for t, shape in zip(terms, shapes, strict=True)
+                 for s, n in zip(t, shape, strict=True)}
+        path = opt_einsum.paths.greedy([frozenset(t) for t in terms], frozenset(out), sizes)
+        ours = Account.of(terms, out, sizes, path)
+        _, theirs = opt_einsum.contract_path(eq, *shapes, shapes=True, optimize=path)
+        assert ours.largest_intermediate == theirs.largest_intermediate
+        assert len(ours.steps) == len(theirs.contraction_list)
+        for (inds, removed, text, flops, blas), (t_inds, t_removed, t_text, _, t_blas) in zip(
+                ours.steps, theirs.contraction_list, strict=True):
+            assert (inds, removed, text) == (t_inds, t_removed, t_text)
+            involved = set(text.split("->")[0].replace(",", ""))
+            assert flops == opt_einsum.helpers.flop_count(involved, bool(removed), len(inds),
+                                                          sizes)
+            assert blas == (bool(t_blas) and "EINSUM" not in t_blas and flops >= 4096)
+
+
+def grid(n: int, seed: int) -> bayesprog.Program:
+    """An n x n grid of binary variables, each with its up and left neighbours as parents
+    (random tables)."""
+    rng = np.random.default_rng(seed)
+    lines = ["bayesprog: 1", "variables:"]
+    lines += [f"  X{i}_{j}: {{states: [s0, s1]}}" for i in range(n) for j in range(n)]
+    lines.append("decomposition:")
+    for i in range(n):
+        for j in range(n):
+            parents = [f"X{a}_{b}" for a, b in ((i - 1, j), (i, j - 1)) if a >= 0 and b >= 0]
+            rows = rng.dirichlet(np.ones(2), size=2 ** len(parents)).round(6)
+            rows[:, 1] = 1 - rows[:, 0]
+            given = f" | {', '.join(parents)}" if parents else ""
+            table = _nested(rows, len(parents))
+            lines.append(f"  - {{term: 'P(X{i}_{j}{given})', form: table, table: {table}}}")
+    return bayesprog.loads("\n".join(lines))
+
+
+def _nested(rows: np.ndarray, parents: int) -> str:
+    """Rows of a binary table (one per parent configuration, the first parent slowest) as
+    lists nested by parent."""
+    if parents == 0:
+        return f"[{rows[0, 0]:.6f}, {rows[0, 1]:.6f}]"
+    half = len(rows) // 2
+    return f"[{_nested(rows[:half], parents - 1)}, {_nested(rows[half:], parents - 1)}]"
+
+
+def test_quick_estimates_choose_as_the_full_ones_do(monkeypatch):
+    """The table's quick estimate (its setup bounded, without a path search) leads the cost
+    model to the same method at every question as the full estimates do, singly and in
+    batches, and the answers agree."""
+    from bayesprog.inference.methods.table import TableMethod
+
+    def run() -> tuple[list[str], list[np.ndarray]]:
+        # a 10 x 10 grid: compiling the table costs more than its bound says (a path search
+        # is needed to know how much more), so the switch comes one question later
+        program, rng = grid(10, seed=2), np.random.default_rng(0)
+        used, answers = [], []
+        for k in range(16):
+            rows = 1 if k < 12 else 50
+            evidence = {name: rng.integers(2, size=rows) for name in ("X9_0", "X0_9", "X4_4")}
+            answer = program.ask("P(X9_9 | X9_0, X0_9, X4_4)", evidence)
+            used.append(answer.method)
+            answers.append(answer.probabilities)
+        return used, answers
+
+    program = grid(10, seed=2)
+    question = program.question("P(X9_9 | X9_0, X0_9, X4_4)")
+    plan = QuestionPlan(program, question, bind(program, question, {"X9_0": 0, "X0_9": 0,
+                                                                     "X4_4": 0}, None, None))
+    costs = {method.name: cost for method, cost in ranked(plan)}
+    per_call = costs["contraction"].operations + costs["contraction"].fixed
+    table = costs["table"]
+    switch = next(k for k in range(12) if table.operations + table.fixed
+                  + max(table.setup - k * per_call, 0.0) < per_call)
+    quick_table = {m.name: c for m, c in ranked(plan, quick=True)}["table"]
+    assert quick_table.floor and quick_table.setup < table.setup  # a bound, below the cost
+    quick = run()
+    monkeypatch.setattr(TableMethod, "quick_estimate", TableMethod.estimate)
+    full = run()
+    assert quick[0] == full[0] == ["contraction"] * switch + ["table"] * (16 - switch)
+    for a, b in zip(quick[1], full[1], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12)

@@ -26,7 +26,7 @@ from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.core import InferenceCache
-from bayesprog.inference.cost import ranked, unanswerable
+from bayesprog.inference.cost import ranked, refined, unanswerable
 from bayesprog.inference.density import Density
 from bayesprog.inference.methods import (
     Cost,
@@ -74,18 +74,22 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     # on the batch size only through its order of magnitude
     found = layout.rankings.get((version, size.bit_length()))
     if found is None:
-        methods = ranked(plan)
+        methods = ranked(plan, quick=True)
         if not methods:
             raise QuestionError(unanswerable(plan))
         found = layout.rankings[(version, size.bit_length())] = (size, methods)
     ranked_size, methods = found
-    fitting = [(m, c) for m, c in methods if c.memory / ranked_size * size <= cap]
     # a method with a setup (a table compiled once) is chosen once the questions of this
     # layout have spent as much on the others as the setup costs: never more than twice the
     # cost of the better choice in hindsight (ski rental)
     spent = layout.spent
-    fitting.sort(key=lambda mc: mc[1].operations / ranked_size * size + mc[1].fixed
-                 + max(mc[1].setup - spent, 0.0))
+    fitting = _fitting(methods, ranked_size, size, cap, spent)
+    floors = [c.setup for _, c in methods if c.floor]
+    if floors and (not fitting or fitting[0][1].floor or spent >= min(floors)):
+        # a quick estimate's bound could decide: the full estimates, once per ranking
+        methods = refined(plan, methods)
+        layout.rankings[(version, size.bit_length())] = (ranked_size, methods)
+        fitting = _fitting(methods, ranked_size, size, cap, spent)
     if not fitting:
         method_, cost = methods[0]
         per_row = cost.memory / ranked_size
@@ -113,6 +117,16 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                 layout.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
             return _with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+
+
+def _fitting(methods: list[tuple[Method, Cost]], ranked_size: int, size: int, cap: float,
+             spent: float) -> list[tuple[Method, Cost]]:
+    """The ranked ``methods`` (estimated for ``ranked_size`` rows) whose memory for ``size``
+    rows is within ``cap``, cheapest first once ``spent`` is deducted from their setups."""
+    fitting = [(m, c) for m, c in methods if c.memory / ranked_size * size <= cap]
+    fitting.sort(key=lambda mc: mc[1].operations / ranked_size * size + mc[1].fixed
+                 + max(mc[1].setup - spent, 0.0))
+    return fitting
 
 
 def _in_slices(program: ProgramLike, question: Question, bound: Bound,

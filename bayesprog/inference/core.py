@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 import opt_einsum
-from opt_einsum import helpers, parser
+from opt_einsum import parser
 
 
 @dataclass
@@ -36,9 +36,9 @@ EINSUM_SUM = 4.0
 
 
 def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
-    """The contraction path for ``equation`` (opt_einsum's notation) over ``shapes``,
-    opt_einsum's account of it (``largest_intermediate``, ...) and its cost in operations, a
-    matrix product's counting ``1 / BLAS_SPEED``.
+    """The contraction path for ``equation`` (opt_einsum's notation) over ``shapes``, its
+    :class:`Account` (steps, ``largest_intermediate``) and its cost in operations, a matrix
+    product's counting ``1 / BLAS_SPEED``.
 
     opt_einsum's greedy path, or where it costs more than ``SECOND_OPINION`` operations, the
     cheaper of it and the path of a min-fill elimination order (variable elimination's classic
@@ -49,15 +49,23 @@ def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list
     small = _one_step(equation, shapes)
     if small is not None:
         return small
-    path, info = opt_einsum.contract_path(equation, *shapes, shapes=True, optimize="greedy")
-    cost = _weighted_cost(info)
+    inputs, output = equation.split("->")
+    terms = inputs.split(",")
+    sizes: dict[str, int] = {}
+    for term, shape in zip(terms, shapes, strict=True):
+        sizes.update(zip(term, shape, strict=True))
+    if len(terms) < 3:
+        path: list[tuple[int, ...]] = [tuple(range(len(terms)))]
+    else:
+        path = opt_einsum.paths.greedy([frozenset(t) for t in terms], frozenset(output), sizes)
+    info = Account.of(terms, output, sizes, path)
+    cost = info.cost()
     if len(shapes) < 3 or cost <= SECOND_OPINION:
         return path, info, cost
-    other = _min_fill_path(equation, shapes)
-    other_path, other_info = opt_einsum.contract_path(equation, *shapes, shapes=True,
-                                                      optimize=other)
-    if _weighted_cost(other_info, EINSUM_SUM) < _weighted_cost(info, EINSUM_SUM):
-        return other_path, other_info, _weighted_cost(other_info)
+    other_path = _min_fill_path(equation, shapes)
+    other = Account.of(terms, output, sizes, other_path)
+    if other.cost(EINSUM_SUM) < info.cost(EINSUM_SUM):
+        return other_path, other, other.cost()
     return path, info, cost
 
 
@@ -67,12 +75,57 @@ ONE_STEP = 1024
 
 
 @dataclass
-class _OneStep:
-    """The account of a one-step path, shaped like the part of opt_einsum's that is read."""
+class Account:
+    """The steps of a contraction path: for each, the positions of its operands (popped from
+    the end, the result appended, as opt_einsum does), the indices it sums out, its einsum
+    string, its operations, and whether it is a matrix product that BLAS could do; with the
+    index sizes and the largest intermediate (entries). What opt_einsum's ``contract_path``
+    tells of a path, made without its checks and printing (a third of a first question's
+    time on a 40-variable network)."""
 
-    contraction_list: list[tuple[tuple[int, ...], frozenset[str], str, list, bool]]
+    steps: list[tuple[tuple[int, ...], frozenset[str], str, int, bool]]
     size_dict: dict[str, int]
     largest_intermediate: float
+
+    @classmethod
+    def of(cls, terms: list[str], output: str, sizes: dict[str, int],
+           path: list[tuple[int, ...]]) -> Account:
+        """The account of ``path`` over operands with index strings ``terms``."""
+        remaining = list(terms)
+        steps = []
+        largest = 1.0
+        for number, positions in enumerate(path):
+            order = tuple(sorted(positions, reverse=True))
+            taken = [remaining.pop(i) for i in order]
+            involved = set("".join(taken))
+            if number == len(path) - 1:
+                result = output
+            else:
+                kept = set(output).union(*remaining) & involved
+                joined = "".join(taken)  # tensordot's order: fewer transpositions
+                result = "".join(sorted(kept, key=joined.find))
+            removed = frozenset(involved.difference(result))
+            flops = math.prod(sizes[i] for i in involved) * (
+                max(1, len(taken) - 1) + (1 if removed else 0))
+            blas = (len(taken) == 2 and flops >= BLAS_MIN and bool(removed) and blas_kind(
+                taken, result, removed, [tuple(sizes[i] for i in t) for t in taken]))
+            steps.append((order, removed, ",".join(taken) + "->" + result, flops, blas))
+            remaining.append(result)
+            largest = max(largest, float(math.prod(sizes[i] for i in result)))
+        return cls(steps, sizes, largest)
+
+    def cost(self, summing: float = 1.0) -> float:
+        """The path's operations, a matrix product's counting 1 / BLAS_SPEED and an einsum
+        step that sums out an index ``summing``."""
+        return sum(flops / BLAS_SPEED if blas else flops * (summing if removed else 1.0)
+                   for _, removed, _, flops, blas in self.steps)
+
+
+def blas_kind(taken: list[str], result: str, removed: frozenset[str],
+              shapes: list[tuple[int, ...]]) -> bool:
+    """Whether a pairwise step is a matrix product numpy's tensordot does by BLAS."""
+    kind = opt_einsum.blas.can_blas(taken, result, removed, shapes)
+    return bool(kind) and "EINSUM" not in kind
 
 
 def _one_step(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float] | None:
@@ -89,21 +142,8 @@ def _one_step(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, 
     order = tuple(range(len(terms) - 1, -1, -1))  # popped last first, as opt_einsum does
     step = ",".join(terms[i] for i in order) + "->" + output
     removed = frozenset(sizes) - set(output)
-    info = _OneStep([(order, removed, step, [], False)], sizes, float(span))
+    info = Account([(order, removed, step, span * len(terms), False)], sizes, float(span))
     return [tuple(range(len(terms)))], info, float(span * len(terms))
-
-
-def _weighted_cost(info: Any, summing: float = 1.0) -> float:
-    """A path's operations, a matrix product's counting 1 / BLAS_SPEED and an einsum step
-    that sums out an index ``summing``."""
-    total = 0.0
-    for inds, removed, einsum_str, _, blas in info.contraction_list:
-        involved = set(einsum_str.split("->")[0].replace(",", ""))
-        flops = helpers.flop_count(involved, bool(removed), len(inds), info.size_dict)
-        # the runner does matrix products below BLAS_MIN operations as einsum steps
-        blas = blas and "EINSUM" not in blas and flops >= BLAS_MIN
-        total += flops / BLAS_SPEED if blas else flops * (summing if removed else 1.0)
-    return total
 
 
 def _min_fill_path(equation: str, shapes: list[tuple[int, ...]]) -> list[tuple[int, ...]]:
@@ -168,13 +208,11 @@ class Contraction:
     that a contraction of small tables costs a few microseconds of Python, not tens."""
 
     def __init__(self, info: Any) -> None:
-        """``info``: opt_einsum's account of the path (``contract_path``'s second value)."""
+        """``info``: the path's :class:`Account`."""
         self.steps: list[tuple[tuple[int, ...], str, Any]] = []
-        for inds, removed, einsum_str, _, blas in info.contraction_list:
-            involved = set(einsum_str.split("->")[0].replace(",", ""))
-            flops = helpers.flop_count(involved, bool(removed), len(inds), info.size_dict)
+        for inds, _, einsum_str, _, blas in info.steps:
             einsum_str = parser.convert_to_valid_einsum_chars(einsum_str)
-            if blas and "EINSUM" not in blas and flops >= BLAS_MIN:
+            if blas:
                 inputs, result = einsum_str.split("->")
                 left, right = inputs.split(",")
                 gone = [s for s in set(left) & set(right) if s not in result]
@@ -258,6 +296,9 @@ class InferenceCache:
     layouts: dict[Any, Any] = field(default_factory=dict)
     #: factors of terms that depend on no evidence nor input, by id of the term
     static_factors: dict[int, Factor] = field(default_factory=dict)
+    #: the same factors in the probability domain, each divided by its largest entry, and
+    #: the log of that entry
+    static_tables: dict[int, tuple[np.ndarray, float]] = field(default_factory=dict)
     #: compiled tables of the table method, by (searched, observed)
     tables: dict[Any, Any] = field(default_factory=dict)
     #: programs derived from this one for a method (its real variables on bins, ...)

@@ -8,22 +8,37 @@ from bayesprog.inference.methods import Cost, Method, registered_methods
 from bayesprog.inference.plan import QuestionPlan
 
 
-def ranked(plan: QuestionPlan, exact: bool = True) -> list[tuple[Method, Cost]]:
+def ranked(plan: QuestionPlan, exact: bool = True, quick: bool = False
+           ) -> list[tuple[Method, Cost]]:
     """The methods that apply to ``plan`` with their estimates, cheapest first (the exact
-    ones only, unless ``exact`` is False)."""
+    ones only, unless ``exact`` is False); ``quick``: their quick estimates (some bounds
+    marked ``floor``, see :func:`refined`)."""
     found = []
-    for order, method in enumerate(registered_methods().values()):
+    for method in registered_methods().values():
         if (exact and not method.exact) or (plan.latent and not method.continuous):
             continue
-        cost = method.estimate(plan)
+        cost = method.quick_estimate(plan) if quick else method.estimate(plan)
         if cost is not None:
-            found.append((cost.operations + cost.fixed + cost.setup, cost.memory, order, method,
-                          cost))
-    found.sort(key=lambda item: item[:3])
+            found.append((method, cost))
     if exact and not found:
         # no exact method: one that answers approximately and states its error
-        return [(m, c) for m, c in ranked(plan, exact=False) if m.fallback]
-    return [(method, cost) for *_, method, cost in found]
+        return [(m, c) for m, c in ranked(plan, exact=False, quick=quick) if m.fallback]
+    return in_order(found)
+
+
+def refined(plan: QuestionPlan, methods: list[tuple[Method, Cost]]
+            ) -> list[tuple[Method, Cost]]:
+    """``methods`` with each quick estimate (``floor``) replaced by the full one, in order."""
+    found = [(m, m.estimate(plan) if c.floor else c) for m, c in methods]
+    return in_order([(m, c) for m, c in found if c is not None])
+
+
+def in_order(methods: list[tuple[Method, Cost]]) -> list[tuple[Method, Cost]]:
+    """Cheapest first by total operations; ties: the smaller memory, then the first
+    registered."""
+    order = {name: i for i, name in enumerate(registered_methods())}
+    return sorted(methods, key=lambda mc: (mc[1].operations + mc[1].fixed + mc[1].setup,
+                                           mc[1].memory, order[mc[0].name]))
 
 
 def unanswerable(plan: QuestionPlan) -> str:

@@ -3,12 +3,14 @@ question's unobserved discrete variables, for bound evidence (batched or not).""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection, Iterable
 
 import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext
+from bayesprog.forms.standard import Categorical
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
 from bayesprog.inference.formulas import formula_value, log_factor
@@ -48,6 +50,29 @@ def is_static(term: Term) -> bool:
             name not in discrete for name in v.names))  # a real parent, or an input
             for v in term.params.values())
     )
+
+
+def static_table(program: ProgramLike, term: Term) -> tuple[np.ndarray, float]:
+    """A static term's factor (axes ``term.axes``) in the probability domain, divided by its
+    largest entry, and the log of that entry (0 for a factor of zeros); made once per program.
+    A table given as probabilities is read as it is, not through its logarithm."""
+    cache = program.inference_cache.static_tables
+    found = cache.get(id(term))
+    if found is not None:
+        return found
+    param = next(iter(term.params.values()), None) if len(term.params) == 1 else None
+    if (isinstance(term.form, Categorical) and isinstance(param, ParamValue)
+            and not param.batched and param.axes == tuple(p.name for p in term.parents)):
+        table = np.moveaxis(np.asarray(param.array, dtype=float), -1, 0)
+        top = float(table.max()) if table.size else 0.0
+        found = (table / top, math.log(top)) if top > 0 else (table.copy(), 0.0)
+    else:
+        f = term_factor(program, term, Bound(()))
+        top = float(np.max(f.log)) if f.log.size else 0.0
+        top = top if np.isfinite(top) else 0.0
+        found = (np.exp(f.log - top), top)
+    cache[id(term)] = found
+    return found
 
 
 def _bound_param(term: Term, key: str, ref: InputRef, bound: Bound) -> ParamValue:

@@ -22,12 +22,15 @@ class Cost:
     """A method's estimate for one question over its whole batch: arithmetic operations and
     the largest array it allocates (entries); ``fixed``: operations a call costs whatever its
     batch size (the handling of each factor, in ``PER_FACTOR`` units); ``setup``: operations
-    paid once for every later question of the same layout (a compiled table), not per call."""
+    paid once for every later question of the same layout (a compiled table), not per call;
+    ``floor``: a quick estimate, whose ``setup`` and ``memory`` are lower bounds (the method's
+    :meth:`~Method.estimate` gives the full one)."""
 
     operations: float
     memory: float
     fixed: float = 0.0
     setup: float = 0.0
+    floor: bool = False
 
 
 #: What handling one factor costs a call (binding, slicing, rescaling, one step of the
@@ -65,6 +68,12 @@ class Method:
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         """The cost of answering ``plan``, or None when this method does not apply to it."""
         raise NotImplementedError
+
+    def quick_estimate(self, plan: QuestionPlan) -> Cost | None:
+        """:meth:`estimate`, or where that takes long (a path search for a setup that may
+        never be paid), a quicker one with lower bounds marked ``floor``: the cost model asks
+        for the full estimate only when the bound could make this method the choice."""
+        return self.estimate(plan)
 
     def posterior(self, plan: QuestionPlan) -> Posterior | Density | None:
         """The answer (a density when the searched variables are real), or None when some rows

@@ -12,10 +12,9 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract, log_contract
 from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import is_static, question_factors, rescaled, term_factor
+from bayesprog.inference.factors import is_static, question_factors, rescaled, static_table
 from bayesprog.inference.methods.base import (
     PER_CALL,
     PER_FACTOR,
@@ -76,14 +75,11 @@ class Sliceable:
             if not is_static(term):
                 self.others.append(term)
                 continue
-            f = term_factor(program, term, Bound(()))
-            top = float(np.max(f.log)) if f.log.size else 0.0
-            top = top if np.isfinite(top) else 0.0
-            fixed = tuple(a for a in f.axes if a in observed)
-            rest = tuple(a for a in f.axes if a not in observed)
-            order = [f.axes.index(a) for a in fixed + rest]
-            self.tables.append((fixed, rest, np.ascontiguousarray(
-                np.exp(f.log - top).transpose(order))))
+            table, top = static_table(program, term)
+            fixed = tuple(a for a in term.axes if a in observed)
+            rest = tuple(a for a in term.axes if a not in observed)
+            order = [term.axes.index(a) for a in fixed + rest]
+            self.tables.append((fixed, rest, np.ascontiguousarray(table.transpose(order))))
             self.log_scale += top
         self.single: Any = None  # the contraction of one row of evidence, once made
 

@@ -10,10 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract
 from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import is_static, term_factor
+from bayesprog.inference.factors import is_static, static_table
 from bayesprog.inference.methods.base import (
     PER_CALL,
     PER_FACTOR,
@@ -47,15 +46,12 @@ def _compile(plan: QuestionPlan) -> CompiledTable:
     key = (searched, observed)
     cached = program.inference_cache.tables.get(key)
     if cached is None:
-        empty = Bound(())
         offset = 0.0
         operands = []
         for t in plan.terms:
-            f = term_factor(program, t, empty)
-            m = float(np.max(f.log)) if f.log.size else 0.0
-            m = m if np.isfinite(m) else 0.0
-            offset += m
-            operands.append(Factor(f.axes, np.exp(f.log - m), False))
+            probabilities, top = static_table(program, t)
+            offset += top
+            operands.append(Factor(t.axes, probabilities, False))
         table = contract(program, operands, observed + searched, False, 1)
         cached = CompiledTable(observed, np.ascontiguousarray(table), offset)
         program.inference_cache.tables[key] = cached
@@ -70,6 +66,12 @@ class TableMethod(Method):
     name = "table"
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
+        return self._estimate(plan, full=True)
+
+    def quick_estimate(self, plan: QuestionPlan) -> Cost | None:
+        return self._estimate(plan, full=False)
+
+    def _estimate(self, plan: QuestionPlan, full: bool) -> Cost | None:
         bound = plan.bound
         if bound.continuous or bound.inputs or bound.soft:
             return None
@@ -81,13 +83,16 @@ class TableMethod(Method):
         if (searched, observed) in plan.program.inference_cache.tables:
             return Cost(operations=float(bound.size * lookup), memory=float(joint),
                         fixed=PER_CALL)
-        compile_ops, compile_memory = plan.contraction_cost(observed + searched, sliced=False)
         # compiling builds every factor whole and contracts them with the observed variables
         # left open, mostly outside matrix products: measured (benchmarks/engine.py) at about
-        # twice the time per operation and four times the time per factor of a contraction
+        # twice the time per operation and four times the time per factor of a contraction;
+        # its operations are at least one per entry of the table (the bound of a quick
+        # estimate, which spares the path search)
+        compile_ops, compile_memory = (plan.contraction_cost(observed + searched, sliced=False)
+                                       if full else (float(joint), float(joint)))
         setup = 2 * compile_ops + 4 * PER_FACTOR * len(plan.terms)
         return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory),
-                    fixed=PER_CALL, setup=setup)
+                    fixed=PER_CALL, setup=setup, floor=not full)
 
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         compiled = plan.layout.prepared.get("table")
