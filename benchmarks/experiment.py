@@ -15,6 +15,11 @@ Measured in one run on this machine:
   runs on the same workspace cut into 30 x 60, 60 x 120 and 120 x 240 cells: wall seconds,
   peak resident memory, and the cost per run x cell relative to the smallest point (``--plot``
   draws them);
+* a robot session over standard input and output: ``bayesprog explore --stdio`` fed 4,000
+  probes at random cells of the paper's workspace, each with readings from the scenario's
+  simulated sensor, one line in and its reply read before the next (as a robot would): the
+  probes answered per second in each block of 1,000, so that a cost per step that grows with
+  the session's length shows;
 * a naive reference: one run at a time (one decision per engine call), no incremental updates
   (uncertainty of every cell and inhibition recomputed each step, a cold multi-start ICP at every
   step). It is measured on a sample of runs of one task and configuration and extrapolated to
@@ -30,6 +35,7 @@ import argparse
 import json
 import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -40,7 +46,7 @@ import numpy as np
 from scipy.special import betaln, logsumexp
 
 from runner.cues import inhibition, uncertainty
-from runner.experiment import load_experiment, run_experiment, simulate
+from runner.experiment import load_experiment, make_sensor, run_experiment, simulate
 from runner.explorer import CONFIGURATIONS, Explorer
 from runner.shape import MIN_POINTS, match
 
@@ -325,6 +331,43 @@ def naive(sample_runs: int) -> dict[str, float]:
             "extrapolated_seconds": per_run * total_runs}
 
 
+def session(probes: int = 4000, block: int = 1000, task: str = "T2") -> dict:
+    """Seconds per block of ``probes`` fed one by one to ``bayesprog explore --stdio`` (at
+    random cells, readings from the scenario's simulated sensor), and probes per second."""
+    experiment = load_experiment(PAPER)
+    scenario = experiment.scenario
+    explorer = Explorer(scenario, task, runs=1)
+    rng = np.random.default_rng(0)
+    cells = rng.integers(scenario.centres.shape[0], size=probes)
+    sensor = make_sensor(scenario, explorer.perception, [(0, 0, 1)])
+    ny = scenario.shape[1]
+    lines = []
+    for cell in cells:
+        texture, compliance = sensor.probe(np.array([cell]))
+        lines.append(json.dumps({"cell": [int(cell) // ny, int(cell) % ny],
+                                 "texture": float(texture[0]),
+                                 "compliance": float(compliance[0])}) + "\n")
+    command = [sys.executable, "-m", "bayesprog.cli", "explore", str(scenario.path),
+               "--stdio", "--task", task]
+    seconds = []
+    with subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                          bufsize=1) as process:
+        assert process.stdin is not None and process.stdout is not None
+        for start in range(0, probes, block):
+            began = time.perf_counter()
+            for line in lines[start:start + block]:
+                process.stdin.write(line)
+                process.stdin.flush()
+                reply = json.loads(process.stdout.readline())
+                if "error" in reply:
+                    raise RuntimeError(f"explore --stdio: {reply['error']}")
+            seconds.append(time.perf_counter() - began)
+        process.stdin.close()
+    rates = [block / s for s in seconds]
+    return {"probes": probes, "block": block, "task": task, "block_seconds": seconds,
+            "probes_per_second": rates, "last_over_first_time": seconds[-1] / seconds[0]}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -332,7 +375,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="results/benchmarks/experiment.json")
     parser.add_argument("--plot", default=None, help="a PNG of the scaling points")
     parser.add_argument("--only-scaling", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--only-session", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.only_session:
+        print(json.dumps(session(), indent=1))
+        return 0
     if args.only_scaling:
         points = scaling()
         print(json.dumps(points, indent=1))
@@ -349,6 +396,7 @@ def main(argv: list[str] | None = None) -> int:
     points = scaling()
     if args.plot:
         plot_scaling(points, Path(args.plot))
+    robot = session()
     ref = naive(args.naive_runs)
     lines = [
         f"paper experiment (150,000 decisions), median of {args.repeats}:",
@@ -367,6 +415,10 @@ def main(argv: list[str] | None = None) -> int:
           f"  peak {p['peak_mib']:6.0f} MiB ({p['peak_mib'] - p['before_mib']:5.0f} MiB added)"
           f"  cost per run x cell "
           f"{p['cost_per_run_cell_relative']:.2f}x the smallest" for p in points),
+        f"explore --stdio, {robot['probes']:,} probes at random cells: "
+        + ", ".join(f"{r:.0f}" for r in robot["probes_per_second"])
+        + f" probes per second by block of {robot['block']:,}; the last block took "
+        f"{robot['last_over_first_time']:.2f}x the first's time",
         f"naive reference: {ref['seconds_per_run']:.2f} s per run of 100 iterations, measured on "
         f"{ref['sample_runs']} run(s) and extrapolated to 1,500 runs: "
         f"{ref['extrapolated_seconds']:.0f} s",
@@ -378,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"one_process_s": one, "two_workers_s": two, "report_s": report,
                                "split_s": parts, "decision": decision, "scaling": points,
-                               "naive": ref},
+                               "session": robot, "naive": ref},
                               indent=2))
     print(f"written to {out}")
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import opt_einsum
@@ -33,6 +33,10 @@ BLAS_SPEED = 40.0
 #: 10,000 rows: greedy 0.06 s, min-fill 0.16 s); the estimate of the time counts it once
 #: (small steps, as on grids, run at the product's speed).
 EINSUM_SUM = 4.0
+#: What each product of a stack of matrix products costs beside its operations (about 70 ns:
+#: numpy's matmul over many small matrices runs near einsum's speed, over a few large ones at
+#: BLAS's), in operations.
+MATMUL_EACH = 80.0
 
 
 def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
@@ -74,16 +78,29 @@ def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list
 ONE_STEP = 1024
 
 
+class Step(NamedTuple):
+    """One step of a contraction path (see :class:`Account`)."""
+
+    positions: tuple[int, ...]
+    removed: frozenset[str]
+    text: str
+    flops: int
+    kind: str
+    #: how many matrix products a ``matmul`` step stacks (1 for the other kinds)
+    stack: int
+
+
 @dataclass
 class Account:
     """The steps of a contraction path: for each, the positions of its operands (popped from
     the end, the result appended, as opt_einsum does), the indices it sums out, its einsum
-    string, its operations, and whether it is a matrix product that BLAS could do; with the
+    string, its operations, and how the runner does it (``einsum``; ``tensordot``, a matrix
+    product BLAS does; ``matmul``, a stack of them over the indices both operands keep); with the
     index sizes and the largest intermediate (entries). What opt_einsum's ``contract_path``
     tells of a path, made without its checks and printing (a third of a first question's
     time on a 40-variable network)."""
 
-    steps: list[tuple[tuple[int, ...], frozenset[str], str, int, bool]]
+    steps: list[Step]
     size_dict: dict[str, int]
     largest_intermediate: float
 
@@ -107,18 +124,32 @@ class Account:
             removed = frozenset(involved.difference(result))
             flops = math.prod(sizes[i] for i in involved) * (
                 max(1, len(taken) - 1) + (1 if removed else 0))
-            blas = (len(taken) == 2 and flops >= BLAS_MIN and bool(removed) and blas_kind(
-                taken, result, removed, [tuple(sizes[i] for i in t) for t in taken]))
-            steps.append((order, removed, ",".join(taken) + "->" + result, flops, blas))
+            kind, stack = "einsum", 1
+            if len(taken) == 2 and flops >= BLAS_MIN and removed:
+                if blas_kind(taken, result, removed, [tuple(sizes[i] for i in t) for t in taken]):
+                    kind = "tensordot"
+                elif removed <= set(taken[0]) & set(taken[1]):
+                    # a matrix product per value of the indices both operands keep
+                    kind = "matmul"
+                    stack = math.prod(sizes[i] for i in set(taken[0]) & set(taken[1])
+                                      if i not in removed)
+            steps.append(Step(order, removed, ",".join(taken) + "->" + result, flops, kind,
+                              stack))
             remaining.append(result)
             largest = max(largest, float(math.prod(sizes[i] for i in result)))
         return cls(steps, sizes, largest)
 
     def cost(self, summing: float = 1.0) -> float:
-        """The path's operations, a matrix product's counting 1 / BLAS_SPEED and an einsum
-        step that sums out an index ``summing``."""
-        return sum(flops / BLAS_SPEED if blas else flops * (summing if removed else 1.0)
-                   for _, removed, _, flops, blas in self.steps)
+        """The path's operations, a matrix product's counting 1 / BLAS_SPEED (and a stack of
+        them ``MATMUL_EACH`` more per product) and an einsum step that sums out an index
+        ``summing``."""
+        total = 0.0
+        for step in self.steps:
+            if step.kind == "einsum":
+                total += step.flops * (summing if step.removed else 1.0)
+            else:
+                total += step.flops / BLAS_SPEED + (step.stack - 1) * MATMUL_EACH
+        return total
 
 
 def blas_kind(taken: list[str], result: str, removed: frozenset[str],
@@ -142,7 +173,8 @@ def _one_step(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, 
     order = tuple(range(len(terms) - 1, -1, -1))  # popped last first, as opt_einsum does
     step = ",".join(terms[i] for i in order) + "->" + output
     removed = frozenset(sizes) - set(output)
-    info = Account([(order, removed, step, span * len(terms), False)], sizes, float(span))
+    info = Account([Step(order, removed, step, span * len(terms), "einsum", 1)], sizes,
+                   float(span))
     return [tuple(range(len(terms)))], info, float(span * len(terms))
 
 
@@ -203,17 +235,19 @@ BLAS_MIN = 4096
 
 class Contraction:
     """A contraction path, run step by step with numpy: each pairwise step as an einsum, or,
-    for large matrix products, as a tensordot (BLAS) and a transpose. What opt_einsum's
-    compiled expressions do, with the per-step choices and index strings settled once, so
-    that a contraction of small tables costs a few microseconds of Python, not tens."""
+    for large matrix products, as a tensordot (BLAS) and a transpose, or where both operands
+    keep some indices, as a stack of matrix products (``np.matmul``: numpy's einsum runs such
+    steps over many small indices ten times slower per operation). What opt_einsum's compiled
+    expressions do, with the per-step choices and index strings settled once, so that a
+    contraction of small tables costs a few microseconds of Python, not tens."""
 
     def __init__(self, info: Any) -> None:
         """``info``: the path's :class:`Account`."""
         self.steps: list[tuple[tuple[int, ...], str, Any]] = []
-        for inds, _, einsum_str, _, blas in info.steps:
+        for inds, _, einsum_str, _, kind, _ in info.steps:
             einsum_str = parser.convert_to_valid_einsum_chars(einsum_str)
-            if blas:
-                inputs, result = einsum_str.split("->")
+            inputs, result = einsum_str.split("->")
+            if kind == "tensordot":
                 left, right = inputs.split(",")
                 gone = [s for s in set(left) & set(right) if s not in result]
                 axes = tuple(zip(*sorted((left.find(s), right.find(s)) for s in gone),
@@ -222,6 +256,8 @@ class Contraction:
                 produced = "".join(s for s in left + right if s not in gone)
                 order = tuple(map(produced.index, result)) if produced != result else None
                 self.steps.append((tuple(inds), "tensordot", (axes, order)))
+            elif kind == "matmul":
+                self.steps.append((tuple(inds), "matmul", _stacked(inputs, result)))
             else:
                 self.steps.append((tuple(inds), "einsum", einsum_str))
 
@@ -231,11 +267,40 @@ class Contraction:
             taken = [operands.pop(i) for i in inds]
             if kind == "einsum":
                 operands.append(np.einsum(how, *taken))
-            else:
+            elif kind == "tensordot":
                 axes, order = how
                 product = np.tensordot(taken[0], taken[1], axes=axes)
                 operands.append(product if order is None else product.transpose(order))
+            else:
+                left, right, (kept, own, summed), order = how
+                a, b = taken[0].transpose(left), taken[1].transpose(right)
+                rows = a.shape[kept:kept + own]
+                stacked = np.matmul(
+                    a.reshape(math.prod(a.shape[:kept]), math.prod(rows), -1),
+                    b.reshape(math.prod(b.shape[:kept]), math.prod(b.shape[kept:kept + summed]),
+                              -1))
+                product = stacked.reshape(a.shape[:kept] + rows + b.shape[kept + summed:])
+                operands.append(product if order is None else product.transpose(order))
         return operands[0]
+
+
+def _stacked(inputs: str, result: str) -> tuple[tuple[int, ...], tuple[int, ...],
+                                                  tuple[int, int, int], tuple[int, ...] | None]:
+    """How a pairwise step ``inputs -> result`` is a stack of matrix products: the left
+    operand's axes in the order (kept by both, its own, summed), the right's in the order
+    (kept by both, summed, its own), the counts of the first three groups, and the order of
+    the product's axes in the result (None: already in it)."""
+    left, right = inputs.split(",")
+    kept = [s for s in left if s in right and s in result]
+    summed = [s for s in left if s in right and s not in result]
+    own_left = [s for s in left if s not in right]
+    own_right = [s for s in right if s not in left]
+    produced = kept + own_left + own_right
+    order = tuple(produced.index(s) for s in result)
+    return (tuple(left.index(s) for s in kept + own_left + summed),
+            tuple(right.index(s) for s in kept + summed + own_right),
+            (len(kept), len(own_left), len(summed)),
+            None if order == tuple(range(len(order))) else order)
 
 
 def equation(operands: list[tuple[str, ...]], output: tuple[str, ...],
