@@ -37,6 +37,9 @@ EINSUM_SUM = 4.0
 #: numpy's matmul over many small matrices runs near einsum's speed, over a few large ones at
 #: BLAS's), in operations.
 MATMUL_EACH = 80.0
+#: A stack of matrix products each smaller than this (operations) runs as an einsum: numpy's
+#: matmul pays per product (10,000 rows of 3 x 3 products: twice einsum's time).
+MATMUL_MIN = 256
 
 
 def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
@@ -128,11 +131,14 @@ class Account:
             if len(taken) == 2 and flops >= BLAS_MIN and removed:
                 if blas_kind(taken, result, removed, [tuple(sizes[i] for i in t) for t in taken]):
                     kind = "tensordot"
-                elif removed <= set(taken[0]) & set(taken[1]):
-                    # a matrix product per value of the indices both operands keep
-                    kind = "matmul"
+                elif removed <= set(taken[0]) & set(taken[1]) and all(
+                        set(t).difference(u) for t, u in (taken, taken[::-1])):
+                    # a matrix product per value of the indices both operands keep (each
+                    # keeping some of its own: a matrix times a vector is einsum's), unless
+                    # the products are so small that einsum's loops do them faster
                     stack = math.prod(sizes[i] for i in set(taken[0]) & set(taken[1])
                                       if i not in removed)
+                    kind = "matmul" if flops >= MATMUL_MIN * stack else "einsum"
             steps.append(Step(order, removed, ",".join(taken) + "->" + result, flops, kind,
                               stack))
             remaining.append(result)
