@@ -415,13 +415,16 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
 
 
 def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
-          variables: Mapping[str, Any] | None = None) -> Program:
+          variables: Mapping[str, Any] | None = None,
+          terms: Mapping[str, Mapping[str, Any]] | None = None) -> Program:
     """Load a program from YAML text. Raises :class:`SpecError` listing every problem.
 
     ``variables`` replaces the declarations of some of the file's variables before the program
     is checked, as if the file said so (for instance a grid's shape, set by the workspace a
     program is used in); every check then runs on the result, so a term that no longer fits is
-    reported at its place in the file.
+    reported at its place in the file. ``terms`` likewise sets parameters of some terms of the
+    decomposition, named as in the file (``{"P(I | O)": {"a": 2.0, "b": 3.0}}``: the keys given
+    replace the entry's, the others stay).
 
     >>> text = ("{bayesprog: 1, variables: {O: {grid: {shape: [2, 3], cell: 1.0}}}, "
     ...         "decomposition: [{term: P(O), form: uniform}]}")
@@ -435,11 +438,17 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     if variables is not None and not isinstance(variables, Mapping):
         raise ArgumentError(f"variables: expected a mapping of variable names to "
                             f"declarations, found {short_repr(variables)}")
+    if terms is not None and not (isinstance(terms, Mapping) and all(
+            isinstance(k, str) and isinstance(v, Mapping) for k, v in terms.items())):
+        raise ArgumentError(f"terms: expected a mapping of terms ('P(A | B)') to mappings of "
+                            f"parameters, found {short_repr(terms)}")
     located, problems = load_yaml(text, file)
     if problems and located.data is None:
         raise SpecError(problems)
     if variables:
         problems += _replace_variables(located, variables)
+    if terms:
+        problems += _replace_terms(located, terms)
     doc, schema_problems = _document(located)
     problems += schema_problems
     if doc is None:
@@ -482,8 +491,10 @@ def _replace_variables(located: Located, variables: Mapping[str, Any]) -> list[D
     return problems
 
 
-def load(path: str | Path, variables: Mapping[str, Any] | None = None) -> Program:
-    """Load and check the program file at ``path`` (``variables``: see :func:`loads`)."""
+def load(path: str | Path, variables: Mapping[str, Any] | None = None,
+         terms: Mapping[str, Mapping[str, Any]] | None = None) -> Program:
+    """Load and check the program file at ``path`` (``variables``, ``terms``: see
+    :func:`loads`)."""
     if not isinstance(path, (str, os.PathLike)):
         raise ArgumentError(f"load: expected a path (a string or pathlib.Path), found "
                             f"{type(path).__name__} {short_repr(path)}")
@@ -497,9 +508,35 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None) -> Progra
     token = _LOADING.set((*chain, key))
     try:
         text = path.read_text(encoding="utf-8")
-        return loads(text, str(path), path.parent, variables)
+        return loads(text, str(path), path.parent, variables, terms)
     finally:
         _LOADING.reset(token)
+
+
+def _canonical(term: Any) -> str | None:
+    try:
+        return str(parse_expression(term))
+    except ExpressionError:
+        return None
+
+
+def _replace_terms(located: Located, terms: Mapping[str, Mapping[str, Any]]
+                   ) -> list[Diagnostic]:
+    entries = located.data.get("decomposition") if isinstance(located.data, dict) else None
+    if not isinstance(entries, list):
+        return []  # the schema check reports the missing or malformed decomposition
+    by_term = {_canonical(e.get("term")): e for e in entries if isinstance(e, dict)}
+    problems = []
+    for name, params in terms.items():
+        entry = by_term.get(_canonical(name))
+        if entry is None or _canonical(name) is None:
+            known = ", ".join(str(e.get("term")) for e in entries if isinstance(e, dict))
+            problems.append(located.diagnostic(("decomposition",), f"no term {name!r} to set "
+                                               f"parameters of: expected one of {known}",
+                                               at_key=True))
+        else:
+            entry.update(copy.deepcopy(dict(params)))
+    return problems
 
 
 #: The program files being loaded, outermost first (see :func:`load`).

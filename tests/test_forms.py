@@ -585,3 +585,23 @@ def test_continuous_evidence_outside_support_is_refused():
     program = _beta_program([2.0, 3.0], [2.0, 1.0])
     with pytest.raises(QuestionError):
         program.ask("P(M | L)", {"L": 1.5})
+
+
+def test_terms_set_when_loading_give_the_answers_of_the_edited_file():
+    """``terms=`` is the file with those parameters written in: the posterior is scipy's."""
+    doc = {"bayesprog": 1,
+           "variables": {"M": {"states": _states(2)}, "X": {"continuous": [0, 1]}},
+           "decomposition": [{"term": "P(M)", "form": "uniform"},
+                             {"term": "P(X | M)", "form": "beta",
+                              "a": _keyed([2.0, 5.0], 2), "b": 3.0}]}
+    text = yaml.safe_dump(doc, sort_keys=False)
+    a = {"m0": 1.5, "m1": 0.7}
+    changed = bayesprog.loads(text, terms={"P(X|M)": {"a": a}})  # spelled as the parser reads it
+    density = stats.beta.pdf(0.3, [1.5, 0.7], 3.0)
+    np.testing.assert_allclose(changed.ask("P(M | X)", {"X": 0.3}).probabilities,
+                               density / density.sum(), rtol=1e-12)
+    original = stats.beta.pdf(0.3, [2.0, 5.0], 3.0)
+    np.testing.assert_allclose(bayesprog.loads(text).ask("P(M | X)", {"X": 0.3}).probabilities,
+                               original / original.sum(), rtol=1e-12)
+    with pytest.raises(bayesprog.SpecError, match=r"<string>:\d+:\d+: no term 'P\(X\)'"):
+        bayesprog.loads(text, terms={"P(X)": {"a": 1.0}})

@@ -165,6 +165,8 @@ API_MISUSES = [
     ("load(None)", lambda p: bayesprog.load(None), ArgumentError, "load: expected a path"),
     ("variables not a mapping", lambda p: bayesprog.load(RAIN, variables=5), ArgumentError,
      "variables: expected a mapping"),
+    ("terms not a mapping of mappings", lambda p: bayesprog.load(RAIN, terms={"P(Rain)": 5}),
+     ArgumentError, "terms: expected a mapping of terms"),
     ("fit(None)", lambda p: p.fit(None), ArgumentError, "data: expected a CSV"),
     ("fit max_iter a word", lambda p: p.fit({"Rain": ["rain"]}, max_iter="a"), ArgumentError,
      "max_iter: expected an integer"),
