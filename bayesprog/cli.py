@@ -309,6 +309,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     return int(runner.run(Path(args.experiment), Path(args.out), options))
 
 
+def cmd_tune(args: argparse.Namespace) -> int:
+    if args.workers < 1:
+        raise _UserError(f"--workers: expected at least 1, found {args.workers}")
+    if args.trials is not None and args.trials < 1:
+        raise _UserError(f"--trials: expected at least 1, found {args.trials}")
+    runner = _runner(_experiment_runner(args.experiment))
+    if not hasattr(runner, "tune"):
+        raise _UserError(f"{args.experiment}: its runner has no parameter search")
+    options = {"quiet": args.quiet, "workers": args.workers, "trials": args.trials}
+    return int(runner.tune(Path(args.experiment), Path(args.out), options))
+
+
 def _output_runner(out: str) -> Any:
     """The runner plugin that wrote the experiment output folder ``out``."""
     manifest = Path(out) / "experiment.json"
@@ -509,6 +521,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
                    "findings are set beside these in the report (default: none)")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("tune", help="search the cue profiles of an experiment's tune: section "
+                       "and compare them with the hand-chosen ones")
+    p.add_argument("experiment", metavar="EXPERIMENT.yaml",
+                   help="an experiment file with a tune: section")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the search's journal and results; an interrupted search "
+                   "resumes there")
+    p.add_argument("--trials", type=int, metavar="N",
+                   help="candidates to evaluate (default: the file's tune.trials); more than "
+                   "before continues the search")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local processes (default: %(default)s)")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (default: a bar on a terminal)")
+    p.set_defaults(func=cmd_tune)
 
     p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
     p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")

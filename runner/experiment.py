@@ -29,6 +29,22 @@ from runner.sensor import HapticSensor, ModelSensor, SyntheticSensor
 from runner.store import ResultStore, Unit, config_hash
 
 
+class TuneSpec(BaseModel):
+    """``tune:``: the search of ``bayesprog tune`` (see :mod:`runner.tune`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    training: list[str] = Field(min_length=1, description="scenario files the profiles are "
+                                "tuned on (relative to the experiment file)")
+    validation: list[str] = Field(min_length=1, description="scenario files, none of the "
+                                  "training ones, the tuned profiles are compared on")
+    trials: int = Field(40, ge=1, le=10_000, description="candidate profiles evaluated")
+    runs: int = Field(20, ge=2, description="runs per scenario and task of each trial")
+    validation_runs: int = Field(50, ge=2, description="runs per scenario and task compared")
+    iterations: int | None = Field(None, ge=1, description="probes per run (default: the "
+                                   "experiment's)")
+
+
 class ExperimentSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -43,6 +59,7 @@ class ExperimentSpec(BaseModel):
     iterations: int = Field(ge=1)
     seed: int = Field(0, ge=0)
     chunk: int = Field(25, ge=1, description="runs per stored piece of results")
+    tune: TuneSpec | None = None
 
 
 @dataclass
@@ -53,9 +70,14 @@ class Experiment:
 
     def start_cells(self) -> np.ndarray:
         """The seeded start cells [runs, 2], shared by every task and configuration."""
-        rng = np.random.default_rng([self.spec.seed, 0xC0FFEE])
-        nx, ny = self.scenario.shape
-        return np.stack([rng.integers(0, nx, self.spec.runs), rng.integers(0, ny, self.spec.runs)], 1)
+        return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
+
+
+def start_cells(shape: tuple[int, int], runs: int, seed: int) -> np.ndarray:
+    """``runs`` start cells [runs, 2] on a grid of ``shape``, drawn from ``seed``."""
+    rng = np.random.default_rng([seed, 0xC0FFEE])
+    nx, ny = shape
+    return np.stack([rng.integers(0, nx, runs), rng.integers(0, ny, runs)], 1)
 
 
 def load_experiment(path: str | Path) -> Experiment:
@@ -199,7 +221,8 @@ def manifest(experiment: Experiment) -> dict:
     if scenario.sensor_model is not None and scenario.sensor_model.path is not None:
         files["sensor_model"] = scenario.sensor_model.path
     return {
-        "experiment": experiment.spec.model_dump(),
+        # a search's settings (tune:) do not change what a run computes
+        "experiment": experiment.spec.model_dump(exclude={"tune"}),
         "start_cells": experiment.start_cells().tolist(),
         "files": {k: {"path": str(v), "text": Path(v).read_text(encoding="utf-8")}
                   for k, v in files.items()},

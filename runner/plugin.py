@@ -1,6 +1,6 @@
 """The haptic runner as a plugin of the ``bayesprog`` command line (entry point ``haptic`` of
 the group ``bayesprog.runners``): ``bayesprog run EXPERIMENT --out DIR``, ``bayesprog report
-DIR`` and ``bayesprog explore SCENARIO --stdio``."""
+DIR``, ``bayesprog tune EXPERIMENT --out DIR`` and ``bayesprog explore SCENARIO --stdio``."""
 
 from __future__ import annotations
 
@@ -27,6 +27,14 @@ def run(experiment: Path, out: Path, options: dict) -> int:
         return report(out, options)
     print(f"results written to {out}")
     return 0
+
+
+def tune(experiment: Path, out: Path, options: dict) -> int:
+    """Search the cue profiles named in the experiment's ``tune:`` section (see
+    :mod:`runner.tune`)."""
+    from runner.tune import tune as run_tune
+
+    return run_tune(experiment, out, options)
 
 
 def report(out: Path, options: dict) -> int:

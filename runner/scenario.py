@@ -6,9 +6,11 @@ A scenario is a YAML file (see ``models/scenarios/paper.yaml``): users describe 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -215,6 +217,20 @@ class Scenario:
     def program_path(self, which: str) -> Path:
         return (self.path.parent / getattr(self.spec.programs, which)).resolve()
 
+    def load_target(self, terms: Mapping[str, Mapping[str, Any]] | None = None
+                    ) -> bayesprog.Program:
+        """pi_tar on this workspace's grid, with ``terms``' parameters set (see
+        :func:`bayesprog.load`)."""
+        return bayesprog.load(self.program_path("target"), variables={"O": _grid(self.spec)},
+                              terms=terms)
+
+
+def _grid(spec: ScenarioSpec) -> dict:
+    """The declaration of pi_tar's O for a scenario: the workspace sets the grid, so one program
+    serves every grid size."""
+    return {"grid": {"shape": list(spec.grid.shape), "cell": spec.grid.cell},
+            "description": "next cell to probe (the scenario's grid)"}
+
 
 def load_scenario(path: str | Path) -> Scenario:
     """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
@@ -228,10 +244,8 @@ def load_scenario(path: str | Path) -> Scenario:
         raise SpecError(missing)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
-    # the workspace sets pi_tar's grid: one program serves every grid size
-    grid = {"grid": {"shape": list(spec.grid.shape), "cell": spec.grid.cell},
-            "description": "next cell to probe (the scenario's grid)"}
-    target = bayesprog.load((path.parent / spec.programs.target).resolve(), variables={"O": grid})
+    target = bayesprog.load((path.parent / spec.programs.target).resolve(),
+                            variables={"O": _grid(spec)})
     diags = []
     tasks = getattr(target.variables.get("T"), "states", ())
     for task in spec.tasks:

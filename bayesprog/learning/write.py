@@ -5,8 +5,10 @@ layout stay as the author wrote them."""
 from __future__ import annotations
 
 import io
+import os
 import re
 from collections.abc import Mapping, MutableMapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -166,6 +168,36 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
         doc.yaml_set_comment_before_after_key(
             "learned", before="\nFits that set this program's parameters (bayesprog learn).")
     learned.append(_record(record))
+    out = io.StringIO()
+    yaml.dump(doc, out)
+    return out.getvalue()
+
+
+def render_values(text: str, params: Mapping[str, Mapping[str, float]], header: str,
+                  moved: tuple[Path, Path] | None = None) -> str:
+    """``text`` (a program file) with single-number parameters (by term label) written in place
+    of the old values and ``header`` as a comment on top; the rest stays as written. ``moved``
+    is (the folder the text was read from, the folder it is written to): sub-programs named by
+    a relative path are named from the new folder."""
+    yaml = _yaml()
+    doc = yaml.load(text)
+    wanted = {_label(label): values for label, values in params.items()}
+    done = set()
+    for item in [*doc.get("decomposition", []), *doc.get("soft_evidence", [])]:
+        program = item.get("program")
+        if moved is not None and isinstance(program, str) and not Path(program).is_absolute():
+            item["program"] = os.path.relpath((moved[0] / program).resolve(),
+                                              moved[1].resolve())
+    for item in doc.get("decomposition", []):
+        label = _label(item.get("term"))
+        if label in wanted:
+            for name, value in wanted[label].items():
+                item[name] = _number(float(value))
+            done.add(label)
+    missing = set(wanted) - done
+    if missing:
+        raise ValueError(f"no term {sorted(str(m) for m in missing)[0]} in the program text")
+    doc.yaml_set_start_comment(header)
     out = io.StringIO()
     yaml.dump(doc, out)
     return out.getvalue()

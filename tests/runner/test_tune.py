@@ -1,0 +1,169 @@
+"""``bayesprog tune``: a seeded search that resumes where it stopped, whose statistics are
+scipy's and statsmodels', and whose tuned program loads and decides as the search evaluated it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy import stats
+from statsmodels.stats.multitest import multipletests
+
+import bayesprog
+from bayesprog.cli import main
+from runner import tune as tune_module
+from runner.scenario import load_scenario
+from runner.tune import PARAMETERS, evaluate, file_values, load_search, run_search, terms_of
+
+MODELS = Path(__file__).parents[2] / "models"
+
+
+def write_search(folder: Path, **tune) -> Path:
+    spec = {"experiment": 1, "name": "tiny", "runner": "haptic",
+            "scenario": str(MODELS / "scenarios" / "small_grid.yaml"), "tasks": ["T1"],
+            "configurations": ["full"], "runs": 4, "iterations": 25, "seed": 3,
+            "tune": {"training": [str(MODELS / "scenarios" / "small_grid.yaml")],
+                     "validation": [str(MODELS / "scenarios" / "corners.yaml")],
+                     "trials": 4, "runs": 3, "validation_runs": 5, **tune}}
+    path = folder / "tiny.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fresh")
+    search = load_search(write_search(folder))
+    return run_search(search, folder / "out", progress=False), folder / "out"
+
+
+def test_the_hand_chosen_profiles_are_the_first_trial_and_the_best_is_no_worse(fresh):
+    result, out = fresh
+    first = result["trials"][0]
+    assert first["objective"] == 1.0  # the file's own values, relative to themselves
+    assert first["params"] == {p["name"]: p["hand"] for p in result["parameters"]}
+    assert result["best_objective"] == min(t["objective"] for t in result["trials"])
+    assert result["best_objective"] <= 1.0
+    assert len({json.dumps(t["params"], sort_keys=True) for t in result["trials"]}) == 4
+    for t in result["trials"]:  # every candidate inside the searched ranges
+        for p in PARAMETERS:
+            assert p.low <= t["params"][p.name] <= p.high
+
+
+def test_a_search_continued_or_interrupted_ends_as_an_uninterrupted_one(fresh, tmp_path,
+                                                                        monkeypatch):
+    result, _ = fresh
+    search = load_search(write_search(tmp_path))
+    run_search(search, tmp_path / "out", trials=2, progress=False)  # then asked for more
+    calls = {"n": 0}
+    real = tune_module.evaluate
+
+    def interrupted(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:  # Ctrl-C in the middle of the third trial
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tune_module, "evaluate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_search(search, tmp_path / "out", progress=False)
+    monkeypatch.setattr(tune_module, "evaluate", real)
+    resumed = run_search(search, tmp_path / "out", progress=False)
+    assert resumed["trials"] == result["trials"]
+    assert resumed["validation"] == result["validation"]
+
+
+def test_the_same_seed_gives_the_same_search_whatever_the_workers(fresh, tmp_path):
+    result, _ = fresh
+    search = load_search(write_search(tmp_path))
+    again = run_search(search, tmp_path / "out", workers=2, progress=False)
+    assert again["trials"] == result["trials"]
+    assert again["validation"] == result["validation"]
+    search.spec.seed = 4  # another seed: other candidates after the hand-chosen first
+    other = run_search(search, tmp_path / "seed4", trials=3, progress=False)
+    assert other["trials"][1]["params"] != result["trials"][1]["params"]
+
+
+def test_the_objective_is_the_mean_relative_area_under_gamma(fresh):
+    result, out = fresh
+    search = load_search(write_search(out.parent))
+    best = result["trials"][result["best_trial"]]["params"]
+    ratios = []
+    for row, (scenario, task) in zip(result["training"], search.pairs("training"), strict=True):
+        hand = evaluate(scenario, task, None, 3, 25, 3)
+        tuned = evaluate(scenario, task, best, 3, 25, 3)
+        assert row["auc_hand"] == pytest.approx(hand.mean(), rel=1e-12)
+        ratios.append(tuned.mean() / hand.mean())
+    assert result["best_objective"] == pytest.approx(np.mean(ratios), rel=1e-12)
+
+
+def test_validation_tests_are_scipys_wilcoxon_with_holms_correction(fresh):
+    result, out = fresh
+    search = load_search(write_search(out.parent))
+    best = result["trials"][result["best_trial"]]["params"]
+    ps = []
+    for row, (scenario, task) in zip(result["validation"], search.pairs("validation"),
+                                     strict=True):
+        assert (row["scenario"], row["task"]) == (scenario.name, task)
+        hand = evaluate(scenario, task, None, 5, 25, 4)  # validation streams: seed + 1
+        tuned = evaluate(scenario, task, best, 5, 25, 4)
+        assert row["auc_hand"] == pytest.approx(hand.mean(), rel=1e-12)
+        assert row["auc_tuned"] == pytest.approx(tuned.mean(), rel=1e-12)
+        expected = 1.0 if np.allclose(hand, tuned) else stats.wilcoxon(tuned, hand).pvalue
+        assert row["p"] == pytest.approx(expected, rel=1e-12)
+        ps.append(expected)
+    holm = multipletests(ps, method="holm")[1]
+    np.testing.assert_allclose([r["p_holm"] for r in result["validation"]], holm, rtol=1e-12)
+
+
+def test_the_tuned_program_loads_with_the_tuned_values_and_keeps_the_rest(fresh):
+    result, out = fresh
+    text = (out / "pi_tar.tuned.yaml").read_text()
+    assert text.startswith("# Profiles tuned by bayesprog tune")
+    assert "soft_evidence:" in text and "isotropic sigma" in text  # the rest as written
+    tuned = bayesprog.load(out / "pi_tar.tuned.yaml")
+    best = {p["name"]: p["tuned"] for p in result["parameters"]}
+    terms = {t.label: t for t in tuned.terms}
+    for label, params in terms_of(best).items():
+        for key, value in params.items():
+            assert float(terms[label].params[key].array) == pytest.approx(value, rel=1e-5)
+    assert (out / "tune.png").stat().st_size > 10_000
+    md = (out / "tune.md").read_text()
+    assert "**Verdict**" in md and "| corners | T1 | 5 |" in md
+
+
+def test_terms_of_inverts_file_values():
+    scenario = load_scenario(MODELS / "scenarios" / "small_grid.yaml")
+    values = file_values(scenario)
+    assert values["shape_weight"] == pytest.approx(0.5) and values["I.b"] == 2.5
+    target = scenario.load_target(terms_of(values))
+    assert [t.params.keys() for t in target.terms] == [t.params.keys()
+                                                       for t in scenario.target.terms]
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (lambda spec: spec.pop("tune"), "tiny.yaml:1:1: no tune: section"),
+    (lambda spec: spec["tune"]["validation"].append(spec["tune"]["training"][0]),
+     "small_grid.yaml is already a training scenario"),
+    (lambda spec: spec["tune"].update(validation=["nowhere.yaml"]),
+     "tiny.yaml:16:5: no scenario file 'nowhere.yaml'"),
+    (lambda spec: spec["tune"].update(trials=0), "trials: Input should be greater than or equal"),
+])
+def test_a_bad_search_is_refused_at_its_place(tmp_path, capsys, edit, expected):
+    path = write_search(tmp_path)
+    spec = yaml.safe_load(path.read_text())
+    edit(spec)
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    assert main(["tune", str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err
+
+
+def test_a_folder_of_another_search_is_refused(fresh, tmp_path, capsys):
+    result, out = fresh
+    path = write_search(tmp_path, runs=4)
+    assert main(["tune", str(path), "--out", str(out), "-q"]) == 2
+    assert "holds a search of other settings" in capsys.readouterr().err
