@@ -13,7 +13,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -43,6 +43,17 @@ class TuneSpec(BaseModel):
     validation_runs: int = Field(50, ge=2, description="runs per scenario and task compared")
     iterations: int | None = Field(None, ge=1, description="probes per run (default: the "
                                    "experiment's)")
+    objective: Literal["probes", "travel"] = Field(
+        "probes", description="area under Gamma over the probes (probes) or over the distance "
+        "the hand travels, up to what the hand-chosen profiles travel (travel)")
+    parameters: list[str] | None = Field(
+        None, min_length=1, description="the searched parameters (names as in tune.md: I.a, "
+        "I.b, S.a, S.b, U.a, U.b, shape_weight); the others keep the file's values (default: "
+        "all)")
+    min_precision: float | None = Field(
+        None, gt=0, le=10, description="the share of probes on the border a candidate must "
+        "keep on the training scenarios, relative to the hand-chosen profiles' (1: at least as "
+        "much; none: any)")
 
 
 class ExperimentSpec(BaseModel):

@@ -30,8 +30,10 @@ import numpy as np
 from bayesprog.errors import BayesprogError, SpecError
 from bayesprog.expressions import ExpressionError, parse_expression
 from bayesprog.language.document import load_document
+from bayesprog.limits import SizeError, check_size
 from runner.experiment import ExperimentSpec, TuneSpec, progress_bar, simulate, start_cells
 from runner.explorer import Explorer
+from runner.metrics import behaviour
 from runner.report import area_under, paired_test
 from runner.scenario import Scenario, load_scenario
 
@@ -98,6 +100,11 @@ class Search:
     def iterations(self) -> int:
         return self.tune.iterations or self.spec.iterations
 
+    @property
+    def searched(self) -> tuple[Parameter, ...]:
+        names = self.tune.parameters
+        return PARAMETERS if names is None else tuple(p for p in PARAMETERS if p.name in names)
+
     def pairs(self, which: str) -> list[tuple[Scenario, str]]:
         return [(s, t) for s in getattr(self, which) for t in s.spec.tasks]
 
@@ -128,6 +135,24 @@ def load_search(path: str | Path) -> Search:
                 continue
             seen[file] = which
             loaded[which].append(load_scenario(file))
+    known = [p.name for p in PARAMETERS]
+    for i, name in enumerate(spec.tune.parameters or []):
+        if name not in known:
+            diags.append(located.diagnostic(("tune", "parameters", i), f"unknown parameter "
+                                            f"{name!r}: expected one of {', '.join(known)}"))
+        elif name in spec.tune.parameters[:i]:
+            diags.append(located.diagnostic(("tune", "parameters", i), f"{name} is named "
+                                            "twice"))
+    # what one evaluation holds (Gamma and the path of every run of every pair), estimated
+    # before anything runs
+    pairs = sum(len(s.spec.tasks) for s in loaded["training"] + loaded["validation"])
+    runs = max(spec.tune.runs, spec.tune.validation_runs)
+    try:
+        check_size(2 * pairs * runs * (spec.tune.iterations or spec.iterations),
+                   f"{runs:,} runs of {spec.tune.iterations or spec.iterations:,} iterations "
+                   f"on {pairs} (scenario, task) pairs")
+    except SizeError as exc:
+        diags.append(located.diagnostic(("tune", "runs"), str(exc)))
     if diags:
         raise SpecError(diags)
     search = Search(path, spec, spec.tune, loaded["training"], loaded["validation"])
@@ -173,18 +198,59 @@ def file_values(scenario: Scenario) -> dict[str, float]:
 
 
 def evaluate(scenario: Scenario, task: str, values: Mapping[str, float] | None, runs: int,
-             iterations: int, seed: int) -> np.ndarray:
-    """Area under Gamma of ``runs`` runs of the full model (pi_tar with ``values``, or as the
-    file writes it), from the seeded start cells: the same for every candidate."""
+             iterations: int, seed: int, chunk: int = 25) -> dict[str, np.ndarray]:
+    """Gamma [runs, iterations] and the probed cells [runs, iterations] of ``runs`` runs of the
+    full model (pi_tar with ``values``, or as the file writes it) from the seeded start cells,
+    the same for every candidate; ``chunk`` runs at a time (the numbers do not depend on it)."""
     target = scenario.target if values is None else scenario.load_target(terms_of(values))
-    explorer = Explorer(scenario, task, runs=runs, programs={"target": target})
-    result = simulate(scenario, task, "full", start_cells(scenario.shape, runs, seed),
-                      np.arange(runs), seed, iterations, explorer=explorer)
-    return area_under(result["gamma"])
+    starts = start_cells(scenario.shape, runs, seed)
+    gamma, paths = [], []
+    for first in range(0, runs, chunk):
+        ids = np.arange(first, min(first + chunk, runs))
+        explorer = Explorer(scenario, task, runs=len(ids), programs={"target": target})
+        result = simulate(scenario, task, "full", starts[ids], ids, seed, iterations,
+                          explorer=explorer)
+        gamma.append(result["gamma"])
+        paths.append(result["paths"])
+    return {"gamma": np.concatenate(gamma), "paths": np.concatenate(paths)}
+
+
+def travelled(scenario: Scenario, paths: np.ndarray) -> np.ndarray:
+    """Distance (metres) travelled before each probe [runs, K], from the first probe."""
+    steps = np.linalg.norm(np.diff(scenario.centres[paths], axis=1), axis=-1)
+    return np.concatenate([np.zeros((len(paths), 1)), np.cumsum(steps, axis=1)], axis=1)
+
+
+def area_over_distance(gamma: np.ndarray, distance: np.ndarray, budget: float) -> np.ndarray:
+    """Area under Gamma against the distance travelled, from 0 to ``budget`` metres, per run:
+    Gamma after probe k holds from the distance of probe k to that of probe k + 1, and the last
+    value to the budget (square metres).
+
+    >>> area_over_distance(np.array([[3.0, 1.0]]), np.array([[0.0, 2.0]]), 5.0)
+    array([9.])
+    """
+    reached = np.minimum(distance, budget)
+    ends = np.concatenate([reached[:, 1:], np.full((len(reached), 1), budget)], axis=1)
+    return np.sum(gamma * (ends - reached), axis=1)
+
+
+def areas(scenario: Scenario, runs: Mapping[str, np.ndarray], objective: str,
+          budget: float | None = None) -> np.ndarray:
+    """The searched area per run: under Gamma over the probes (``probes``) or over the distance
+    travelled up to ``budget`` (``travel``)."""
+    if objective == "probes":
+        return area_under(runs["gamma"])
+    assert budget is not None
+    return area_over_distance(runs["gamma"], travelled(scenario, runs["paths"]), budget)
+
+
+def path_budget(scenario: Scenario, runs: Mapping[str, np.ndarray]) -> float:
+    """Mean distance travelled per run (metres): the hand-chosen profiles' budget."""
+    return float(travelled(scenario, runs["paths"])[:, -1].mean())
 
 
 def _evaluate_at(scenario_path: str, task: str, values: Mapping[str, float] | None, runs: int,
-                 iterations: int, seed: int) -> np.ndarray:
+                 iterations: int, seed: int) -> dict[str, np.ndarray]:
     """:func:`evaluate` from the scenario's file, for worker processes."""
     return evaluate(_scenario(scenario_path), task, values, runs, iterations, seed)
 
@@ -216,7 +282,7 @@ class Evaluator:
                 initializer=_worker_init, initargs=(os.getpid(),))
 
     def __call__(self, pairs: list[tuple[Scenario, str]], values: Mapping[str, float] | None,
-                 runs: int, iterations: int, seed: int) -> list[np.ndarray]:
+                 runs: int, iterations: int, seed: int) -> list[dict[str, np.ndarray]]:
         if self.pool is None:
             return [evaluate(s, t, values, runs, iterations, seed) for s, t in pairs]
         values = None if values is None else dict(values)
@@ -276,19 +342,23 @@ def _open_journal(search: Search, out: Path) -> Any:
                                load_if_exists=True)
 
 
-def _distributions() -> dict[str, Any]:
+def _distributions(searched: tuple[Parameter, ...]) -> dict[str, Any]:
     from optuna.distributions import FloatDistribution
 
-    return {p.name: FloatDistribution(p.low, p.high, log=p.log) for p in PARAMETERS}
+    return {p.name: FloatDistribution(p.low, p.high, log=p.log) for p in searched}
 
 
-def _sampler(seed: int, number: int) -> Any:
-    """Trial ``number``'s sampler: seeded from (seed, number), so a resumed search draws what an
-    uninterrupted one would."""
+def _sampler(seed: int, index: int) -> Any:
+    """The sampler of the ``index``-th finished trial: seeded from (seed, index), so a resumed
+    search draws what an uninterrupted one would."""
     from optuna.samplers import TPESampler
 
-    state = int(np.random.SeedSequence([seed, number]).generate_state(1)[0])
+    state = int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
     return TPESampler(seed=state)
+
+
+def _feasible(trial: Any, min_precision: float | None) -> bool:
+    return min_precision is None or trial.user_attrs["precision"] >= min_precision
 
 
 def run_search(search: Search, out: Path, trials: int | None = None, workers: int = 1,
@@ -299,74 +369,136 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
 
     trials = trials or search.tune.trials
     seed = search.spec.seed
+    objective = search.tune.objective
+    min_precision = search.tune.min_precision
     study = _open_journal(search, out)
     pairs = search.pairs("training")
     evaluator = Evaluator(workers)
     try:
         baseline = study.user_attrs.get("baseline")
-        if baseline is None:
-            areas = evaluator(pairs, None, search.tune.runs, search.iterations, seed)
-            baseline = [float(a.mean()) for a in areas]
+        if baseline is None:  # the hand-chosen profiles' mean area (and distance) per pair
+            baseline = [_measure(s, t, runs, objective) for (s, t), runs in zip(
+                pairs, evaluator(pairs, None, search.tune.runs, search.iterations, seed),
+                strict=True)]
             study.set_user_attr("baseline", baseline)
         paper = file_values(search.training[0])
-        if not study.trials and all(p.low <= paper[p.name] <= p.high for p in PARAMETERS):
-            study.enqueue_trial(paper)
-        distributions = _distributions()
+        searched = search.searched
+        if not study.trials and all(p.low <= paper[p.name] <= p.high for p in searched):
+            study.enqueue_trial({p.name: paper[p.name] for p in searched})
+        distributions = _distributions(searched)
         finished = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
         bar = progress_bar(trials, "tune", unit="trial", done=min(len(finished), trials),
                            enabled=progress, leave=True)
         try:
             while len(finished) < trials:
-                stale = [t for t in study.trials if t.state == optuna.trial.TrialState.RUNNING]
-                if stale:  # interrupted before it finished: evaluated again as it was asked
-                    number, params = stale[0].number, stale[0].params
-                else:
-                    study.sampler = _sampler(seed, len(study.trials))
-                    trial = study.ask(distributions)
-                    number, params = trial.number, trial.params
-                areas = evaluator(pairs, params, search.tune.runs, search.iterations, seed)
-                ratios = [float(a.mean()) / b for a, b in zip(areas, baseline, strict=True)]
-                study.tell(number, float(np.mean(ratios)))
+                for stale in study.trials:  # interrupted before it finished: asked again
+                    if stale.state == optuna.trial.TrialState.RUNNING:
+                        study.tell(stale.number, state=optuna.trial.TrialState.FAIL)
+                        study.enqueue_trial(stale.params)
+                study.sampler = _sampler(seed, len(finished))
+                trial = study.ask(distributions)
+                found = evaluator(pairs, paper | trial.params, search.tune.runs,
+                                  search.iterations, seed)
+                ratios = [float(areas(s, runs, objective, b["budget"]).mean()) / b["area"]
+                          for (s, _), runs, b in zip(pairs, found, baseline, strict=True)]
+                # the share of probes on the border, relative to the hand-chosen profiles'
+                kept = float(np.mean([_precision(s, t, runs["paths"]) for (s, t), runs
+                                      in zip(pairs, found, strict=True)])
+                             / np.mean([b["precision"] for b in baseline]))
+                trial.set_user_attr("precision", kept)
+                if min_precision is not None:  # Optuna's constrained TPE: <= 0 is feasible
+                    trial.set_constraint("precision", min_precision - kept)
+                study.tell(trial, float(np.mean(ratios)))
                 finished = [t for t in study.trials
                             if t.state == optuna.trial.TrialState.COMPLETE]
                 bar.update(1)
         finally:
             bar.close()
+        # numbered in the order they finished (a trial asked again after an interruption
+        # takes the place of the one it repeats)
         complete = sorted(finished, key=lambda t: t.number)[:trials]
-        best = min(complete, key=lambda t: (t.value, t.number))
+        index, best = min(((i, t) for i, t in enumerate(complete)
+                           if _feasible(t, min_precision)),
+                          key=lambda it: (it[1].value, it[0]), default=(0, complete[0]))
         validation = study.user_attrs.get("validation")
-        if validation is None or validation.get("trial") != best.number:
+        if validation is None or validation.get("trial") != index:
             valid_pairs = search.pairs("validation")
             runs, vseed = search.tune.validation_runs, seed + 1
             hand = evaluator(valid_pairs, None, runs, search.iterations, vseed)
-            tuned = evaluator(valid_pairs, best.params, runs, search.iterations, vseed)
-            validation = {"trial": best.number, "hand": [a.tolist() for a in hand],
-                          "tuned": [a.tolist() for a in tuned]}
+            tuned = evaluator(valid_pairs, paper | best.params, runs, search.iterations,
+                              vseed)
+            validation = {"trial": index, "pairs": [
+                _compare(s, t, h, u, objective)
+                for (s, t), h, u in zip(valid_pairs, hand, tuned, strict=True)]}
             study.set_user_attr("validation", validation)
     finally:
         evaluator.close()
-    result = summary(search, complete, best, baseline, validation, paper)
+    result = summary(search, complete, index, baseline, validation, paper)
     write_outputs(search, out, result)
     return result
 
 
+def _measure(scenario: Scenario, task: str, runs: Mapping[str, np.ndarray],
+             objective: str) -> dict:
+    """The hand-chosen profiles' mean area on a pair, the distance budget it sets and their
+    share of probes on the border."""
+    budget = path_budget(scenario, runs) if objective == "travel" else None
+    return {"area": float(areas(scenario, runs, objective, budget).mean()), "budget": budget,
+            "precision": _precision(scenario, task, runs["paths"])}
+
+
+def _precision(scenario: Scenario, task: str, paths: np.ndarray) -> float:
+    """Share of the probes that fall on the task's border."""
+    return float(scenario.border(task).ravel()[paths].mean())
+
+
+def _compare(scenario: Scenario, task: str, hand: Mapping[str, np.ndarray],
+             tuned: Mapping[str, np.ndarray], objective: str) -> dict:
+    """One validation pair: both profiles' areas per run, and how each moved."""
+    budget = path_budget(scenario, hand) if objective == "travel" else None
+    border = scenario.border(task)
+    return {"hand": areas(scenario, hand, objective, budget).tolist(),
+            "tuned": areas(scenario, tuned, objective, budget).tolist(),
+            "hand_behaviour": _moves(scenario, hand["paths"], border),
+            "tuned_behaviour": _moves(scenario, tuned["paths"], border),
+            "hand_visits": _visits(scenario, hand["paths"]),
+            "tuned_visits": _visits(scenario, tuned["paths"])}
+
+
+def _visits(scenario: Scenario, paths: np.ndarray) -> list[int]:
+    """Probes per cell over all runs (flat, row-major)."""
+    return np.bincount(paths.ravel(), minlength=len(scenario.centres)).tolist()
+
+
+def _moves(scenario: Scenario, paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
+    b = behaviour(paths, border, scenario.centres)
+    steps = np.linalg.norm(np.diff(scenario.centres[paths], axis=1), axis=-1)
+    return {"precision": b["precision"], "border_probed": b["border_probed"],
+            "path_length": b["path_length"], "median_step": float(np.median(steps))}
+
+
 # results ----------------------------------------------------------------------------------------
-def summary(search: Search, trials: list, best: Any, baseline: list[float], validation: dict,
-            paper: Mapping[str, float]) -> dict:
+def summary(search: Search, trials: list, index: int, baseline: list[dict],
+            validation: dict, paper: Mapping[str, float]) -> dict:
+    """What ``tune.json`` holds: the ``trials`` (finished, in order), the best (``trials[index]``)
+    and its validation."""
     from statsmodels.stats.multitest import multipletests
 
     rows = []
     hand_all, tuned_all = [], []
-    for (scenario, task), hand, tuned in zip(search.pairs("validation"), validation["hand"],
-                                             validation["tuned"], strict=True):
-        hand, tuned = np.asarray(hand), np.asarray(tuned)
+    for (scenario, task), pair in zip(search.pairs("validation"), validation["pairs"],
+                                      strict=True):
+        hand, tuned = np.asarray(pair["hand"]), np.asarray(pair["tuned"])
         scale = hand.mean()
         hand_all.append(hand / scale)
         tuned_all.append(tuned / scale)
         rows.append({"scenario": scenario.name, "task": task, "runs": int(hand.size),
                      "auc_hand": float(hand.mean()), "auc_hand_sem": _sem(hand),
                      "auc_tuned": float(tuned.mean()), "auc_tuned_sem": _sem(tuned),
-                     "ratio": float(tuned.mean() / scale), "p": paired_test(tuned, hand)})
+                     "ratio": float(tuned.mean() / scale), "p": paired_test(tuned, hand),
+                     "hand_behaviour": pair["hand_behaviour"],
+                     "tuned_behaviour": pair["tuned_behaviour"],
+                     "hand_visits": pair["hand_visits"], "tuned_visits": pair["tuned_visits"]})
     adjusted = multipletests([r["p"] for r in rows], method="holm")[1]
     for row, value in zip(rows, adjusted, strict=True):
         row["p_holm"] = float(value)
@@ -376,20 +508,24 @@ def summary(search: Search, trials: list, best: Any, baseline: list[float], vali
               "p": paired_test(tuned_pooled, hand_pooled),
               "better": int(sum(r["ratio"] < 1 and r["p_holm"] < 0.05 for r in rows)),
               "worse": int(sum(r["ratio"] > 1 and r["p_holm"] < 0.05 for r in rows))}
-    training = [{"scenario": s.name, "task": t, "auc_hand": b}
+    training = [{"scenario": s.name, "task": t, "auc_hand": b["area"], "budget": b["budget"],
+                 "precision_hand": b["precision"]}
                 for (s, t), b in zip(search.pairs("training"), baseline, strict=True)]
     return {
-        "experiment": str(search.path),
+        "experiment": str(search.path), "objective": search.tune.objective,
         "seed": search.spec.seed, "iterations": search.iterations,
         "training_runs": search.tune.runs, "validation_runs": search.tune.validation_runs,
         "training": training,
         "validation_scenarios": sorted({s.name for s in search.validation}),
         "parameters": [{"name": p.name, "term": p.term, "key": p.key, "meaning": p.meaning,
                         "low": p.low, "high": p.high, "hand": paper[p.name],
-                        "tuned": float(best.params[p.name])} for p in PARAMETERS],
-        "best_trial": best.number, "best_objective": float(best.value),
-        "trials": [{"number": t.number, "objective": float(t.value), "params": t.params}
-                   for t in trials],
+                        "searched": p in search.searched,
+                        "tuned": float((paper | trials[index].params)[p.name])}
+                       for p in PARAMETERS],
+        "best_trial": index, "best_objective": float(trials[index].value),
+        "min_precision": search.tune.min_precision,
+        "trials": [{"number": i, "objective": float(t.value), "params": t.params,
+                    "precision": t.user_attrs["precision"]} for i, t in enumerate(trials)],
         "validation": rows, "pooled": pooled,
     }
 
@@ -403,6 +539,7 @@ def write_outputs(search: Search, out: Path, result: dict) -> None:
     tuned_file = out / f"{search.training[0].program_path('target').stem}.tuned.yaml"
     tuned_file.write_text(tuned_program(search, result, out), encoding="utf-8")
     plot(result, out / "tune.png")
+    plot_visits(search, result, out / "tune-visits.png")
     (out / "tune.md").write_text(markdown(result, tuned_file.name), encoding="utf-8")
 
 
@@ -433,39 +570,80 @@ def markdown(result: dict, tuned_name: str) -> str:
     else:
         verdict = (f"the tuned profiles do not differ from the hand-chosen ones on the validation "
                    f"scenarios ({change:+.1f}%, pooled paired Wilcoxon p = {pooled['p']:.2g})")
+    moves = {who: {key: float(np.mean([r[f"{who}_behaviour"][key] for r in result["validation"]]))
+                   for key in ("precision", "border_probed", "path_length", "median_step")}
+             for who in ("hand", "tuned")}
+    following = (f"Border following on the validation pairs (means): precision (share of probes "
+                 f"on the border) {100 * moves['hand']['precision']:.0f}% hand-chosen, "
+                 f"{100 * moves['tuned']['precision']:.0f}% tuned; border recall "
+                 f"{100 * moves['hand']['border_probed']:.0f}% and "
+                 f"{100 * moves['tuned']['border_probed']:.0f}%; median step "
+                 f"{100 * moves['hand']['median_step']:.1f} cm and "
+                 f"{100 * moves['tuned']['median_step']:.1f} cm.")
+    if moves["tuned"]["precision"] < 0.5 * moves["hand"]["precision"]:
+        following += (" **The tuned explorer does not follow the border**: its probes fall on "
+                      f"it {moves['hand']['precision'] / max(moves['tuned']['precision'], 1e-9):.1f}"
+                      " times less often than the hand-chosen profiles'.")
+    measure = ("area under Gamma over the probes" if result["objective"] == "probes" else
+               "area under Gamma over the distance the hand travels, up to the distance the "
+               "hand-chosen profiles travel in as many probes")
+    constraint = ""
+    if result.get("min_precision") is not None:
+        constraint = (f" A candidate counts only if its share of probes on the border of the "
+                      f"training scenarios is at least {result['min_precision']:g} times the "
+                      "hand-chosen profiles'.")
     lines = [
         "# Tuned cue profiles", "",
         f"Experiment `{result['experiment']}`: {len(result['trials'])} trials of Optuna's TPE "
         f"sampler (seed {result['seed']}), each running the full model {result['training_runs']} "
         f"times per task on the training scenarios "
         f"({', '.join(sorted({r['scenario'] for r in result['training']}))}) for "
-        f"{result['iterations']} probes. The objective is the mean area under Gamma relative to "
-        "the hand-chosen profiles' (1 = the file's values; lower is better). Best: trial "
-        f"{result['best_trial']}, objective {result['best_objective']:.4f}.", "",
+        f"{result['iterations']} probes. The objective (`{result['objective']}`) is the mean "
+        f"{measure}, relative to the hand-chosen profiles' (1 = the file's values; lower is "
+        f"better).{constraint} Best: trial {result['best_trial']}, objective "
+        f"{result['best_objective']:.4f}.", "",
         f"**Verdict**: {verdict}; {pooled['better']} of {pooled['pairs']} validation (scenario, "
         f"task) pairs better, {pooled['worse']} worse (Holm-adjusted p < 0.05).", "",
+        following, "",
         "| parameter | meaning | hand-chosen | tuned | range |",
         "|---|---|---|---|---|",
     ]
     for p in result["parameters"]:
         lines.append(f"| {p['name']} | {p['meaning']} | {p['hand']:.3g} | {p['tuned']:.3g} | "
-                     f"{p['low']:g} to {p['high']:g} |")
+                     + (f"{p['low']:g} to {p['high']:g} |" if p["searched"] else
+                        "not searched |"))
     lines += ["", f"The tuned program: `{tuned_name}`.", "",
               "## Validation (scenarios not used for tuning)", "",
               f"{result['validation_runs']} paired runs per (scenario, task) from the same start "
-              "cells and random streams; two-sided Wilcoxon signed-rank test of the areas under "
-              "Gamma, Holm-adjusted over the pairs (statsmodels multipletests).", "",
-              "| scenario | task | runs | AUC hand-chosen | AUC tuned | tuned / hand | p | p (Holm) |",
-              "|---|---|---|---|---|---|---|---|"]
+              f"cells and random streams; the {measure}; two-sided Wilcoxon signed-rank test, "
+              "Holm-adjusted over the pairs (statsmodels multipletests). Precision, recall, path "
+              "length and median step: hand-chosen / tuned.", "",
+              "| scenario | task | runs | area hand-chosen | area tuned | tuned / hand | p | "
+              "p (Holm) | precision | recall | path (m) | step (cm) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["validation"]:
         lines.append(f"| {r['scenario']} | {r['task']} | {r['runs']} | "
                      f"{r['auc_hand']:.3f} ± {r['auc_hand_sem']:.3f} | "
                      f"{r['auc_tuned']:.3f} ± {r['auc_tuned_sem']:.3f} | {r['ratio']:.3f} | "
-                     f"{r['p']:.2g} | {r['p_holm']:.2g} |")
+                     f"{r['p']:.2g} | {r['p_holm']:.2g} | "
+                     + " | ".join(_pair(r, key, scale) for key, scale in _MOVES) + " |")
     lines.append(f"| pooled (each pair scaled by its hand-chosen mean) | | {pooled['runs']} | 1 | "
-                 f"{pooled['ratio']:.3f} | {pooled['ratio']:.3f} | {pooled['p']:.2g} | |")
-    lines += ["", "![objective per trial and validation](tune.png)", ""]
+                 f"{pooled['ratio']:.3f} | {pooled['ratio']:.3f} | {pooled['p']:.2g} | | "
+                 + " | ".join(f"{scale(moves['hand'][key])} / {scale(moves['tuned'][key])}"
+                              for key, scale in _MOVES) + " |")
+    lines += ["", "![objective per trial and validation](tune.png)", "",
+              "Where the probes go on the validation scenarios (first task of each; visits "
+              "summed over the runs, the task's border drawn):", "",
+              "![visits of both profiles](tune-visits.png)", ""]
     return "\n".join(lines)
+
+
+_MOVES = (("precision", lambda v: f"{100 * v:.0f}%"), ("border_probed", lambda v: f"{100 * v:.0f}%"),
+          ("path_length", lambda v: f"{v:.2f}"), ("median_step", lambda v: f"{100 * v:.1f}"))
+
+
+def _pair(row: dict, key: str, scale: Any) -> str:
+    return f"{scale(row['hand_behaviour'][key])} / {scale(row['tuned_behaviour'][key])}"
 
 
 def plot(result: dict, path: Path) -> None:
@@ -473,29 +651,65 @@ def plot(result: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
-    numbers = [t["number"] for t in result["trials"]]
-    values = [t["objective"] for t in result["trials"]]
-    left.scatter(numbers, values, s=14, color="0.5", label="trial")
-    left.plot(numbers, np.minimum.accumulate(values), color="C0", label="best so far")
+    rows = result["validation"]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, max(4.2, 1.5 + 0.28 * len(rows))))
+    numbers = np.array([t["number"] for t in result["trials"]])
+    values = np.array([t["objective"] for t in result["trials"]])
+    least = result.get("min_precision")
+    feasible = np.array([least is None or t["precision"] >= least for t in result["trials"]])
+    left.scatter(numbers[feasible], values[feasible], s=14, color="0.5", label="trial")
+    if not feasible.all():
+        left.scatter(numbers[~feasible], values[~feasible], s=14, facecolors="none",
+                     edgecolors="C3", label=f"border precision below {least:g} x hand-chosen")
+    left.step(numbers, np.minimum.accumulate(np.where(feasible, values, np.inf)),
+              where="post", color="C0", label="best so far")
     left.axhline(1.0, color="C3", ls="--", lw=1, label="hand-chosen profiles")
     left.set_xlabel("trial")
-    left.set_ylabel("training AUC / hand-chosen AUC")
+    left.set_ylabel("training area / hand-chosen area")
     left.set_title("search (training scenarios)")
     left.legend(fontsize=8)
-    rows = result["validation"]
-    labels = [f"{r['scenario']}\n{r['task']}" for r in rows]
+    labels = [f"{r['scenario']} {r['task']}" for r in rows]
     ratios = [r["ratio"] for r in rows]
     errors = [r["auc_tuned_sem"] / r["auc_hand"] for r in rows]
     colors = ["C2" if r["ratio"] < 1 and r["p_holm"] < 0.05 else
               "C3" if r["ratio"] > 1 and r["p_holm"] < 0.05 else "0.6" for r in rows]
-    right.bar(range(len(rows)), ratios, yerr=errors, color=colors, capsize=2)
-    right.axhline(1.0, color="k", lw=1)
-    right.set_xticks(range(len(rows)), labels, fontsize=7)
-    right.set_ylabel("tuned AUC / hand-chosen AUC")
-    right.set_title("validation (green: better, red: worse, Holm p < 0.05)")
+    positions = np.arange(len(rows))[::-1]  # the first pair on top, as in tune.md
+    right.barh(positions, ratios, xerr=errors, color=colors, capsize=2)
+    right.axvline(1.0, color="k", lw=1)
+    right.set_yticks(positions, labels, fontsize=8)
+    right.set_xlabel("tuned area / hand-chosen area (bar: standard error)")
+    right.set_title("validation (green: better, red: worse, Holm p < 0.05)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_visits(search: Search, result: dict, path: Path) -> None:
+    """Visits per cell of the hand-chosen and the tuned profiles on the first task of each
+    validation scenario, side by side on one colour scale per scenario."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from runner.figures import draw_border, draw_map
+
+    rows = {}
+    for row in result["validation"]:
+        rows.setdefault(row["scenario"], row)
+    scenarios = {s.name: s for s in search.validation}
+    fig, axes = plt.subplots(len(rows), 2, figsize=(8, 2.3 * len(rows)), squeeze=False)
+    for (name, row), (left, right) in zip(rows.items(), axes, strict=True):
+        scenario = scenarios[name]
+        top = max(max(row["hand_visits"]), max(row["tuned_visits"]), 1)
+        for ax, who in ((left, "hand"), (right, "tuned")):
+            visits = np.asarray(row[f"{who}_visits"], float)
+            draw_map(ax, np.log10(1 + visits), scenario, cmap="magma", vmin=0,
+                     vmax=np.log10(1 + top), label="log10(1 + probes)" if who == "tuned" else None,
+                     title=f"{name} {row['task']}: {'hand-chosen' if who == 'hand' else 'tuned'}"
+                     f" (precision {100 * row[f'{who}_behaviour']['precision']:.0f}%)")
+            draw_border(ax, scenario, row["task"], colour="cyan", width=0.6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

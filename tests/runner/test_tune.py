@@ -16,7 +16,16 @@ import bayesprog
 from bayesprog.cli import main
 from runner import tune as tune_module
 from runner.scenario import load_scenario
-from runner.tune import PARAMETERS, evaluate, file_values, load_search, run_search, terms_of
+from runner.tune import (
+    PARAMETERS,
+    area_over_distance,
+    areas,
+    evaluate,
+    file_values,
+    load_search,
+    run_search,
+    terms_of,
+)
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -93,11 +102,52 @@ def test_the_objective_is_the_mean_relative_area_under_gamma(fresh):
     best = result["trials"][result["best_trial"]]["params"]
     ratios = []
     for row, (scenario, task) in zip(result["training"], search.pairs("training"), strict=True):
-        hand = evaluate(scenario, task, None, 3, 25, 3)
-        tuned = evaluate(scenario, task, best, 3, 25, 3)
+        hand = np.trapezoid(evaluate(scenario, task, None, 3, 25, 3)["gamma"], axis=1)
+        tuned = np.trapezoid(evaluate(scenario, task, best, 3, 25, 3)["gamma"], axis=1)
         assert row["auc_hand"] == pytest.approx(hand.mean(), rel=1e-12)
         ratios.append(tuned.mean() / hand.mean())
     assert result["best_objective"] == pytest.approx(np.mean(ratios), rel=1e-12)
+
+
+def test_runs_are_the_same_whatever_the_chunk():
+    scenario = load_scenario(MODELS / "scenarios" / "small_grid.yaml")
+    values = file_values(scenario) | {"S.a": 8.0, "shape_weight": 0.2}
+    whole = evaluate(scenario, "T2", values, 5, 20, 9, chunk=5)
+    pieces = evaluate(scenario, "T2", values, 5, 20, 9, chunk=2)
+    for key in ("gamma", "paths"):
+        np.testing.assert_array_equal(whole[key], pieces[key])
+
+
+def test_area_over_distance_is_the_integral_of_gamma_held_between_probes():
+    rng = np.random.default_rng(5)
+    gamma = np.sort(rng.uniform(0, 2, (4, 12)), axis=1)[:, ::-1]
+    distance = np.cumsum(np.r_[0, *rng.uniform(0, 0.05, 11)] * np.ones((4, 1)), axis=1)
+    distance[1] *= 3  # a run that overshoots the budget
+    budget = 0.4
+    fine = np.linspace(0, budget, 400_001)[:-1] + budget / 800_000  # midpoints
+    expected = [gamma[i, np.searchsorted(distance[i], fine, side="right") - 1].sum()
+                * budget / 400_000 for i in range(4)]
+    np.testing.assert_allclose(area_over_distance(gamma, distance, budget), expected, rtol=1e-4)
+
+
+def test_a_search_over_travel_compares_areas_within_the_hand_chosen_distance(tmp_path):
+    search = load_search(write_search(tmp_path, objective="travel", trials=2))
+    result = run_search(search, tmp_path / "out", progress=False)
+    assert result["objective"] == "travel" and result["trials"][0]["objective"] == 1.0
+    (scenario, task), row = search.pairs("training")[0], result["training"][0]
+    hand = evaluate(scenario, task, None, 3, 25, 3)
+    steps = np.linalg.norm(np.diff(scenario.centres[hand["paths"]], axis=1), axis=-1)
+    budget = steps.sum(axis=1).mean()
+    assert row["budget"] == pytest.approx(budget, rel=1e-12)
+    distance = np.concatenate([np.zeros((3, 1)), np.cumsum(steps, axis=1)], axis=1)
+    assert row["auc_hand"] == pytest.approx(
+        area_over_distance(hand["gamma"], distance, budget).mean(), rel=1e-12)
+    first = result["trials"][1]
+    ratios = []
+    for b, (scenario, task) in zip(result["training"], search.pairs("training"), strict=True):
+        runs = evaluate(scenario, task, first["params"], 3, 25, 3)
+        ratios.append(areas(scenario, runs, "travel", b["budget"]).mean() / b["auc_hand"])
+    assert first["objective"] == pytest.approx(np.mean(ratios), rel=1e-12)
 
 
 def test_validation_tests_are_scipys_wilcoxon_with_holms_correction(fresh):
@@ -108,8 +158,9 @@ def test_validation_tests_are_scipys_wilcoxon_with_holms_correction(fresh):
     for row, (scenario, task) in zip(result["validation"], search.pairs("validation"),
                                      strict=True):
         assert (row["scenario"], row["task"]) == (scenario.name, task)
-        hand = evaluate(scenario, task, None, 5, 25, 4)  # validation streams: seed + 1
-        tuned = evaluate(scenario, task, best, 5, 25, 4)
+        # validation streams: seed + 1
+        hand = np.trapezoid(evaluate(scenario, task, None, 5, 25, 4)["gamma"], axis=1)
+        tuned = np.trapezoid(evaluate(scenario, task, best, 5, 25, 4)["gamma"], axis=1)
         assert row["auc_hand"] == pytest.approx(hand.mean(), rel=1e-12)
         assert row["auc_tuned"] == pytest.approx(tuned.mean(), rel=1e-12)
         expected = 1.0 if np.allclose(hand, tuned) else stats.wilcoxon(tuned, hand).pvalue
@@ -131,8 +182,14 @@ def test_the_tuned_program_loads_with_the_tuned_values_and_keeps_the_rest(fresh)
         for key, value in params.items():
             assert float(terms[label].params[key].array) == pytest.approx(value, rel=1e-5)
     assert (out / "tune.png").stat().st_size > 10_000
+    assert (out / "tune-visits.png").stat().st_size > 10_000
     md = (out / "tune.md").read_text()
     assert "**Verdict**" in md and "| corners | T1 | 5 |" in md
+    row = result["validation"][0]
+    scenario = load_scenario(MODELS / "scenarios" / "corners.yaml")
+    paths = evaluate(scenario, "T1", best, 5, 25, 4)["paths"]
+    border = scenario.border("T1").ravel()
+    assert row["tuned_behaviour"]["precision"] == pytest.approx(border[paths].mean())
 
 
 def test_terms_of_inverts_file_values():
@@ -144,6 +201,44 @@ def test_terms_of_inverts_file_values():
                                                        for t in scenario.target.terms]
 
 
+def test_a_search_that_must_keep_border_precision_picks_a_candidate_that_keeps_it(tmp_path):
+    search = load_search(write_search(tmp_path, min_precision=1.0, trials=5))
+    result = run_search(search, tmp_path / "out", progress=False)
+    hand = [scenario.border(task).ravel()[evaluate(scenario, task, None, 3, 25, 3)["paths"]]
+            .mean() for scenario, task in search.pairs("training")]
+    for trial in result["trials"][:2]:
+        kept = [scenario.border(task).ravel()[evaluate(scenario, task, trial["params"], 3, 25, 3)
+                                              ["paths"]].mean()
+                for scenario, task in search.pairs("training")]
+        assert trial["precision"] == pytest.approx(np.mean(kept) / np.mean(hand), rel=1e-12)
+    feasible = [t for t in result["trials"] if t["precision"] >= 1.0]
+    assert result["best_objective"] == min(t["objective"] for t in feasible)
+    assert result["trials"][result["best_trial"]]["precision"] >= 1.0
+    assert "at least 1 times the hand-chosen" in (tmp_path / "out" / "tune.md").read_text()
+
+
+def test_parameters_not_searched_keep_the_files_values(tmp_path):
+    search = load_search(write_search(tmp_path, parameters=["S.a", "shape_weight"], trials=3))
+    result = run_search(search, tmp_path / "out", progress=False)
+    hand = {p["name"]: p["hand"] for p in result["parameters"]}
+    for trial in result["trials"]:
+        assert set(trial["params"]) == {"S.a", "shape_weight"}
+    tuned = {p["name"]: p for p in result["parameters"]}
+    assert [n for n, p in tuned.items() if not p["searched"]] == ["I.a", "I.b", "S.b", "U.a",
+                                                                   "U.b"]
+    assert all(tuned[n]["tuned"] == hand[n] for n in ("I.a", "I.b", "S.b", "U.a", "U.b"))
+    scenario, task = search.pairs("training")[0]
+    second = result["trials"][1]
+    runs = evaluate(scenario, task, hand | second["params"], 3, 25, 3)
+    ratios = [areas(s, evaluate(s, t, hand | second["params"], 3, 25, 3), "probes").mean()
+              / b["auc_hand"] for b, (s, t) in zip(result["training"], search.pairs("training"),
+                                                   strict=True)]
+    assert runs["gamma"].shape == (3, 25)
+    assert second["objective"] == pytest.approx(np.mean(ratios), rel=1e-12)
+    assert "| I.a | inhibition profile, Beta a | 1 | 1 | not searched |" in (
+        tmp_path / "out" / "tune.md").read_text()
+
+
 @pytest.mark.parametrize("edit, expected", [
     (lambda spec: spec.pop("tune"), "tiny.yaml:1:1: no tune: section"),
     (lambda spec: spec["tune"]["validation"].append(spec["tune"]["training"][0]),
@@ -151,6 +246,10 @@ def test_terms_of_inverts_file_values():
     (lambda spec: spec["tune"].update(validation=["nowhere.yaml"]),
      "tiny.yaml:16:5: no scenario file 'nowhere.yaml'"),
     (lambda spec: spec["tune"].update(trials=0), "trials: Input should be greater than or equal"),
+    (lambda spec: spec["tune"].update(runs=10**12), "tiny.yaml:18:9: 1,000,000,000,000 runs"),
+    (lambda spec: spec["tune"].update(objective="speed"), "objective: Input should be 'probes'"),
+    (lambda spec: spec["tune"].update(parameters=["S.a", "S.c"]),
+     "tiny.yaml:22:5: unknown parameter 'S.c': expected one of I.a, I.b"),
 ])
 def test_a_bad_search_is_refused_at_its_place(tmp_path, capsys, edit, expected):
     path = write_search(tmp_path)
