@@ -10,7 +10,11 @@ random streams), so a search resumed after Ctrl-C ends exactly where an uninterr
 
 The objective of a candidate is the mean, over training (scenario, task) pairs, of its mean area
 under Gamma divided by the hand-chosen profiles' (1 for the file's own values; below 1 is
-better), so that every pair weighs the same whatever its grid size.
+better), so that every pair weighs the same whatever its grid size. The area is over the probes
+(``objective: probes``) or over the distance the hand travels, up to what the hand-chosen
+profiles travel (``objective: travel``); ``min_precision`` makes candidates that probe the
+border less than the hand-chosen profiles (relative share) infeasible, and ``parameters``
+leaves the others at the file's values.
 """
 
 from __future__ import annotations

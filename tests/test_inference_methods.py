@@ -307,12 +307,15 @@ def test_a_path_account_matches_opt_einsums():
         _, theirs = opt_einsum.contract_path(eq, *shapes, shapes=True, optimize=path)
         assert ours.largest_intermediate == theirs.largest_intermediate
         assert len(ours.steps) == len(theirs.contraction_list)
-        for (inds, removed, text, flops, kind, _), (t_inds, t_removed, t_text, _, t_blas) in zip(
+        for (inds, removed, text, flops, kind, _, moved), (t_inds, t_removed, t_text, _,
+                                                           t_blas) in zip(
                 ours.steps, theirs.contraction_list, strict=True):
             assert (inds, removed, text) == (t_inds, t_removed, t_text)
             involved = set(text.split("->")[0].replace(",", ""))
             assert flops == opt_einsum.helpers.flop_count(involved, bool(removed), len(inds),
                                                           sizes)
+            assert moved == sum(opt_einsum.helpers.compute_size_by_dict(t, sizes)
+                                for t in text.replace("->", ",").split(","))
             tensordot = bool(t_blas) and "EINSUM" not in t_blas and flops >= 4096
             assert (kind == "tensordot") == tensordot
 

@@ -40,6 +40,11 @@ MATMUL_EACH = 80.0
 #: A stack of matrix products each smaller than this (operations) runs as an einsum: numpy's
 #: matmul pays per product (10,000 rows of 3 x 3 products: twice einsum's time).
 MATMUL_MIN = 256
+#: What a matrix-product step (tensordot or matmul) costs per entry it reads and writes, in
+#: operations: its operands are transposed into place and its result written back, which costs
+#: what BLAS's arithmetic does not once the operands outgrow the caches (16 x 16 grid: the
+#: estimate without it was a third of the clock, benchmarks/engine.py).
+MOVED = 1.0
 
 
 def contraction_path(equation: str, shapes: list[tuple[int, ...]]) -> tuple[list, Any, float]:
@@ -91,6 +96,8 @@ class Step(NamedTuple):
     kind: str
     #: how many matrix products a ``matmul`` step stacks (1 for the other kinds)
     stack: int
+    #: entries of the operands and the result
+    moved: int = 0
 
 
 @dataclass
@@ -139,22 +146,25 @@ class Account:
                     stack = math.prod(sizes[i] for i in set(taken[0]) & set(taken[1])
                                       if i not in removed)
                     kind = "matmul" if flops >= MATMUL_MIN * stack else "einsum"
+            moved = sum(math.prod(sizes[i] for i in t) for t in taken) \
+                + math.prod(sizes[i] for i in result)
             steps.append(Step(order, removed, ",".join(taken) + "->" + result, flops, kind,
-                              stack))
+                              stack, moved))
             remaining.append(result)
             largest = max(largest, float(math.prod(sizes[i] for i in result)))
         return cls(steps, sizes, largest)
 
     def cost(self, summing: float = 1.0) -> float:
         """The path's operations, a matrix product's counting 1 / BLAS_SPEED (and a stack of
-        them ``MATMUL_EACH`` more per product) and an einsum step that sums out an index
-        ``summing``."""
+        them ``MATMUL_EACH`` more per product, and ``MOVED`` per entry read and written) and an
+        einsum step that sums out an index ``summing``."""
         total = 0.0
         for step in self.steps:
             if step.kind == "einsum":
                 total += step.flops * (summing if step.removed else 1.0)
             else:
-                total += step.flops / BLAS_SPEED + (step.stack - 1) * MATMUL_EACH
+                total += (step.flops / BLAS_SPEED + (step.stack - 1) * MATMUL_EACH
+                          + MOVED * step.moved)
         return total
 
 
@@ -250,7 +260,7 @@ class Contraction:
     def __init__(self, info: Any) -> None:
         """``info``: the path's :class:`Account`."""
         self.steps: list[tuple[tuple[int, ...], str, Any]] = []
-        for inds, _, einsum_str, _, kind, _ in info.steps:
+        for inds, _, einsum_str, _, kind, _, _ in info.steps:
             einsum_str = parser.convert_to_valid_einsum_chars(einsum_str)
             inputs, result = einsum_str.split("->")
             if kind == "tensordot":
