@@ -422,7 +422,8 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     ``variables`` replaces the declarations of some of the file's variables before the program
     is checked, as if the file said so (for instance a grid's shape, set by the workspace a
     program is used in); every check then runs on the result, so a term that no longer fits is
-    reported at its place in the file. ``terms`` likewise sets parameters of some terms of the
+    reported at its place in the file. A program a term names (``form: program``) has the
+    variables it shares with that term replaced alike. ``terms`` likewise sets parameters of some terms of the
     decomposition, named as in the file (``{"P(I | O)": {"a": 2.0, "b": 3.0}}``: the keys given
     replace the entry's, the others stay).
 
@@ -453,7 +454,13 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     problems += schema_problems
     if doc is None:
         raise SpecError(problems)
-    checked = check_document(located, doc, base_dir or Path.cwd(), load)
+    def load_named(file: Path, shared: tuple[str, ...] = ()) -> Program:
+        # a program named by a term: the variables it shares with the term (its child and
+        # parents) are replaced there as they are here, so they keep the same states
+        given = {name: variables[name] for name in shared if variables and name in variables}
+        return load(file, variables=given or None)
+
+    checked = check_document(located, doc, base_dir or Path.cwd(), load_named)
     problems += checked.problems
     if problems:
         raise SpecError(problems)

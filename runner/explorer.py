@@ -265,12 +265,11 @@ class Explorer:
                     for k, v in evidence.items()}
             if with_shape:
                 assert reg is not None
-                inputs = {"templates": reg.points[group], "l_rectangle": reg.error[group, 0],
-                          "l_triangle": reg.error[group, 1]}
+                inputs = {"templates": reg.points[group], "errors": reg.error[group]}
                 program = self.target
             else:
                 # no shape evidence: P(R | O) is uniform, and so the soft evidence on R is moot
-                inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
+                inputs = {"errors": np.full(len(self.shape_names), 0.5)}
                 program = self.target_no_shape
             answer = program.ask("next_target", rows, inputs=inputs,
                                  rng=[self.rngs[r] for r in group])

@@ -178,8 +178,7 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         d = explorer.last
         evidence = {"T": task, "I": d.inhibition, "S": d.saliency, "U": d.uncertainty}
         if d.templates is not None and d.shape_ready is not None and d.shape_ready[0]:
-            inputs = {"templates": d.templates, "l_rectangle": d.shape_error[:, 0],
-                      "l_triangle": d.shape_error[:, 1]}
+            inputs = {"templates": d.templates, "errors": d.shape_error}
             shape = shape_only.posterior("P(O | T, I, S, U)", evidence, inputs=inputs)
             shape_field = shape.probabilities[0]
         else:

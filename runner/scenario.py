@@ -10,10 +10,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_validator,
+)
 
 import bayesprog
 from bayesprog.errors import SpecError
@@ -50,6 +58,35 @@ def _outline(points: list[list[float]], what: str) -> None:
         if len(point) != 2 or not all(np.isfinite(point)):
             raise ValueError(f"{what}: expected points [x, y] of two finite numbers, found "
                              f"{point}")
+
+
+class CurveSpec(_Strict):
+    """A template given as a curve: an ellipse of semi-axes ``ellipse: [a, b]`` or a circle of
+    radius ``circle: r`` (metres), centred, its outline a polygon of ``vertices`` corners."""
+
+    ellipse: list[float] | None = Field(None, min_length=2, max_length=2)
+    circle: float | None = Field(None, gt=0)
+    vertices: int = Field(48, ge=8, le=1000)
+
+    @model_validator(mode="after")
+    def _one_curve(self) -> CurveSpec:
+        if (self.ellipse is None) == (self.circle is None):
+            raise ValueError("expected exactly one of 'ellipse: [a, b]' or 'circle: r'")
+        if self.ellipse is not None and not all(np.isfinite(v) and v > 0 for v in self.ellipse):
+            raise ValueError(f"ellipse: expected two positive semi-axes, found {self.ellipse}")
+        return self
+
+    def polygon(self) -> np.ndarray:
+        a, b = self.ellipse if self.ellipse is not None else (self.circle, self.circle)
+        t = 2 * np.pi * np.arange(self.vertices) / self.vertices
+        return np.stack([a * np.cos(t), b * np.sin(t)], axis=1)
+
+
+def template_polygon(template: list[list[float]] | CurveSpec) -> np.ndarray:
+    """A template's outline as a polygon [V, 2] (a curve's corners, or the points given)."""
+    if isinstance(template, CurveSpec):
+        return template.polygon()
+    return np.asarray(template, float)
 
 
 class ObjectSpec(_Strict):
@@ -90,7 +127,11 @@ class ScenarioSpec(_Strict):
     programs: ProgramsSpec
     grid: GridSpec
     background: str
-    templates: dict[str, list[list[float]]] = Field(min_length=1)
+    templates: dict[str, Annotated[
+        Annotated[list[list[float]], Tag("polygon")] | Annotated[CurveSpec, Tag("curve")],
+        Discriminator(lambda v: "curve" if isinstance(v, Mapping) else "polygon")]] = Field(
+        min_length=1, description="outlines by name: a polygon [[x, y], ...] (any shape, "
+        "concave ones included) or a curve {ellipse: [a, b]} / {circle: r}")
     template_points: int = Field(50, ge=3)
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
@@ -98,9 +139,11 @@ class ScenarioSpec(_Strict):
 
     @field_validator("templates")
     @classmethod
-    def _outlines(cls, templates: dict[str, list[list[float]]]) -> dict[str, list[list[float]]]:
+    def _outlines(cls, templates: dict[str, list[list[float]] | CurveSpec]
+                  ) -> dict[str, list[list[float]] | CurveSpec]:
         for name, points in templates.items():
-            _outline(points, f"template {name!r}")
+            if not isinstance(points, CurveSpec):
+                _outline(points, f"template {name!r}")
         return templates
 
 
@@ -170,7 +213,7 @@ class Scenario:
             if obj.polygon is not None:
                 out.append((obj.material, np.asarray(obj.polygon, float)))
             else:
-                base = np.asarray(self.spec.templates[obj.template], float)  # type: ignore[index]
+                base = template_polygon(self.spec.templates[obj.template])  # type: ignore[index]
                 out.append((obj.material, base @ _rotation(obj.rotation).T + np.asarray(obj.at)))
         return out
 
@@ -208,7 +251,7 @@ class Scenario:
         outline, both centred on the centroid of those points (the template frame)."""
         out = {}
         for name, poly in self.spec.templates.items():
-            poly_arr = np.asarray(poly, float)
+            poly_arr = template_polygon(poly)
             pts = outline_points(poly_arr, self.spec.template_points)
             centre = pts.mean(axis=0)
             out[name] = (poly_arr - centre, pts - centre)
@@ -221,8 +264,22 @@ class Scenario:
                     ) -> bayesprog.Program:
         """pi_tar on this workspace's grid, with ``terms``' parameters set (see
         :func:`bayesprog.load`)."""
-        return bayesprog.load(self.program_path("target"), variables={"O": _grid(self.spec)},
+        return bayesprog.load(self.program_path("target"), variables=_workspace(self.spec),
                               terms=terms)
+
+    def load_shape(self) -> bayesprog.Program:
+        """pi_obj over this workspace's templates."""
+        return bayesprog.load(self.program_path("shape"), variables={"R": _shapes(self.spec)})
+
+
+def _workspace(spec: ScenarioSpec) -> dict:
+    """What a scenario sets in pi_tar: the grid O, and the shapes R (its templates)."""
+    return {"O": _grid(spec), "R": _shapes(spec)}
+
+
+def _shapes(spec: ScenarioSpec) -> dict:
+    return {"states": list(spec.templates),
+            "description": "shape category of the discontinuity (the scenario's templates)"}
 
 
 def _grid(spec: ScenarioSpec) -> dict:
@@ -245,7 +302,7 @@ def load_scenario(path: str | Path) -> Scenario:
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     target = bayesprog.load((path.parent / spec.programs.target).resolve(),
-                            variables={"O": _grid(spec)})
+                            variables=_workspace(spec))
     diags = []
     tasks = getattr(target.variables.get("T"), "states", ())
     for task in spec.tasks:
@@ -253,12 +310,6 @@ def load_scenario(path: str | Path) -> Scenario:
             diags.append(located.diagnostic(("tasks", task), f"task {task!r} is not a state of "
                                             f"T in {spec.programs.target}: expected one of "
                                             f"{', '.join(tasks)}", at_key=True))
-    shapes = tuple(getattr(target.variables.get("R"), "states", ()))
-    if tuple(spec.templates) != shapes:
-        diags.append(located.diagnostic(("templates",), f"templates {', '.join(spec.templates)} "
-                                        f"do not match the shapes R of {spec.programs.target}: "
-                                        f"expected {', '.join(shapes)} in that order",
-                                        at_key=True))
     named = [("background",), *[("objects", i, "material") for i in range(len(spec.objects))],
              *[("tasks", t) for t in spec.tasks]]
     values = [spec.background, *[o.material for o in spec.objects], *spec.tasks.values()]

@@ -69,7 +69,7 @@ class _Session:
         self.explorer = explorer
         self.shape_program: bayesprog.Program | None = None
         if "P(R | O)" not in explorer.target.ablated:
-            self.shape_program = bayesprog.load(explorer.scenario.program_path("shape"))
+            self.shape_program = explorer.scenario.load_shape()
 
     def probed(self, cell: list[int]) -> dict:
         e = self.explorer
@@ -93,8 +93,7 @@ class _Session:
         ready = bool(d.shape_ready is not None and d.shape_ready[0])
         if not ready or self.shape_program is None or d.shape_error is None:
             return {"in_force": False, "posterior": None}
-        answer = self.shape_program.ask("shape", {"L1": float(d.shape_error[0, 0]),
-                                                  "L2": float(d.shape_error[0, 1])})
+        answer = self.shape_program.ask("shape", {"L": d.shape_error[0]})
         states = answer.states[answer.variables[0]]
         probabilities = [float(x) for x in answer.probabilities]
         return {"in_force": True, "posterior": dict(zip(states, probabilities, strict=True))}

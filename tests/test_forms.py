@@ -605,3 +605,65 @@ def test_terms_set_when_loading_give_the_answers_of_the_edited_file():
                                original / original.sum(), rtol=1e-12)
     with pytest.raises(bayesprog.SpecError, match=r"<string>:\d+:\d+: no term 'P\(X\)'"):
         bayesprog.loads(text, terms={"P(X)": {"a": 1.0}})
+
+
+# a sub-program over a field of errors, one per shape, whatever the shapes ---------------------
+_SHAPES = """\
+bayesprog: 1
+variables:
+  R: {states: [a, b]}
+  L: {continuous: [0, 1], indexed_by: R}
+decomposition:
+  - {term: P(R), form: uniform}
+  - {term: P(L | R), form: beta, a: 1.0, b: 4.5}
+questions:
+  shape: P(R | L)
+"""
+
+_CHOOSER = """\
+bayesprog: 1
+variables:
+  R: {states: [a, b]}
+  D: {states: [go, stay]}
+inputs:
+  errors: {shape: [R]}
+decomposition:
+  - {term: P(R), form: uniform}
+  - {term: P(D | R), form: table, table: {a: {go: 0.9, stay: 0.1}, b: {go: 0.2, stay: 0.8}}}
+soft_evidence:
+  - {variable: R, form: program, program: shapes.yaml, question: shape,
+     bind: {L: {input: errors}}}
+"""
+
+
+def test_a_field_of_errors_bound_from_an_input_over_shapes_set_when_loading(tmp_path):
+    """The shapes R, set when the outer program is loaded, are set in the sub-program too; the
+    sub-program's field L takes one error per shape from the outer input, and its answer
+    P(R | L) weighs the outer program as soft evidence."""
+    (tmp_path / "shapes.yaml").write_text(_SHAPES)
+    (tmp_path / "chooser.yaml").write_text(_CHOOSER)
+    states = ["disc", "ell", "square"]
+    go = {"disc": 0.9, "ell": 0.4, "square": 0.2}
+    program = bayesprog.load(tmp_path / "chooser.yaml", variables={"R": {"states": states}},
+                             terms={"P(D | R)": {"table": {
+                                 s: {"go": p, "stay": 1 - p} for s, p in go.items()}}})
+    errors = np.array([[0.1, 0.5, 0.9], [0.7, 0.05, 0.3]])
+    answer = program.ask("P(D)", inputs={"errors": errors})
+    for row, e in enumerate(errors):
+        # by hand: P(R = r | L) proportional to Beta(1, 4.5) at the error against r (the
+        # others uniform), then P(D = go) = sum over r of P(r | L) P(go | r)
+        shape = stats.beta(1.0, 4.5).pdf(e)
+        shape /= shape.sum()
+        assert answer.probabilities[row, 0] == pytest.approx(shape @ list(go.values()),
+                                                             rel=1e-12)
+    one = program.ask("P(D)", inputs={"errors": errors[1]})
+    np.testing.assert_allclose(one.probabilities, answer.probabilities[1], rtol=1e-12)
+
+
+def test_an_input_over_another_variable_is_not_bound_to_a_field(tmp_path):
+    (tmp_path / "shapes.yaml").write_text(_SHAPES)
+    text = _CHOOSER.replace("errors: {shape: [R]}", "errors: {shape: [D]}")
+    (tmp_path / "chooser.yaml").write_text(text)
+    with pytest.raises(bayesprog.SpecError, match="input 'errors' must not vary over variables, "
+                       "except one of the term's own"):
+        bayesprog.load(tmp_path / "chooser.yaml")

@@ -18,6 +18,15 @@ from bayesprog.expressions import ExpressionError, parse_expression
 from bayesprog.forms.base import Form, InputRef, ParamValue, TermContext, register_form
 
 
+def _fills_field(sub: Any, name: str, decl: Any, term: Any) -> bool:
+    """Whether input ``decl``, bound to ``name`` of the sub-program, gives one value per state of
+    a variable of the term (so the same states there) to a field of ``sub`` indexed by it."""
+    field = sub.variables.get(name)
+    own = {term.child.name, *(p.name for p in term.parents)}
+    return (len(decl.axes) == 1 and not decl.event and decl.axes[0] in own
+            and field is not None and getattr(field, "index", None) == decl.axes[0])
+
+
 @register_form
 class ProgramForm(Form):
     """A term whose distribution is a question of another program file.
@@ -47,7 +56,8 @@ class ProgramForm(Form):
             checker.error(path + ("program",), f"{what}: sub-programs cannot be loaded here")
             return len(checker.problems) - before
         try:
-            sub = checker.load_program(file)
+            sub = checker.load_program(file, tuple(v.name for v in (term.child,
+                                                                    *term.parents)))
         except ProgramCycleError as exc:
             checker.error(path + ("program",), f"{what} {raw['program']!r}: programs that name "
                           f"each other in a circle ({exc}): expected a program that does not "
@@ -102,9 +112,10 @@ class ProgramForm(Form):
                 decl = checker.inputs.get(value["input"])
                 if decl is None:
                     problems.append(f"bind: unknown input {value['input']!r}")
-                elif decl.axes:
+                elif decl.axes and not _fills_field(sub, name, decl, term):
                     problems.append(f"bind: input {value['input']!r} must not vary over "
-                                    "variables")
+                                    "variables, except one of the term's own, bound to a "
+                                    f"field of {raw['program']!r} indexed by it")
                 else:
                     term.params[f"bind:{name}"] = InputRef(value["input"])
             else:

@@ -120,11 +120,12 @@ def build_variable(name: str, spec: Any) -> Variable:
 
 class _Checker:
     def __init__(self, located: Located, doc: Document, base_dir: Path,
-                 load_program: Callable[[Path], Any] | None = None):
+                 load_program: Callable[..., Any] | None = None):
         self.located = located
         self.doc = doc
         self.base_dir = base_dir
-        #: loads another program file (for ``program`` terms); given by the program layer
+        #: loads another program file (for ``program`` terms), with the names of the variables
+        #: it shares with the term; given by the program layer
         self.load_program = load_program
         self.problems: list[Diagnostic] = []
         self.variables: dict[str, Variable] = {}
@@ -774,7 +775,7 @@ def _offender(array: np.ndarray, param: Param, event_ndim: int) -> str:
 
 
 def check_document(located: Located, doc: Document, base_dir: Path,
-                   load_program: Callable[[Path], Any] | None = None) -> Checked:
+                   load_program: Callable[..., Any] | None = None) -> Checked:
     """Check a validated document whole; ``load_program`` loads the files that ``program`` terms
     name (sub-programs), which this layer cannot do itself."""
     c = _Checker(located, doc, base_dir, load_program)

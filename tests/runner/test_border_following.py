@@ -82,12 +82,42 @@ def test_a_task_that_pi_tar_does_not_know_is_refused_at_load(tmp_path):
     assert f"{path}:{line}:3: task 'T4' is not a state of T" in text, text
 
 
-def test_templates_that_are_not_pi_tar_shapes_are_refused_at_load(tmp_path):
-    path = write(tmp_path, templates="  square: [[0, 0], [0.02, 0], [0.02, 0.02], [0, 0.02]]")
+def test_the_scenario_templates_are_the_shapes_of_pi_tar_and_pi_obj(tmp_path):
+    """Any number of templates, polygons or curves: R of pi_tar and of pi_obj (its soft
+    evidence) takes their names, and the explorer decides with all of them."""
+    path = write(tmp_path, templates=(
+        "  rectangle: [[-0.07, -0.05], [0.07, -0.05], [0.07, 0.05], [-0.07, 0.05]]\n"
+        "  disc: {circle: 0.04}\n"
+        "  oval: {ellipse: [0.06, 0.03], vertices: 64}\n"
+        "  l_shape: [[-0.04, -0.05], [0.04, -0.05], [0.04, -0.02], [-0.01, -0.02], "
+        "[-0.01, 0.05], [-0.04, 0.05]]"))
+    scenario = load_scenario(path)
+    names = ("rectangle", "disc", "oval", "l_shape")
+    assert scenario.target.variables["R"].states == names
+    assert scenario.load_shape().variables["R"].states == names
+    oval = scenario.templates["oval"][0]
+    assert oval.shape == (64, 2)
+    x, y = oval[:, 0], oval[:, 1]  # shoelace area of the 64-gon inscribed in the ellipse
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    assert area == pytest.approx(32 * 0.06 * 0.03 * np.sin(2 * np.pi / 64), rel=1e-12)
+    result = simulate(scenario, "T2", "full", np.array([[3, 3], [15, 20]]), np.arange(2), seed=1,
+                      iterations=30)
+    assert result["paths"].shape == (2, 30)
+
+
+@pytest.mark.parametrize("template, expected", [
+    ("{ellipse: [0.05, -0.01]}", "ellipse: expected two positive semi-axes"),
+    ("{ellipse: [0.05, 0.02], circle: 0.03}", "expected exactly one of 'ellipse: [a, b]'"),
+    ("{square: 0.03}", "square"),
+])
+def test_a_bad_curve_template_is_refused_at_its_place(tmp_path, template, expected):
+    path = write(tmp_path, templates=(
+        "  rectangle: [[-0.07, -0.05], [0.07, -0.05], [0.07, 0.05], [-0.07, 0.05]]\n"
+        f"  oval: {template}"))
     with pytest.raises(bayesprog.SpecError) as err:
         load_scenario(path)
-    line = path.read_text().splitlines().index("templates:") + 1
-    assert f"{path}:{line}:1: templates square do not match the shapes R" in str(err.value)
+    line = path.read_text().splitlines().index(f"  oval: {template}") + 1
+    assert f"{path}:{line}:" in str(err.value) and expected in str(err.value)
 
 
 def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):

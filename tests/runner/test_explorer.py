@@ -42,11 +42,10 @@ def test_runner_choice_is_pi_tar_map_on_the_same_fields(scenario):
         cells = explorer.step(cells, texture, compliance)
         d = explorer.last
         for run in range(3):
-            inputs = {"l_rectangle": 0.5, "l_triangle": 0.5}
+            inputs = {"errors": np.full(2, 0.5)}
             program = pi_tar.ablate("P(R | O)")
             if d.shape_ready[run]:
-                inputs = {"templates": d.templates[run], "l_rectangle": d.shape_error[run, 0],
-                          "l_triangle": d.shape_error[run, 1]}
+                inputs = {"templates": d.templates[run], "errors": d.shape_error[run]}
                 program = pi_tar
             post = program.posterior("P(O | T, I, S, U)", {
                 "T": "T2", "I": d.inhibition[run], "S": d.saliency[run],
@@ -97,8 +96,8 @@ def test_each_ablation_is_the_program_with_that_term_uniform(scenario, tmp_path,
     cells = 1800
     evidence = {"T": "T3", "I": rng.random((2, cells)), "S": rng.random((2, cells)),
                 "U": rng.random((2, cells))}
-    inputs = {"templates": rng.random((2, 2, 50, 2)) * 0.3, "l_rectangle": [0.1, 0.7],
-              "l_triangle": [0.6, 0.2]}
+    inputs = {"templates": rng.random((2, 2, 50, 2)) * 0.3,
+              "errors": np.array([[0.1, 0.6], [0.7, 0.2]])}
     ours = explorer.target.posterior("P(O | T, I, S, U)", evidence, inputs=inputs)
     theirs = rewritten.posterior("P(O | T, I, S, U)", evidence, inputs=inputs)
     np.testing.assert_allclose(ours.probabilities, theirs.probabilities, rtol=1e-9, atol=1e-15)
