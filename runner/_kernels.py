@@ -159,3 +159,29 @@ def perceived_sobel_2d_around(d, mask, out, cells):
         for x in range(max(x0 - 1, 0), min(x0 + 2, nx)):
             for y in range(max(y0 - 1, 0), min(y0 + 2, ny)):
                 out[r, x, y] = _sobel_cell(d, mask, r, x, y)
+
+
+@njit(cache=True, parallel=True)
+def chamfer(path, counts, outlines, nverts, angle, shift):
+    """The mean distance of the path points to the template outline at every given pose (the
+    chamfer distance), without moving it: path [R, k, 2] (run r uses its first ``counts[r]``
+    points), outlines [T, V, 2] with ``nverts[t]`` vertices used, poses angle [R, T, S] and
+    shift [R, T, S, 2]; returns [R, T, S]."""
+    runs, n_t, n_s = angle.shape
+    dist = np.empty((runs, n_t, n_s))
+    for job in prange(runs * n_t * n_s):
+        r = job // (n_t * n_s)
+        t = (job // n_s) % n_t
+        s = job % n_s
+        poly = outlines[t]
+        nv = nverts[t]
+        k = counts[r]
+        a, tx, ty = angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1]
+        c, sn = math.cos(a), math.sin(a)
+        total = 0.0
+        for i in range(k):
+            px, py = path[r, i, 0] - tx, path[r, i, 1] - ty
+            _, _, d2 = _closest(c * px + sn * py, -sn * px + c * py, poly, nv)
+            total += math.sqrt(d2)
+        dist[r, t, s] = total / k
+    return dist

@@ -91,7 +91,8 @@ class Explorer:
         self.counter_materials = scenario.counter_materials(task)
         self.centres = scenario.centres
         self.diagonal = float(np.hypot(*(np.asarray(scenario.shape) * scenario.cell)))
-        self.tracker = ShapeTracker(self.outlines, self.template_points)
+        self.tracker = ShapeTracker(self.outlines, self.template_points,
+                                    method=scenario.spec.shape_matcher)
         nx, ny = scenario.shape
         offsets = np.stack(np.meshgrid(np.arange(-nx + 1, nx), np.arange(-ny + 1, ny),
                                        indexing="ij"), axis=-1).reshape(-1, 2)

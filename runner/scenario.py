@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
@@ -133,6 +133,9 @@ class ScenarioSpec(_Strict):
         min_length=1, description="outlines by name: a polygon [[x, y], ...] (any shape, "
         "concave ones included) or a curve {ellipse: [a, b]} / {circle: r}")
     template_points: int = Field(50, ge=3)
+    shape_matcher: Literal["icp", "chamfer"] = Field(
+        "icp", description="how the templates are registered onto the followed border: the "
+        "paper's ICP, or a chamfer search over a grid of poses (runner/shape.py)")
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)

@@ -1,4 +1,5 @@
-"""Shape matching of the exploration path: rigid 2-D ICP against each template, batched.
+"""Shape matching of the exploration path: rigid 2-D registration against each template, batched,
+by ICP (the paper's) or by a chamfer search.
 
 ``match(path, outlines, points)`` registers every template onto every run's path (eq. 6-7):
 rigid ICP in which each path point is paired with its closest point on the template's outline
@@ -8,6 +9,14 @@ and a warm start (the previous step's transform) can be added. The normalised er
 ``L = d / (d + error_scale)`` in [0, 1), where ``d`` is the mean distance (metres) of the path
 points to the registered outline: 0 for a perfect match, 1/2 at ``d = error_scale``, and never 1
 (Beta(1, 4.5) is 0 at 1, so a mismatch of both templates would otherwise be impossible).
+
+``method="chamfer"`` registers without pairing points: the mean distance of the path points to
+the outline (the chamfer distance, computed exactly against the polygon) is scored at every pose
+of a grid (24 rotations x 7 x 7 offsets around the path's centroid, spanning the template's
+radius), and the best pose refined by a pattern search (27 neighbouring poses per round, the
+steps halved every other round). ICP descends from each of its starts to the nearest minimum
+of the same distance; the chamfer search looks at every pose of its grid, so it cannot be
+trapped by a start, but it is only as fine as its refinement.
 """
 
 from __future__ import annotations
@@ -16,11 +25,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runner._kernels import icp
+from runner._kernels import chamfer, icp
 
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
 MIN_POINTS = 10  # fewer probed cells than this on the perceived border: no shape evidence (R uniform)
 _OFFSETS = np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
+METHODS = ("icp", "chamfer")
+#: the chamfer search's grid: rotations, and offsets per axis across [-radius, radius]
+CHAMFER_ROTATIONS, CHAMFER_OFFSETS = 24, 7
+#: its refinement: rounds of 27 neighbouring poses (angle and both offsets -1, 0, +1 step)
+CHAMFER_ROUNDS = 8
+_NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)],
+                       float)
 
 
 @dataclass
@@ -72,15 +88,22 @@ def match(
     iterations: int = 25,
     error_scale: float = ERROR_SCALE,
     warm: tuple[np.ndarray, np.ndarray] | None = None,
+    method: str = "icp",
 ) -> Registration:
-    """Register templates onto ``path`` [runs, k, 2].
+    """Register templates onto ``path`` [runs, k, 2] by ``method`` (``icp`` or ``chamfer``).
 
     ``counts`` [runs] (each in 1..k) says how many of its first points each run uses (all k
     when None): runs with point sets of different sizes are registered in one batch.
     ``outlines`` [T, V, 2] are the template polygons and ``points`` [T, K, 2] the template points
     returned registered (both in the template frame, centred). ``warm`` = (angle, shift) of
     shape [runs, T] and [runs, T, 2] adds the previous step's transform as one more start.
+    With ``chamfer``, ``rotations`` > 0 asks for the grid search (``rotations`` and
+    ``iterations`` are ICP's otherwise), and a warm start alone is refined as it is.
     """
+    if method == "chamfer":
+        return _chamfer_match(path, outlines, points, counts, rotations > 0, error_scale, warm)
+    if method != "icp":
+        raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
     runs, k = path.shape[:2]
     counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
     if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
@@ -117,6 +140,58 @@ def match(
     )
 
 
+def _chamfer_match(path: np.ndarray, outlines: np.ndarray, points: np.ndarray,
+                   counts: np.ndarray | None, search: bool, error_scale: float,
+                   warm: tuple[np.ndarray, np.ndarray] | None) -> Registration:
+    runs, k = path.shape[:2]
+    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
+    n_t = outlines.shape[0]
+    path = np.ascontiguousarray(path, dtype=float)
+    outlines = np.ascontiguousarray(outlines, float)
+    nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
+    radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
+    if not search and warm is None:
+        raise ValueError("match needs rotations > 0 or a warm start")
+    if search:
+        used = np.arange(k)[None, :] < counts[:, None]
+        centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
+        grid = np.linspace(-1.0, 1.0, CHAMFER_OFFSETS)
+        offsets = np.stack(np.meshgrid(grid, grid, indexing="ij"), -1).reshape(-1, 2)
+        turns = np.arange(CHAMFER_ROTATIONS) * (2 * np.pi / CHAMFER_ROTATIONS)
+        angle = np.broadcast_to(np.repeat(turns, len(offsets)),
+                                (runs, n_t, turns.size * len(offsets))).copy()
+        shift = (centroid[:, None, None, :]
+                 + np.tile(offsets, (turns.size, 1))[None, None] * radius[None, :, None, None])
+        if warm is not None:
+            angle = np.concatenate([angle, warm[0][..., None]], axis=2)
+            shift = np.concatenate([shift, warm[1][:, :, None, :]], axis=2)
+        dist = chamfer(path, counts, outlines, nverts, np.ascontiguousarray(angle),
+                       np.ascontiguousarray(shift))
+        best = dist.argmin(-1)[..., None]
+        angle = np.take_along_axis(angle, best, -1)[..., 0]
+        shift = np.take_along_axis(shift, best[..., None], 2)[:, :, 0]
+        turn, step = np.pi / CHAMFER_ROTATIONS, radius / (CHAMFER_OFFSETS - 1)
+    else:
+        assert warm is not None
+        angle, shift = warm[0].astype(float), warm[1].astype(float)
+        turn, step = np.pi / (4 * CHAMFER_ROTATIONS), radius / (4 * (CHAMFER_OFFSETS - 1))
+    step = np.broadcast_to(step, (n_t,))
+    for round_ in range(CHAMFER_ROUNDS):  # the centre is among the neighbours: never worse
+        scale = 0.5 ** (round_ // 2)
+        candidates_angle = angle[..., None] + _NEIGHBOURS[:, 0] * turn * scale
+        candidates_shift = (shift[:, :, None, :] + _NEIGHBOURS[None, None, :, 1:]
+                            * (step * scale)[None, :, None, None])
+        dist = chamfer(path, counts, outlines, nverts, np.ascontiguousarray(candidates_angle),
+                       np.ascontiguousarray(candidates_shift))
+        best = dist.argmin(-1)[..., None]
+        angle = np.take_along_axis(candidates_angle, best, -1)[..., 0]
+        shift = np.take_along_axis(candidates_shift, best[..., None], 2)[:, :, 0]
+        distance = np.take_along_axis(dist, best, -1)[..., 0]
+    registered = _transform(angle[..., None], shift[:, :, None], points[None, :, None])[:, :, 0]
+    return Registration(error=distance / (distance + error_scale), distance=distance,
+                        points=registered, angle=angle, shift=shift)
+
+
 _FIELDS = ("error", "distance", "points", "angle", "shift")
 
 
@@ -132,8 +207,10 @@ class ShapeTracker:
 
     def __init__(self, outlines: np.ndarray, points: np.ndarray, restart_every: int = 10,
                  short: int = 12, warm_iterations: int = 8, worse: float = 1.25,
-                 slack: float = 0.0005):
-        self.outlines, self.points = outlines, points
+                 slack: float = 0.0005, method: str = "icp"):
+        if method not in METHODS:
+            raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
+        self.outlines, self.points, self.method = outlines, points, method
         self.restart_every, self.short = restart_every, short
         self.warm_iterations, self.worse, self.slack = warm_iterations, worse, slack
         self.reset()
@@ -196,7 +273,8 @@ class ShapeTracker:
         assert self.state is not None
         start = (self.state.angle[runs], self.state.shift[runs]) if warm else None
         return match(path[runs, :top], self.outlines, self.points, counts=counts[runs],
-                     rotations=rotations, iterations=iterations, warm=start)
+                     rotations=rotations, iterations=iterations, warm=start,
+                     method=self.method)
 
     def _store(self, runs: np.ndarray, reg: Registration, keep: np.ndarray) -> None:
         assert self.state is not None

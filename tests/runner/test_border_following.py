@@ -14,6 +14,7 @@ import pytest
 
 import bayesprog
 from runner.experiment import simulate
+from runner.explorer import Explorer
 from runner.metrics import behaviour
 from runner.scenario import load_scenario
 
@@ -185,3 +186,18 @@ def test_every_shipped_experiment_loads_and_each_task_has_a_border(path):
         # a border cell is of the task's material and the task's material does not fill the grid
         assert (materials[border] == scenario.task_material(task)).all()
         assert (materials != scenario.task_material(task)).any()
+
+
+def test_the_scenario_chooses_the_shape_matcher(tmp_path):
+    path = write(tmp_path, templates=(
+        "  rectangle: [[-0.07, -0.05], [0.07, -0.05], [0.07, 0.05], [-0.07, 0.05]]\n"
+        "  disc: {circle: 0.04}\n"
+        "shape_matcher: chamfer"))
+    scenario = load_scenario(path)
+    explorer = Explorer(scenario, "T2", runs=2)
+    assert explorer.tracker.method == "chamfer"
+    starts = np.array([[3, 3], [15, 20]])
+    first = simulate(scenario, "T2", "full", starts, np.arange(2), seed=1, iterations=40,
+                     explorer=explorer)
+    again = simulate(scenario, "T2", "full", starts, np.arange(2), seed=1, iterations=40)
+    np.testing.assert_array_equal(first["paths"], again["paths"])

@@ -253,3 +253,54 @@ def test_tracker_leaves_a_wrong_basin_when_the_path_grows():
     cold = match(path[None], outlines, points)
     assert cold.error[0, 0] < 0.01  # a rectangle path: a cold match sees it
     assert reg.error[0, 0] == pytest.approx(cold.error[0, 0], abs=0.02)
+
+
+# the chamfer search ------------------------------------------------------------------------------
+def test_the_chamfer_kernel_is_the_mean_distance_to_the_outline_at_each_pose():
+    from runner._kernels import chamfer
+
+    _, polys, outlines, _ = templates()
+    rng = np.random.default_rng(4)
+    path = rng.uniform(0.0, 0.3, (3, 20, 2))
+    counts = np.array([20, 7, 13])
+    angle = rng.uniform(0, 2 * np.pi, (3, 2, 5))
+    shift = rng.uniform(0.05, 0.25, (3, 2, 5, 2))
+    nverts = np.array([len(p) for p in polys])
+    got = chamfer(path, counts, outlines, nverts, angle, shift)
+    for r in range(3):
+        for t in range(2):
+            for s in range(5):
+                # the pose moves the template: outline at rot(angle) @ v + shift
+                moved = polys[t] @ rot(angle[r, t, s]).T + shift[r, t, s]
+                expected = distance_to_polygon(path[r, :counts[r]], moved).mean()
+                assert got[r, t, s] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("t", [0, 1], ids=["rectangle", "triangle"])
+def test_the_chamfer_search_recovers_a_whole_outline(t):
+    _, polys, outlines, points = templates()
+    true, polygon, path = make_path(t, 2.2, (0.14, 0.31), start=7, m=K, sigma=0.0, seed=0)
+    reg = match(path[None], outlines, points, method="chamfer")
+    # the grid's and the refinement's steps leave a residual under a millimetre
+    assert reg.distance[0, t] < 1e-3
+    assert reg.distance[0, t] == pytest.approx(
+        distance_to_polygon(path, polys[t] @ rot(reg.angle[0, t]).T + reg.shift[0, t]).mean(),
+        rel=1e-9)
+    assert reg.distance[0, t] < reg.distance[0, 1 - t]
+    assert point_error(t, reg.points[0, t], true) < 0.01
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(m=st.integers(35, K), sigma=st.floats(0.0, 0.001), **poses)
+def test_the_chamfer_search_never_fits_worse_than_the_true_pose_by_much(angle, x, y, start, m,
+                                                                          sigma, seed):
+    _, polys, outlines, points = templates()
+    _, polygon, path = make_path(0, angle, (x, y), start, m, sigma, seed)
+    reg = match(path[None], outlines, points, method="chamfer")
+    assert reg.distance[0, 0] <= distance_to_polygon(path, polygon).mean() + 0.002
+
+
+def test_an_unknown_matcher_is_refused():
+    _, _, outlines, points = templates()
+    with pytest.raises(ValueError, match="unknown shape matcher 'procrustes'"):
+        ShapeTracker(outlines, points, method="procrustes")
