@@ -35,6 +35,19 @@ def _closest(qx, qy, poly, nv):
     return bx, by, best
 
 
+@njit(cache=True, inline="always")
+def _mean_distance(points, k, poly, nv, a, tx, ty):
+    """Mean distance of the first ``k`` points to the polygon moved by rotation ``a`` then shift
+    (tx, ty)."""
+    c, sn = math.cos(a), math.sin(a)
+    total = 0.0
+    for i in range(k):
+        px, py = points[i, 0] - tx, points[i, 1] - ty
+        _, _, d2 = _closest(c * px + sn * py, -sn * px + c * py, poly, nv)
+        total += math.sqrt(d2)
+    return total / k
+
+
 @njit(cache=True, parallel=True)
 def icp(path, counts, outlines, nverts, angle, shift, iterations):
     """Refine every start in place; returns the mean distance per start.
@@ -75,16 +88,8 @@ def icp(path, counts, outlines, nverts, angle, shift, iterations):
             c, sn = math.cos(a), math.sin(a)
             tx = mdx - (c * msx - sn * msy)
             ty = mdy - (sn * msx + c * msy)
-        c, sn = math.cos(a), math.sin(a)
-        total = 0.0
-        for i in range(k):
-            px, py = path[r, i, 0], path[r, i, 1]
-            qx = c * (px - tx) + sn * (py - ty)
-            qy = -sn * (px - tx) + c * (py - ty)
-            _, _, d2 = _closest(qx, qy, poly, nv)
-            total += math.sqrt(d2)
         angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1] = a, tx, ty
-        dist[r, t, s] = total / k
+        dist[r, t, s] = _mean_distance(path[r], k, poly, nv, a, tx, ty)
     return dist
 
 
@@ -173,15 +178,6 @@ def chamfer(path, counts, outlines, nverts, angle, shift):
         r = job // (n_t * n_s)
         t = (job // n_s) % n_t
         s = job % n_s
-        poly = outlines[t]
-        nv = nverts[t]
-        k = counts[r]
-        a, tx, ty = angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1]
-        c, sn = math.cos(a), math.sin(a)
-        total = 0.0
-        for i in range(k):
-            px, py = path[r, i, 0] - tx, path[r, i, 1] - ty
-            _, _, d2 = _closest(c * px + sn * py, -sn * px + c * py, poly, nv)
-            total += math.sqrt(d2)
-        dist[r, t, s] = total / k
+        dist[r, t, s] = _mean_distance(path[r], counts[r], outlines[t], nverts[t],
+                                       angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1])
     return dist
