@@ -447,7 +447,13 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     if problems and located.data is None:
         raise SpecError(problems)
     if variables:
-        problems += _replace_variables(located, variables)
+        # a sub-program that does not declare a variable shared with its term is told so by the
+        # term's own check (the same states), not as a replacement of a missing variable
+        shared, token = _SHARED.get(), _SHARED.set(frozenset())
+        try:
+            problems += _replace_variables(located, variables, skip_missing=shared)
+        finally:
+            _SHARED.reset(token)
     if terms:
         problems += _replace_terms(located, terms)
     doc, schema_problems = _document(located)
@@ -458,7 +464,11 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
         # a program named by a term: the variables it shares with the term (its child and
         # parents) are replaced there as they are here, so they keep the same states
         given = {name: variables[name] for name in shared if variables and name in variables}
-        return load(file, variables=given or None)
+        token = _SHARED.set(frozenset(given))
+        try:
+            return load(file, variables=given or None)
+        finally:
+            _SHARED.reset(token)
 
     checked = check_document(located, doc, base_dir or Path.cwd(), load_named)
     problems += checked.problems
@@ -483,12 +493,19 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     return program
 
 
-def _replace_variables(located: Located, variables: Mapping[str, Any]) -> list[Diagnostic]:
+#: the variables a program being loaded for a term shares with it (replaced where declared)
+_SHARED: ContextVar[frozenset[str]] = ContextVar("bayesprog_shared", default=frozenset())
+
+
+def _replace_variables(located: Located, variables: Mapping[str, Any],
+                       skip_missing: frozenset[str] = frozenset()) -> list[Diagnostic]:
     declared = located.data.get("variables") if isinstance(located.data, dict) else None
     if not isinstance(declared, dict):
         return []  # the schema check reports the missing or malformed variables
     problems = []
     for name, spec in variables.items():
+        if name not in declared and name in skip_missing:
+            continue
         if name not in declared:
             problems.append(located.diagnostic(("variables",), f"no variable {name!r} to "
                                                f"replace: expected one of {', '.join(declared)}",

@@ -32,8 +32,10 @@ pyAgrum's junction tree finds it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gzip
 import json
+import signal
 import statistics
 import sys
 import tempfile
@@ -125,6 +127,26 @@ def load_network(name: str, tmp: Path):
     return model, path, names[chosen[0]], [names[i] for i in chosen[1:]], rng
 
 
+#: seconds a peer's mode may take on one network before it is given up (see pgmpy_rate)
+PEER_BUDGET = 120
+
+
+@contextlib.contextmanager
+def time_budget(seconds: float):
+    """Raise TimeoutError in the block once ``seconds`` have passed (checked between Python
+    bytecodes: a long numpy call ends first)."""
+    def expire(signum, frame):
+        raise TimeoutError(f"over {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> dict:
     table_method.TABLE_LIMIT = TABLE_LIMIT if tables else 0
     model, path, target, observed, rng = load_network(name, tmp)
@@ -160,8 +182,10 @@ def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> di
         return time.perf_counter() - t
 
     try:
-        row["cold_ms"]["pgmpy"] = 1e3 * statistics.median(cold_pgmpy() for _ in range(repeats))
-    except MemoryError:  # an order of pgmpy's greedy heuristic too large (see pgmpy_rate)
+        with time_budget(PEER_BUDGET):
+            row["cold_ms"]["pgmpy"] = 1e3 * statistics.median(cold_pgmpy()
+                                                              for _ in range(repeats))
+    except (MemoryError, TimeoutError):  # an order of pgmpy's greedy heuristic too large
         row["cold_ms"]["pgmpy"] = float("nan")
     bn = agrum_net(model)
 
@@ -217,11 +241,13 @@ def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> di
     def pgmpy_rate(fixed: bool) -> float:
         # pgmpy's greedy order breaks ties in set order, which changes with Python's string
         # hashing from one process to the next: on munin1 some orders need more memory than
-        # the machine has (the address-space cap set in main turns that into MemoryError)
+        # the machine has (the address-space cap set in main turns that into MemoryError) or
+        # minutes per query (a mode over PEER_BUDGET seconds counts as rate 0)
         try:
-            return len(sample_pgmpy) / median_time(lambda: loop_pgmpy(sample_pgmpy, fixed),
-                                                   repeats)
-        except MemoryError:
+            with time_budget(PEER_BUDGET):
+                return len(sample_pgmpy) / median_time(
+                    lambda: loop_pgmpy(sample_pgmpy, fixed), repeats)
+        except (MemoryError, TimeoutError):
             return 0.0
 
     pgmpy_modes = {"greedy order per query (default)": pgmpy_rate(False),
@@ -431,6 +457,9 @@ def cost_model(networks: list[str], grids: list[int], repeats: int, tmp: Path) -
                 fresh = bayesprog.load(p)
                 plan = QuestionPlan(fresh, fresh.question(q),
                                     bind(fresh, fresh.question(q), e, None, None), {})
+                # the methods ranked first, as a first question does: the estimate has found
+                # the compilation's contraction path, which the compilation then reuses
+                ranked(plan)
                 start = time.perf_counter()
                 table_method._compile(plan)
                 return time.perf_counter() - start

@@ -14,12 +14,12 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Discriminator,
     Field,
     Tag,
-    field_validator,
     model_validator,
 )
 
@@ -60,20 +60,29 @@ def _outline(points: list[list[float]], what: str) -> None:
                              f"{point}")
 
 
+def _polygon(points: list[list[float]]) -> list[list[float]]:
+    _outline(points, "polygon")
+    return points
+
+
 class CurveSpec(_Strict):
     """A template given as a curve: an ellipse of semi-axes ``ellipse: [a, b]`` or a circle of
     radius ``circle: r`` (metres), centred, its outline a polygon of ``vertices`` corners."""
 
-    ellipse: list[float] | None = Field(None, min_length=2, max_length=2)
-    circle: float | None = Field(None, gt=0)
+    ellipse: list[float] | None = None
+    circle: float | None = None
     vertices: int = Field(48, ge=8, le=1000)
 
     @model_validator(mode="after")
     def _one_curve(self) -> CurveSpec:
         if (self.ellipse is None) == (self.circle is None):
             raise ValueError("expected exactly one of 'ellipse: [a, b]' or 'circle: r'")
-        if self.ellipse is not None and not all(np.isfinite(v) and v > 0 for v in self.ellipse):
-            raise ValueError(f"ellipse: expected two positive semi-axes, found {self.ellipse}")
+        if self.ellipse is not None and not (
+                len(self.ellipse) == 2 and all(np.isfinite(v) and v > 0 for v in self.ellipse)):
+            raise ValueError(f"ellipse: expected two positive semi-axes [a, b] (metres), found "
+                             f"{self.ellipse}")
+        if self.circle is not None and not (np.isfinite(self.circle) and self.circle > 0):
+            raise ValueError(f"circle: expected a positive radius (metres), found {self.circle}")
         return self
 
     def polygon(self) -> np.ndarray:
@@ -128,8 +137,9 @@ class ScenarioSpec(_Strict):
     grid: GridSpec
     background: str
     templates: dict[str, Annotated[
-        Annotated[list[list[float]], Tag("polygon")] | Annotated[CurveSpec, Tag("curve")],
-        Discriminator(lambda v: "curve" if isinstance(v, Mapping) else "polygon")]] = Field(
+        Annotated[list[list[float]], AfterValidator(_polygon), Tag("<polygon>")]
+        | Annotated[CurveSpec, Tag("<curve>")],
+        Discriminator(lambda v: "<curve>" if isinstance(v, Mapping) else "<polygon>")]] = Field(
         min_length=1, description="outlines by name: a polygon [[x, y], ...] (any shape, "
         "concave ones included) or a curve {ellipse: [a, b]} / {circle: r}")
     template_points: int = Field(50, ge=3)
@@ -140,14 +150,6 @@ class ScenarioSpec(_Strict):
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
 
-    @field_validator("templates")
-    @classmethod
-    def _outlines(cls, templates: dict[str, list[list[float]] | CurveSpec]
-                  ) -> dict[str, list[list[float]] | CurveSpec]:
-        for name, points in templates.items():
-            if not isinstance(points, CurveSpec):
-                _outline(points, f"template {name!r}")
-        return templates
 
 
 def _rotation(degrees: float) -> np.ndarray:

@@ -303,15 +303,16 @@ class Evaluator:
 
 # the search -------------------------------------------------------------------------------------
 def _manifest(search: Search) -> dict:
+    """What the search depends on: its settings and what its files say (keyed by their role, not
+    where they are, so a moved checkout resumes its searches)."""
     files = {"experiment": search.path}
     for which in ("training", "validation"):
-        for scenario in getattr(search, which):
-            files[f"{which}:{scenario.path}"] = scenario.path
-            files[f"target:{scenario.path}"] = scenario.program_path("target")
-            files[f"perception:{scenario.path}"] = scenario.program_path("perception")
-            files[f"shape:{scenario.path}"] = scenario.program_path("shape")
+        for i, scenario in enumerate(getattr(search, which)):
+            files[f"{which} {i}"] = scenario.path
+            for program in ("target", "perception", "shape"):
+                files[f"{which} {i} {program}"] = scenario.program_path(program)
             if scenario.sensor_model is not None and scenario.sensor_model.path is not None:
-                files[f"sensor:{scenario.path}"] = scenario.sensor_model.path
+                files[f"{which} {i} sensor"] = scenario.sensor_model.path
     return {"tune": search.tune.model_dump(), "seed": search.spec.seed,
             "iterations": search.iterations,
             "files": {k: Path(v).read_text(encoding="utf-8") for k, v in sorted(files.items())}}
@@ -327,6 +328,11 @@ def _open_journal(search: Search, out: Path) -> Any:
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
 
+    if out.exists() and not out.is_dir():
+        raise BayesprogError(f"--out {out}: is a file, expected a folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).exists():
+        raise BayesprogError(f"--out {out}: holds files but no search ({MANIFEST}): choose an "
+                             "empty or new folder")
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / MANIFEST
     digest = _digest(_manifest(search))
@@ -423,7 +429,9 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
         complete = sorted(finished, key=lambda t: t.number)[:trials]
         index, best = min(((i, t) for i, t in enumerate(complete)
                            if _feasible(t, min_precision)),
-                          key=lambda it: (it[1].value, it[0]), default=(0, complete[0]))
+                          key=lambda it: (it[1].value, it[0]), default=(-1, complete[0]))
+        feasible = index >= 0
+        index = max(index, 0)  # none keeps the precision asked: the first trial, reported so
         validation = study.user_attrs.get("validation")
         if validation is None or validation.get("trial") != index:
             valid_pairs = search.pairs("validation")
@@ -438,6 +446,7 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
     finally:
         evaluator.close()
     result = summary(search, complete, index, baseline, validation, paper)
+    result["feasible"] = feasible
     write_outputs(search, out, result)
     return result
 
@@ -596,6 +605,10 @@ def markdown(result: dict, tuned_name: str) -> str:
         constraint = (f" A candidate counts only if its share of probes on the border of the "
                       f"training scenarios is at least {result['min_precision']:g} times the "
                       "hand-chosen profiles'.")
+    if not result.get("feasible", True):
+        constraint += (" **No candidate kept it**: the profiles below are the first trial's"
+                       " (the file's values when they lie in the searched ranges), not a better"
+                       " search result.")
     lines = [
         "# Tuned cue profiles", "",
         f"Experiment `{result['experiment']}`: {len(result['trials'])} trials of Optuna's TPE "
@@ -733,6 +746,9 @@ def tune(experiment: Path, out: Path, options: Mapping[str, Any]) -> int:
               "command again to resume", file=sys.stderr)
         return 130
     pooled = result["pooled"]
+    if not result["feasible"]:
+        print(f"no trial kept min_precision {search.tune.min_precision:g}: the first trial "
+              "is reported")
     print(f"best of {len(result['trials'])} trials: training objective "
           f"{result['best_objective']:.4f} (hand-chosen 1); validation tuned / hand-chosen "
           f"{pooled['ratio']:.3f}, pooled p = {pooled['p']:.2g}")

@@ -667,3 +667,24 @@ def test_an_input_over_another_variable_is_not_bound_to_a_field(tmp_path):
     with pytest.raises(bayesprog.SpecError, match="input 'errors' must not vary over variables, "
                        "except one of the term's own"):
         bayesprog.load(tmp_path / "chooser.yaml")
+
+
+def test_a_replaced_variable_the_named_program_lacks_is_reported_by_the_term(tmp_path):
+    (tmp_path / "shapes.yaml").write_text(_SHAPES)
+    (tmp_path / "outer.yaml").write_text("""\
+bayesprog: 1
+variables:
+  W: {states: [u, v]}
+  R: {states: [a, b]}
+  L: {continuous: [0, 1], indexed_by: R}
+decomposition:
+  - {term: P(W), form: uniform}
+  - {term: P(R | W), form: program, program: shapes.yaml, question: shape,
+     bind: {L: 0.5}}
+  - {term: P(L | R), form: beta, a: 1, b: 2}
+""")
+    with pytest.raises(bayesprog.SpecError) as err:
+        bayesprog.load(tmp_path / "outer.yaml", variables={"W": {"states": ["x", "y", "z"]}})
+    text = str(err.value)
+    assert "variable 'W' must have the same states in 'shapes.yaml'" in text
+    assert "no variable 'W' to replace" not in text

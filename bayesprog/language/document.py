@@ -254,6 +254,8 @@ class Document(_Strict):
         return QuestionSpec(ask=q, kind="posterior") if isinstance(q, str) else q
 
 
+#: pydantic's names for the branches of a union, left out of the paths in messages (a branch
+#: tagged ``<name>`` by a discriminator is left out too)
 _UNION_TAGS = {"QuestionSpec", "str"}
 
 
@@ -268,7 +270,8 @@ def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[D
             raw_loc = tuple(err["loc"])
             if "str" in raw_loc and not isinstance(err.get("input"), str):
                 continue  # the string shorthand of a union did not apply: the other branch speaks
-            loc = tuple(p for p in raw_loc if not (isinstance(p, str) and p in _UNION_TAGS))
+            loc = tuple(p for p in raw_loc if not (isinstance(p, str) and (
+                p in _UNION_TAGS or (p.startswith("<") and p.endswith(">")))))
             msg = err["msg"].removeprefix("Value error, ")
             at_key = False
             if err["type"] == "missing":

@@ -107,9 +107,12 @@ def test_the_scenario_templates_are_the_shapes_of_pi_tar_and_pi_obj(tmp_path):
 
 
 @pytest.mark.parametrize("template, expected", [
-    ("{ellipse: [0.05, -0.01]}", "ellipse: expected two positive semi-axes"),
+    ("{ellipse: [0.05, -0.01]}", "templates.oval: ellipse: expected two positive semi-axes"),
+    ("{ellipse: [0.05]}", "ellipse: expected two positive semi-axes [a, b] (metres), found"),
     ("{ellipse: [0.05, 0.02], circle: 0.03}", "expected exactly one of 'ellipse: [a, b]'"),
     ("{square: 0.03}", "square"),
+    ("{circle: -0.01}", "circle: expected a positive radius"),
+    ("[[0, 0], [0.01, 0]]", "templates.oval: polygon: expected at least 3 points"),
 ])
 def test_a_bad_curve_template_is_refused_at_its_place(tmp_path, template, expected):
     path = write(tmp_path, templates=(

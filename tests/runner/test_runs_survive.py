@@ -250,7 +250,7 @@ TRIANGLE = "triangle: [[-0.09, -0.06], [0.09, -0.06], [0.0, 0.09]]"
     ({}, ("shape: [30, 60]", "shape: [0, 60]"), "scenario.yaml:10:7: grid: expected sizes >= 1"),
     ({}, ("pi_obj.yaml", "nothere.yaml"), "scenario.yaml:8:10: no program file"),
     ({}, (TRIANGLE, "triangle: [[-0.09, -0.06], [0.09, -0.06]]"),
-     "templates: template 'triangle': expected at least 3 points"),
+     "scenario.yaml:15:13: templates.triangle: polygon: expected at least 3 points"),
 ])
 def test_bad_experiments_and_scenarios_are_refused_at_their_place(tmp_path, capsys, changes,
                                                                   scenario_edit, expected):

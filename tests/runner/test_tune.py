@@ -261,6 +261,27 @@ def test_a_bad_search_is_refused_at_its_place(tmp_path, capsys, edit, expected):
     assert expected in err and "Traceback" not in err
 
 
+def test_a_search_where_no_candidate_keeps_the_precision_says_so(tmp_path, capsys):
+    path = write_search(tmp_path, min_precision=10.0, trials=2)
+    assert main(["tune", str(path), "--out", str(tmp_path / "out"), "-q"]) == 0
+    assert "no trial kept min_precision 10" in capsys.readouterr().out
+    result = json.loads((tmp_path / "out" / "tune.json").read_text())
+    assert result["feasible"] is False and result["best_trial"] == 0
+    assert "**No candidate kept it**" in (tmp_path / "out" / "tune.md").read_text()
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda out: out.write_text("x"), "is a file, expected a folder"),
+    (lambda out: (out.mkdir(), (out / "notes.txt").write_text("x")), "holds files but no search"),
+])
+def test_an_out_that_is_not_a_search_folder_is_refused(tmp_path, capsys, make, expected):
+    path = write_search(tmp_path)
+    make(tmp_path / "out")
+    assert main(["tune", str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err
+
+
 def test_a_folder_of_another_search_is_refused(fresh, tmp_path, capsys):
     result, out = fresh
     path = write_search(tmp_path, runs=4)

@@ -35,11 +35,11 @@ class LoopyBeliefPropagation(Method):
         iterations = min(plan.options.get("max_iterations", MAX_ITERATIONS), EXPECTED_ITERATIONS)
         size = float(plan.bound.size)
         # a sweep handles each group of factors of one shape in a few array operations: about
-        # 16 x PER_FACTOR per group and sweep (measured on grids, benchmarks/engine.py)
+        # 24 x PER_FACTOR per group and sweep (measured on grids, benchmarks/engine.py)
         groups = len({tuple(plan.card(a) for a in t.axes if a not in plan.bound.discrete)
                       for t in plan.terms})
         return Cost(operations=size * iterations * sum(sizes) * 4,
-                    memory=size * max(sizes), fixed=iterations * 16 * PER_FACTOR * groups)
+                    memory=size * max(sizes), fixed=iterations * 24 * PER_FACTOR * groups)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched

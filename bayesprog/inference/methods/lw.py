@@ -39,9 +39,9 @@ class LikelihoodWeighting(Method):
         n = plan.options.get("samples", DEFAULT_SAMPLES)
         cards = [plan.card(t.child.name) for t in plan.terms if t.child.is_discrete] or [1]
         draws = float(plan.bound.size) * n
-        # a draw of a term gathers its row, sums and compares it: about 60 operations per
+        # a draw of a term gathers its row, sums and compares it: about 90 operations per
         # state (measured on grids, benchmarks/engine.py)
-        return Cost(operations=60 * draws * sum(cards), memory=draws * max(cards),
+        return Cost(operations=90 * draws * sum(cards), memory=draws * max(cards),
                     fixed=PER_FACTOR * len(plan.terms))
 
     def posterior(self, plan: QuestionPlan) -> Posterior:

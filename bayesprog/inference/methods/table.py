@@ -84,14 +84,14 @@ class TableMethod(Method):
             return Cost(operations=float(bound.size * lookup), memory=float(joint),
                         fixed=PER_CALL)
         # compiling builds every factor whole and contracts them with the observed variables
-        # left open, mostly outside matrix products: measured (benchmarks/engine.py) at about
-        # twice the time per operation and four times the time per factor of a contraction,
-        # with ten factors' worth of fixed work (finding the terms, storing the table: a
-        # one-term table still takes 0.2 ms); its operations are at least one per entry of the
-        # table (the bound of a quick estimate, which spares the path search)
+        # left open, on the path the full estimate has just found: measured
+        # (benchmarks/engine.py) at the contraction's time per operation, 1.3 times its time
+        # per factor and seven factors' worth of fixed work (finding the terms, storing the
+        # table); its operations are at least one per entry of the table (the bound of a quick
+        # estimate, which spares the path search)
         compile_ops, compile_memory = (plan.contraction_cost(observed + searched, sliced=False)
                                        if full else (float(joint), float(joint)))
-        setup = 2 * compile_ops + PER_FACTOR * (10 + 4 * len(plan.terms))
+        setup = compile_ops + PER_FACTOR * (7 + 1.3 * len(plan.terms))
         return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory),
                     fixed=PER_CALL, setup=setup, floor=not full)
 
