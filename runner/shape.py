@@ -100,36 +100,27 @@ def match(
     With ``chamfer``, ``rotations`` > 0 asks for the grid search (``rotations`` and
     ``iterations`` are ICP's otherwise), and a warm start alone is refined as it is.
     """
-    if method == "chamfer":
-        return _chamfer_match(path, outlines, points, counts, rotations > 0, error_scale, warm)
-    if method != "icp":
+    if method not in METHODS:
         raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
     runs, k = path.shape[:2]
     counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
     if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
         raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
-    n_t = outlines.shape[0]
-    radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
-    angles = np.repeat(np.arange(rotations) * (2 * np.pi / max(rotations, 1)), len(_OFFSETS))
-    moves = np.tile(_OFFSETS, (rotations, 1))[None] * radius[:, None, None]  # [T, S, 2]
-    angle = np.broadcast_to(angles, (runs, n_t, angles.size)).copy()
-    used = np.arange(k)[None, :] < counts[:, None]
-    centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
-    shift = centroid[:, None, None, :] + moves[None]
     if rotations == 0 and warm is None:
         raise ValueError("match needs rotations > 0 or a warm start")
-    if warm is not None:
-        angle = np.concatenate([angle, warm[0][..., None]], axis=2)
-        shift = np.concatenate([shift, warm[1][:, :, None, :]], axis=2)
-    angle = np.ascontiguousarray(angle, dtype=float)
-    shift = np.ascontiguousarray(shift, dtype=float)
+    radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
+    used = np.arange(k)[None, :] < counts[:, None]
+    centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
+    path = np.ascontiguousarray(path, dtype=float)
+    outlines = np.ascontiguousarray(outlines, float)
     nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
-    dist = icp(np.ascontiguousarray(path, dtype=float), counts,
-               np.ascontiguousarray(outlines, float), nverts, angle, shift, iterations)
-    best = dist.argmin(-1)[..., None]
-    angle = np.take_along_axis(angle, best, -1)[..., 0]
-    shift = np.take_along_axis(shift, best[..., None], 2)[:, :, 0]
-    distance = np.take_along_axis(dist, best, -1)[..., 0]
+    if method == "icp":
+        angle, shift = _poses(rotations, _OFFSETS, radius, centroid, warm)
+        dist = icp(path, counts, outlines, nverts, angle, shift, iterations)
+        angle, shift, distance = _best(dist, angle, shift)
+    else:
+        angle, shift, distance = _chamfer_search(path, counts, outlines, nverts, radius,
+                                                 centroid, rotations > 0, warm)
     registered = _transform(angle[..., None], shift[:, :, None], points[None, :, None])[:, :, 0]
     return Registration(
         error=distance / (distance + error_scale),
@@ -140,56 +131,59 @@ def match(
     )
 
 
-def _chamfer_match(path: np.ndarray, outlines: np.ndarray, points: np.ndarray,
-                   counts: np.ndarray | None, search: bool, error_scale: float,
-                   warm: tuple[np.ndarray, np.ndarray] | None) -> Registration:
-    runs, k = path.shape[:2]
-    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
-    n_t = outlines.shape[0]
-    path = np.ascontiguousarray(path, dtype=float)
-    outlines = np.ascontiguousarray(outlines, float)
-    nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
-    radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
-    if not search and warm is None:
-        raise ValueError("match needs rotations > 0 or a warm start")
+def _poses(turns: int, offsets: np.ndarray, radius: np.ndarray, centroid: np.ndarray,
+           warm: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Starting poses (angle [runs, T, S], shift [runs, T, S, 2]): ``turns`` rotations evenly
+    spread, each at every one of ``offsets`` (in template radii) around the path's centroid,
+    then the ``warm`` pose when given."""
+    runs, n_t = len(centroid), len(radius)
+    angles = np.repeat(np.arange(turns) * (2 * np.pi / max(turns, 1)), len(offsets))
+    moves = np.tile(offsets, (turns, 1))[None] * radius[:, None, None]  # [T, S, 2]
+    angle = np.broadcast_to(angles, (runs, n_t, angles.size)).copy()
+    shift = centroid[:, None, None, :] + moves[None]
+    if warm is not None:
+        angle = np.concatenate([angle, warm[0][..., None]], axis=2)
+        shift = np.concatenate([shift, warm[1][:, :, None, :]], axis=2)
+    return np.ascontiguousarray(angle, dtype=float), np.ascontiguousarray(shift, dtype=float)
+
+
+def _best(dist: np.ndarray, angle: np.ndarray, shift: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pose of smallest distance of each run and template, and that distance."""
+    best = dist.argmin(-1)[..., None]
+    return (np.take_along_axis(angle, best, -1)[..., 0],
+            np.take_along_axis(shift, best[..., None], 2)[:, :, 0],
+            np.take_along_axis(dist, best, -1)[..., 0])
+
+
+def _chamfer_search(path: np.ndarray, counts: np.ndarray, outlines: np.ndarray,
+                    nverts: np.ndarray, radius: np.ndarray, centroid: np.ndarray, search: bool,
+                    warm: tuple[np.ndarray, np.ndarray] | None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The chamfer search (see the module): the best pose of a grid (with ``search``; the warm
+    pose otherwise), refined by rounds of neighbouring poses."""
     if search:
-        used = np.arange(k)[None, :] < counts[:, None]
-        centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
         grid = np.linspace(-1.0, 1.0, CHAMFER_OFFSETS)
         offsets = np.stack(np.meshgrid(grid, grid, indexing="ij"), -1).reshape(-1, 2)
-        turns = np.arange(CHAMFER_ROTATIONS) * (2 * np.pi / CHAMFER_ROTATIONS)
-        angle = np.broadcast_to(np.repeat(turns, len(offsets)),
-                                (runs, n_t, turns.size * len(offsets))).copy()
-        shift = (centroid[:, None, None, :]
-                 + np.tile(offsets, (turns.size, 1))[None, None] * radius[None, :, None, None])
-        if warm is not None:
-            angle = np.concatenate([angle, warm[0][..., None]], axis=2)
-            shift = np.concatenate([shift, warm[1][:, :, None, :]], axis=2)
-        dist = chamfer(path, counts, outlines, nverts, np.ascontiguousarray(angle),
-                       np.ascontiguousarray(shift))
-        best = dist.argmin(-1)[..., None]
-        angle = np.take_along_axis(angle, best, -1)[..., 0]
-        shift = np.take_along_axis(shift, best[..., None], 2)[:, :, 0]
+        angle, shift = _poses(CHAMFER_ROTATIONS, offsets, radius, centroid, warm)
+        angle, shift, _ = _best(chamfer(path, counts, outlines, nverts, angle, shift),
+                                angle, shift)
         turn, step = np.pi / CHAMFER_ROTATIONS, radius / (CHAMFER_OFFSETS - 1)
     else:
         assert warm is not None
         angle, shift = warm[0].astype(float), warm[1].astype(float)
         turn, step = np.pi / (4 * CHAMFER_ROTATIONS), radius / (4 * (CHAMFER_OFFSETS - 1))
-    step = np.broadcast_to(step, (n_t,))
     for round_ in range(CHAMFER_ROUNDS):  # the centre is among the neighbours: never worse
         scale = 0.5 ** (round_ // 2)
-        candidates_angle = angle[..., None] + _NEIGHBOURS[:, 0] * turn * scale
-        candidates_shift = (shift[:, :, None, :] + _NEIGHBOURS[None, None, :, 1:]
-                            * (step * scale)[None, :, None, None])
-        dist = chamfer(path, counts, outlines, nverts, np.ascontiguousarray(candidates_angle),
-                       np.ascontiguousarray(candidates_shift))
-        best = dist.argmin(-1)[..., None]
-        angle = np.take_along_axis(candidates_angle, best, -1)[..., 0]
-        shift = np.take_along_axis(candidates_shift, best[..., None], 2)[:, :, 0]
-        distance = np.take_along_axis(dist, best, -1)[..., 0]
-    registered = _transform(angle[..., None], shift[:, :, None], points[None, :, None])[:, :, 0]
-    return Registration(error=distance / (distance + error_scale), distance=distance,
-                        points=registered, angle=angle, shift=shift)
+        candidates_angle = np.ascontiguousarray(angle[..., None]
+                                                + _NEIGHBOURS[:, 0] * turn * scale)
+        candidates_shift = np.ascontiguousarray(shift[:, :, None, :]
+                                                + _NEIGHBOURS[None, None, :, 1:]
+                                                * (step * scale)[None, :, None, None])
+        angle, shift, distance = _best(chamfer(path, counts, outlines, nverts, candidates_angle,
+                                               candidates_shift),
+                                       candidates_angle, candidates_shift)
+    return angle, shift, distance
 
 
 _FIELDS = ("error", "distance", "points", "angle", "shift")
