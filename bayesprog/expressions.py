@@ -89,6 +89,19 @@ def parse_expression(text: str) -> Expression:
     return Expression(tuple(left), tuple(right), values)
 
 
+def canonical(text: object) -> str | None:
+    """``text`` as the parser writes the expression (``P(A | B)`` however it was spaced), or
+    None when it is not one: the key under which two spellings of a term are the same.
+
+    >>> canonical("P( I|O )"), canonical("no term")
+    ('P(I | O)', None)
+    """
+    try:
+        return str(parse_expression(text))  # type: ignore[arg-type]
+    except ExpressionError:
+        return None
+
+
 @dataclass(frozen=True)
 class Question:
     """A question ``P(searched | known)`` of kind ``posterior`` or ``map``."""

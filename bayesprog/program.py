@@ -24,7 +24,13 @@ from bayesprog.errors import (
     SpecError,
     short_repr,
 )
-from bayesprog.expressions import Expression, ExpressionError, Question, parse_expression
+from bayesprog.expressions import (
+    Expression,
+    ExpressionError,
+    Question,
+    canonical,
+    parse_expression,
+)
 from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
 from bayesprog.inference import MapResult, Posterior
@@ -423,9 +429,9 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     is checked, as if the file said so (for instance a grid's shape, set by the workspace a
     program is used in); every check then runs on the result, so a term that no longer fits is
     reported at its place in the file. A program a term names (``form: program``) has the
-    variables it shares with that term replaced alike. ``terms`` likewise sets parameters of some terms of the
-    decomposition, named as in the file (``{"P(I | O)": {"a": 2.0, "b": 3.0}}``: the keys given
-    replace the entry's, the others stay).
+    variables it shares with that term replaced alike. ``terms`` likewise sets parameters of
+    some terms of the decomposition, named as in the file (``{"P(I | O)": {"a": 2.0, "b":
+    3.0}}``: the keys given replace the entry's, the others stay).
 
     >>> text = ("{bayesprog: 1, variables: {O: {grid: {shape: [2, 3], cell: 1.0}}}, "
     ...         "decomposition: [{term: P(O), form: uniform}]}")
@@ -460,6 +466,7 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     problems += schema_problems
     if doc is None:
         raise SpecError(problems)
+
     def load_named(file: Path, shared: tuple[str, ...] = ()) -> Program:
         # a program named by a term: the variables it shares with the term (its child and
         # parents) are replaced there as they are here, so they keep the same states
@@ -537,23 +544,17 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None,
         _LOADING.reset(token)
 
 
-def _canonical(term: Any) -> str | None:
-    try:
-        return str(parse_expression(term))
-    except ExpressionError:
-        return None
-
-
 def _replace_terms(located: Located, terms: Mapping[str, Mapping[str, Any]]
                    ) -> list[Diagnostic]:
     entries = located.data.get("decomposition") if isinstance(located.data, dict) else None
     if not isinstance(entries, list):
         return []  # the schema check reports the missing or malformed decomposition
-    by_term = {_canonical(e.get("term")): e for e in entries if isinstance(e, dict)}
+    by_term = {canonical(e.get("term")): e for e in entries if isinstance(e, dict)}
     problems = []
     for name, params in terms.items():
-        entry = by_term.get(_canonical(name))
-        if entry is None or _canonical(name) is None:
+        key = canonical(name)
+        entry = by_term.get(key) if key is not None else None
+        if entry is None:
             known = ", ".join(str(e.get("term")) for e in entries if isinstance(e, dict))
             problems.append(located.diagnostic(("decomposition",), f"no term {name!r} to set "
                                                f"parameters of: expected one of {known}",

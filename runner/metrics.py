@@ -47,6 +47,12 @@ def border_band(border: np.ndarray) -> np.ndarray:
     return ndimage.maximum_filter(border, size=3, mode="constant")
 
 
+def moves(paths: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The length (metres) of each move of runs ``paths`` [runs, K] (flat cells, ``centres``
+    [cells, 2] in metres): [runs, K - 1]."""
+    return np.linalg.norm(np.diff(centres[paths], axis=1), axis=-1)
+
+
 def behaviour(paths: np.ndarray, border: np.ndarray,
               centres: np.ndarray | None = None) -> dict[str, float]:
     """How the walker moved, over runs ``paths`` [runs, K] (flat cells) for a task's ``border``
@@ -76,8 +82,7 @@ def behaviour(paths: np.ndarray, border: np.ndarray,
     probed_share = [flat_border[np.unique(p)].sum() / max(flat_border.sum(), 1) for p in paths]
     length = {}
     if centres is not None:
-        steps = np.linalg.norm(np.diff(centres[paths], axis=1), axis=-1)  # [runs, K - 1]
-        length["path_length"] = float(steps.sum(axis=1).mean())
+        length["path_length"] = float(moves(paths, centres).sum(axis=1).mean())
     return {
         "precision": float(on.mean()),
         **length,

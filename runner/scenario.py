@@ -151,7 +151,6 @@ class ScenarioSpec(_Strict):
     sensor: SensorSpec = Field(default_factory=SensorSpec)
 
 
-
 def _rotation(degrees: float) -> np.ndarray:
     t = np.deg2rad(degrees)
     return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
@@ -269,17 +268,17 @@ class Scenario:
                     ) -> bayesprog.Program:
         """pi_tar on this workspace's grid, with ``terms``' parameters set (see
         :func:`bayesprog.load`)."""
-        return bayesprog.load(self.program_path("target"), variables=_workspace(self.spec),
-                              terms=terms)
+        return _load_target(self.program_path("target"), self.spec, terms)
 
     def load_shape(self) -> bayesprog.Program:
         """pi_obj over this workspace's templates."""
         return bayesprog.load(self.program_path("shape"), variables={"R": _shapes(self.spec)})
 
 
-def _workspace(spec: ScenarioSpec) -> dict:
-    """What a scenario sets in pi_tar: the grid O, and the shapes R (its templates)."""
-    return {"O": _grid(spec), "R": _shapes(spec)}
+def _load_target(path: Path, spec: ScenarioSpec,
+                 terms: Mapping[str, Mapping[str, Any]] | None = None) -> bayesprog.Program:
+    """pi_tar as the scenario ``spec`` sets it: its grid O and its shapes R (the templates)."""
+    return bayesprog.load(path, variables={"O": _grid(spec), "R": _shapes(spec)}, terms=terms)
 
 
 def _shapes(spec: ScenarioSpec) -> dict:
@@ -306,8 +305,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise SpecError(missing)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
-    target = bayesprog.load((path.parent / spec.programs.target).resolve(),
-                            variables=_workspace(spec))
+    target = _load_target((path.parent / spec.programs.target).resolve(), spec)
     diags = []
     tasks = getattr(target.variables.get("T"), "states", ())
     for task in spec.tasks:

@@ -32,12 +32,12 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import BayesprogError, SpecError
-from bayesprog.expressions import ExpressionError, parse_expression
+from bayesprog.expressions import canonical
 from bayesprog.language.document import load_document
 from bayesprog.limits import SizeError, check_size
 from runner.experiment import ExperimentSpec, TuneSpec, progress_bar, simulate, start_cells
 from runner.explorer import Explorer
-from runner.metrics import behaviour
+from runner.metrics import behaviour, moves
 from runner.report import area_under, paired_test
 from runner.scenario import Scenario, load_scenario
 
@@ -169,7 +169,7 @@ def _check_terms(scenario: Scenario) -> None:
     """Every searched term is in the scenario's pi_tar with the searched parameters."""
     labels = _terms(scenario)
     for p in PARAMETERS:
-        term = labels.get(str(parse_expression(p.term)))
+        term = labels.get(canonical(p.term))
         if term is None or p.key not in term.params:
             raise BayesprogError(f"{scenario.program_path('target')}: the search sets "
                                  f"parameter {p.key!r} of {p.term}, which this program (used "
@@ -178,13 +178,8 @@ def _check_terms(scenario: Scenario) -> None:
 
 def _terms(scenario: Scenario) -> dict[str, Any]:
     """pi_tar's terms by their canonical label (soft evidence, not a term P(...), left out)."""
-    out = {}
-    for term in scenario.target.terms:
-        try:
-            out[str(parse_expression(term.label))] = term
-        except ExpressionError:
-            continue
-    return out
+    labels = ((canonical(term.label), term) for term in scenario.target.terms)
+    return {label: term for label, term in labels if label is not None}
 
 
 def file_values(scenario: Scenario) -> dict[str, float]:
@@ -193,7 +188,7 @@ def file_values(scenario: Scenario) -> dict[str, float]:
     out = {}
     terms = _terms(scenario)
     for p in PARAMETERS:
-        value = np.asarray(terms[str(parse_expression(p.term))].params[p.key].array, float)
+        value = np.asarray(terms[canonical(p.term)].params[p.key].array, float)
         if value.size != 1 or not np.all(value == value.flat[0]):
             raise BayesprogError(f"{scenario.program_path('target')}: {p.term} {p.key} is "
                                  "given per state; the search sets one number")
@@ -221,8 +216,8 @@ def evaluate(scenario: Scenario, task: str, values: Mapping[str, float] | None, 
 
 def travelled(scenario: Scenario, paths: np.ndarray) -> np.ndarray:
     """Distance (metres) travelled before each probe [runs, K], from the first probe."""
-    steps = np.linalg.norm(np.diff(scenario.centres[paths], axis=1), axis=-1)
-    return np.concatenate([np.zeros((len(paths), 1)), np.cumsum(steps, axis=1)], axis=1)
+    return np.concatenate([np.zeros((len(paths), 1)),
+                           np.cumsum(moves(paths, scenario.centres), axis=1)], axis=1)
 
 
 def area_over_distance(gamma: np.ndarray, distance: np.ndarray, budget: float) -> np.ndarray:
@@ -269,7 +264,7 @@ def _scenario(path: str) -> Scenario:
 
 
 class Evaluator:
-    """Areas under Gamma of many (scenario, task) pairs, in this process or spread over local
+    """:func:`evaluate` over many (scenario, task) pairs, in this process or spread over local
     worker processes (the numbers do not depend on which)."""
 
     def __init__(self, workers: int = 1):
@@ -485,9 +480,9 @@ def _visits(scenario: Scenario, paths: np.ndarray) -> list[int]:
 
 def _moves(scenario: Scenario, paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
     b = behaviour(paths, border, scenario.centres)
-    steps = np.linalg.norm(np.diff(scenario.centres[paths], axis=1), axis=-1)
     return {"precision": b["precision"], "border_probed": b["border_probed"],
-            "path_length": b["path_length"], "median_step": float(np.median(steps))}
+            "path_length": b["path_length"],
+            "median_step": float(np.median(moves(paths, scenario.centres)))}
 
 
 # results ----------------------------------------------------------------------------------------

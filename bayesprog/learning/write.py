@@ -16,7 +16,7 @@ from ruamel.yaml import YAML
 from ruamel.yaml.comments import CommentedMap, CommentedSeq
 from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
-from bayesprog.expressions import ExpressionError, parse_expression
+from bayesprog.expressions import canonical, parse_expression
 from bayesprog.forms import ParamValue
 from bayesprog.language.document import FitRecord
 from bayesprog.variables import Discrete, Variable
@@ -120,13 +120,6 @@ def _keep(old: Any, new: Any) -> Any:
     return new
 
 
-def _label(text: Any) -> str | None:
-    try:
-        return str(parse_expression(str(text)))
-    except ExpressionError:
-        return None
-
-
 def _record(record: FitRecord) -> CommentedMap:
     out = CommentedMap()
     for key, value in record.model_dump().items():
@@ -151,7 +144,7 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
     doc = yaml.load(text)
     done = set()
     for item in doc.get("decomposition", []):
-        label = _label(item.get("term"))
+        label = canonical(item.get("term"))
         if label is None or label not in params:
             continue
         child = variables.get(parse_expression(label).left[0])
@@ -181,7 +174,7 @@ def render_values(text: str, params: Mapping[str, Mapping[str, float]], header: 
     a relative path are named from the new folder."""
     yaml = _yaml()
     doc = yaml.load(text)
-    wanted = {_label(label): values for label, values in params.items()}
+    wanted = {canonical(label): values for label, values in params.items()}
     done = set()
     for item in [*doc.get("decomposition", []), *doc.get("soft_evidence", [])]:
         program = item.get("program")
@@ -189,7 +182,7 @@ def render_values(text: str, params: Mapping[str, Mapping[str, float]], header: 
             item["program"] = os.path.relpath((moved[0] / program).resolve(),
                                               moved[1].resolve())
     for item in doc.get("decomposition", []):
-        label = _label(item.get("term"))
+        label = canonical(item.get("term"))
         if label in wanted:
             for name, value in wanted[label].items():
                 item[name] = _number(float(value))
