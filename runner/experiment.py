@@ -84,11 +84,10 @@ class Experiment:
         return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
 
 
-def start_cells(shape: tuple[int, int], runs: int, seed: int) -> np.ndarray:
-    """``runs`` start cells [runs, 2] on a grid of ``shape``, drawn from ``seed``."""
+def start_cells(shape: tuple[int, ...], runs: int, seed: int) -> np.ndarray:
+    """``runs`` start cells [runs, dims] on a grid of ``shape``, drawn from ``seed``."""
     rng = np.random.default_rng([seed, 0xC0FFEE])
-    nx, ny = shape
-    return np.stack([rng.integers(0, nx, runs), rng.integers(0, ny, runs)], 1)
+    return np.stack([rng.integers(0, n, runs) for n in shape], 1)
 
 
 def load_experiment(path: str | Path) -> Experiment:

@@ -20,7 +20,7 @@ from scipy import ndimage
 import bayesprog
 from bayesprog import Program
 from runner._kernels import perceived_sobel_2d_around
-from runner.cues import inhibition, perceived_border, uncertainty
+from runner.cues import inhibition, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
 from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
 
@@ -90,14 +90,15 @@ class Explorer:
         #: the other side of the task's discontinuity: the remaining materials of the workspace
         self.counter_materials = scenario.counter_materials(task)
         self.centres = scenario.centres
-        self.diagonal = float(np.hypot(*(np.asarray(scenario.shape) * scenario.cell)))
+        self.dims = scenario.dims
+        self.diagonal = float(np.linalg.norm(np.asarray(scenario.shape) * scenario.cell))
         self.tracker = ShapeTracker(self.outlines, self.template_points,
                                     method=scenario.spec.shape_matcher)
-        nx, ny = scenario.shape
-        offsets = np.stack(np.meshgrid(np.arange(-nx + 1, nx), np.arange(-ny + 1, ny),
-                                       indexing="ij"), axis=-1).reshape(-1, 2)
-        self._inhibition_table = inhibition(offsets * scenario.cell, np.zeros((1, 2)),
-                                            self.diagonal).reshape(2 * nx - 1, 2 * ny - 1)
+        shape = np.asarray(scenario.shape)
+        offsets = np.stack(np.meshgrid(*[np.arange(-n + 1, n) for n in shape], indexing="ij"),
+                           axis=-1).reshape(-1, self.dims)
+        self._inhibition_table = inhibition(offsets * scenario.cell, np.zeros((1, self.dims)),
+                                            self.diagonal).reshape(tuple(2 * shape - 1))
         self.last: Decision | None = None
         self.registration: Registration | None = None
         #: seconds spent per phase since construction (perception, cues, shape, decision)
@@ -105,9 +106,9 @@ class Explorer:
 
     # state --------------------------------------------------------------------------------------
     def reset(self, start: Sequence[int] | np.ndarray, seed: int | Sequence[int] = 0) -> None:
-        """Start new runs: ``start`` is a cell (ix, iy) or one per run [runs, 2]; ``seed`` one
-        integer (run r then uses seed ``(seed, r)``) or one seed per run."""
-        start = np.asarray(start, dtype=int).reshape(-1, 2)
+        """Start new runs: ``start`` is a cell (ix, iy(, iz)) or one per run [runs, dims];
+        ``seed`` one integer (run r then uses seed ``(seed, r)``) or one seed per run."""
+        start = np.asarray(start, dtype=int).reshape(-1, self.dims)
         if start.shape[0] == 1 and self.runs > 1:
             start = np.repeat(start, self.runs, axis=0)
         if start.shape[0] != self.runs:
@@ -126,7 +127,7 @@ class Explorer:
         self._target = np.zeros((self.runs, len(self.centres)), bool)
         self._perceived = np.zeros((self.runs, len(self.centres)), bool)
         # and its saliency (eq. 12), brought up to date around the cells probed since the last
-        # decision (a cell's saliency reads its 3 x 3 neighbourhood); nothing perceived: 0
+        # decision (a cell's saliency reads its 3^dims neighbourhood); nothing perceived: 0
         self._saliency = np.zeros((self.runs, *self.scenario.shape))
         self._changed: list[np.ndarray] = []
         self.tracker.reset()
@@ -136,25 +137,27 @@ class Explorer:
     def inhibition_at(self, last: np.ndarray) -> np.ndarray:
         """Eq. (10) around the last probed cells [runs] -> [runs, cells], by lookup in the table
         of I over every offset between two cells (I depends only on the offset)."""
-        nx, ny = self.scenario.shape
-        lx, ly = np.divmod(np.asarray(last), ny)
+        shape = self.scenario.shape
+        at = np.unravel_index(np.asarray(last), shape)
         # the map around cell (lx, ly) is the window of the table that starts at offset
         # (-lx, -ly): one block copy per run
-        windows = np.lib.stride_tricks.sliding_window_view(self._inhibition_table, (nx, ny))
-        return windows[nx - 1 - lx, ny - 1 - ly].reshape(len(lx), nx * ny)
+        windows = np.lib.stride_tricks.sliding_window_view(self._inhibition_table, shape)
+        corner = tuple(n - 1 - i for n, i in zip(shape, at, strict=True))
+        return windows[corner].reshape(len(at[0]), -1)
 
     def flat(self, cells: np.ndarray) -> np.ndarray:
-        """Flat cell indices of ``cells`` [..., 2] (ix, iy), checked against the grid."""
+        """Flat cell indices of ``cells`` [..., dims] (ix, iy(, iz)), checked against the grid."""
         cells = np.asarray(cells, dtype=int)
-        nx, ny = self.scenario.shape
-        if np.any(cells[..., 0] < 0) or np.any(cells[..., 0] >= nx) or np.any(cells[..., 1] < 0) \
-                or np.any(cells[..., 1] >= ny):
-            raise bayesprog.QuestionError(f"cell outside the {nx} x {ny} grid: {cells.tolist()}")
-        return cells[..., 0] * ny + cells[..., 1]
+        shape = self.scenario.shape
+        if cells.shape[-1:] != (len(shape),) or np.any(cells < 0) \
+                or np.any(cells >= np.asarray(shape)):
+            raise bayesprog.QuestionError(f"cell outside the {' x '.join(map(str, shape))} grid: "
+                                          f"{cells.tolist()}")
+        return np.ravel_multi_index(tuple(np.moveaxis(cells, -1, 0)), shape)
 
     def cell(self, flat: np.ndarray) -> np.ndarray:
-        ny = self.scenario.shape[1]
-        return np.stack([flat // ny, flat % ny], axis=-1)
+        """Cells (ix, iy(, iz)) [..., dims] of flat indices."""
+        return np.stack(np.unravel_index(np.asarray(flat), self.scenario.shape), axis=-1)
 
     # the loop -----------------------------------------------------------------------------------
     def perceive(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> None:
@@ -193,8 +196,11 @@ class Explorer:
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
         target, perceived = self.percept()
-        for cells in self._changed:
-            perceived_sobel_2d_around(target, perceived, self._saliency, cells)
+        if self.dims == 2:
+            for cells in self._changed:
+                perceived_sobel_2d_around(target, perceived, self._saliency, cells)
+        elif self._changed:
+            self._saliency = saliency(target.astype(float), perceived, dims=self.dims)
         self._changed.clear()
         s = self._saliency.reshape(self.runs, -1).copy()
         # a run where no cell has any saliency (nothing left to compare: the probed region is
@@ -207,8 +213,8 @@ class Explorer:
         """The probed cells of the perceived border that the walker follows, [runs, cells]: of
         the perceived border of the task's material, the connected part (8-neighbours) that
         holds the last probed border cell."""
-        border = perceived_border(*self.percept())
-        structure = np.zeros((3, 3, 3), bool)
+        border = perceived_border(*self.percept(), dims=self.dims)
+        structure = np.zeros((3,) * (1 + self.dims), bool)
         structure[1] = True  # connected within a run's grid, never across runs
         labels, _ = ndimage.label(border, structure=structure)
         labels = labels.reshape(self.runs, -1)
@@ -225,7 +231,7 @@ class Explorer:
         return labels == followed[:, None]
 
     def border_points(self, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Cells ``border`` [runs, cells] as points [runs, K, 2] (each run's first ``counts[r]``
+        """Cells ``border`` [runs, cells] as points [runs, K, dims] (each run's first ``counts[r]``
         rows; the rest padding) and their counts [runs]."""
         counts = border.sum(axis=1)
         cells = np.argsort(~border, axis=1, kind="stable")[:, :max(int(counts.max()), 1)]
@@ -289,11 +295,12 @@ class Explorer:
         self.expected = nxt
         return nxt
 
-    def observe(self, cell: Sequence[int], texture: float, compliance: float) -> tuple[int, int]:
-        """One run, one probe: the cell (ix, iy) just probed and its readings -> next cell."""
+    def observe(self, cell: Sequence[int], texture: float, compliance: float
+                ) -> tuple[int, ...]:
+        """One run, one probe: the cell (ix, iy(, iz)) just probed and its readings -> next
+        cell."""
         if self.runs != 1:
             raise bayesprog.QuestionError("observe() drives one run; use step() for batches")
-        flat = self.flat(np.asarray(cell).reshape(1, 2))
+        flat = self.flat(np.asarray(cell).reshape(1, -1))
         nxt = self.step(flat, np.array([texture]), np.array([compliance]))
-        ix, iy = self.cell(nxt)[0]
-        return int(ix), int(iy)
+        return tuple(int(i) for i in self.cell(nxt)[0])

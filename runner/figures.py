@@ -1,9 +1,14 @@
 """Drawing the workspace: maps over the grid in centimetres with colour bars, the ground-truth
 border as a line between cells, materials with a legend, the path, its start and the chosen
-cell. Used by the report's figures and the notebook's step view."""
+cell. Used by the report's figures and the notebook's step view.
+
+A volume of cells is drawn a plane at a time (:class:`Plane`): one slice along z, or the view
+from above (fields summed over z). Every function here takes a 2-D scenario or a plane."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -26,19 +31,79 @@ def figure(figsize: tuple[float, float]) -> Any:
     return fig
 
 
-def extent_cm(scenario: Scenario) -> tuple[float, float, float, float]:
-    nx, ny = scenario.shape
+@dataclass(frozen=True)
+class Plane:
+    """A plane of a volume of cells to draw: the slice at height index ``z``, or, with ``z``
+    None, the view from above (a field summed over z; each column shows the material of its
+    highest object, so the border drawn is the outline of the task's solid seen from above)."""
+
+    scenario: Scenario
+    z: int | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        nx, ny = self.scenario.shape[:2]
+        return nx, ny
+
+    @property
+    def cell(self) -> float:
+        return self.scenario.cell
+
+    @property
+    def materials(self) -> tuple[str, ...]:
+        return self.scenario.materials
+
+    @property
+    def centres(self) -> np.ndarray:
+        return self.scenario.centres
+
+    def task_material(self, task: str) -> int:
+        return self.scenario.task_material(task)
+
+    @cached_property
+    def material_map(self) -> np.ndarray:
+        m = self.scenario.material_map
+        if self.z is not None:
+            return m[:, :, self.z]
+        background = self.scenario.materials.index(self.scenario.spec.background)
+        solid = m != background
+        top = m.shape[2] - 1 - np.argmax(solid[:, :, ::-1], axis=2)
+        seen = np.take_along_axis(m, top[..., None], axis=2)[..., 0]
+        return np.where(solid.any(axis=2), seen, background)
+
+    def field(self, values: np.ndarray) -> np.ndarray:
+        """A field over the volume (flat or grid-shaped) on this plane, flat [nx * ny]."""
+        grid = np.asarray(values, float).reshape(self.scenario.shape)
+        return (grid[:, :, self.z] if self.z is not None else grid.sum(axis=2)).ravel()
+
+    @property
+    def label(self) -> str:
+        if self.z is None:
+            return "seen from above (summed over z)"
+        return f"slice z = {(self.z + 0.5) * self.cell * 100:.1f} cm"
+
+
+#: what a drawing function takes: a 2-D workspace, or a plane of a volume
+View = Scenario | Plane
+
+
+def field(view: View, values: np.ndarray) -> np.ndarray:
+    """A field over the workspace as drawn on ``view`` (unchanged on a 2-D workspace)."""
+    return view.field(values) if isinstance(view, Plane) else np.asarray(values, float)
+
+
+def extent_cm(scenario: View) -> tuple[float, float, float, float]:
+    nx, ny = scenario.shape[:2]
     return (0.0, nx * scenario.cell * 100, 0.0, ny * scenario.cell * 100)
 
 
-def centre_cm(scenario: Scenario, cells: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """(x, y) in cm of flat cell indices."""
-    ny = scenario.shape[1]
-    cells = np.asarray(cells)
-    return (cells // ny + 0.5) * scenario.cell * 100, (cells % ny + 0.5) * scenario.cell * 100
+def centre_cm(scenario: View, cells: np.ndarray | list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) in cm of flat cell indices (of a volume: the cells seen from above)."""
+    xy = scenario.centres[np.asarray(cells, dtype=np.int64)] * 100
+    return xy[..., 0], xy[..., 1]
 
 
-def border_segments(scenario: Scenario, task: str) -> np.ndarray:
+def border_segments(scenario: View, task: str) -> np.ndarray:
     """Segments [n, 2, 2] (cm) between a cell of the task's material and a cell of another: the
     ground-truth discontinuity the task follows."""
     m = scenario.material_map
@@ -57,7 +122,7 @@ def border_segments(scenario: Scenario, task: str) -> np.ndarray:
     return np.array(out).reshape(-1, 2, 2)
 
 
-def draw_border(ax: Any, scenario: Scenario, task: str, colour: str = BORDER,
+def draw_border(ax: Any, scenario: View, task: str, colour: str = BORDER,
                 width: float = 1.0) -> None:
     from matplotlib.collections import LineCollection
 
@@ -65,7 +130,7 @@ def draw_border(ax: Any, scenario: Scenario, task: str, colour: str = BORDER,
                                      linewidths=width, label=f"{task} border"))
 
 
-def draw_map(ax: Any, values: np.ndarray, scenario: Scenario, *, cmap: str = "viridis",
+def draw_map(ax: Any, values: np.ndarray, scenario: View, *, cmap: str = "viridis",
              vmin: float | None = None, vmax: float | None = None, label: str | None = None,
              title: str = "", bad: str = "0.6") -> Any:
     """A field over the grid (flat or [nx, ny]) in cm, NaN drawn grey, with a labelled colour
@@ -87,14 +152,16 @@ def draw_map(ax: Any, values: np.ndarray, scenario: Scenario, *, cmap: str = "vi
     return image
 
 
-def draw_materials(ax: Any, scenario: Scenario, legend: bool = True,
+def draw_materials(ax: Any, scenario: View, legend: bool = True,
                    extra: list[Any] | None = None) -> None:
     """The true material of every cell, one colour per material present, with a legend (and
     the ``extra`` handles after the materials)."""
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
-    present = list(dict.fromkeys(np.unique(scenario.material_map).tolist()))
+    # the colours of the whole workspace, so that every plane of a volume shows a material alike
+    whole = scenario.scenario if isinstance(scenario, Plane) else scenario
+    present = list(dict.fromkeys(np.unique(whole.material_map).tolist()))
     palette = ["#e8dcc8", "#9ecae1", "#a1d99b", "#fdae6b", "#bcbddc", "#fc9272"]
     index = np.searchsorted(present, scenario.material_map)
     ax.imshow(index.T, origin="lower", extent=extent_cm(scenario), interpolation="nearest",
@@ -108,7 +175,7 @@ def draw_materials(ax: Any, scenario: Scenario, legend: bool = True,
     ax.tick_params(labelsize=6)
 
 
-def draw_path(ax: Any, scenario: Scenario, path: list[int] | np.ndarray,
+def draw_path(ax: Any, scenario: View, path: list[int] | np.ndarray,
               chosen: int | None = None) -> None:
     """The probed path (line), its start (circle) and the chosen next cell (star)."""
     px, py = centre_cm(scenario, path)

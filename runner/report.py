@@ -131,7 +131,8 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
     visits per run of each configuration (each with its colour bar), the border over them."""
     from matplotlib.lines import Line2D
 
-    nx, ny = scenario.shape
+    view = scenario if scenario.dims == 2 else figures.Plane(scenario)
+    nx, ny = view.shape
     cols = len(spec.configurations) + 1
     # panels as tall as the grid's aspect asks (the paper's 30 x 60: 3.9 in), the first column
     # wider for its legend
@@ -142,19 +143,54 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
         ax = axes[r, 0]
         extra = [Line2D([], [], color="black", lw=1.2, label=f"{task} border")]
         if starts is not None:
-            sx, sy = figures.centre_cm(scenario, starts[:, 0] * ny + starts[:, 1])
+            sx, sy = figures.centre_cm(view, np.ravel_multi_index(tuple(starts.T),
+                                                                  scenario.shape))
             ax.plot(sx, sy, "x", color="0.25", ms=3, mew=0.8)
             extra.append(Line2D([], [], ls="", marker="x", color="0.25", ms=4,
                                 label="start cells"))
-        figures.draw_materials(ax, scenario, extra=extra)
-        figures.draw_border(ax, scenario, task, colour="black", width=1.2)
-        ax.set_title(f"{task}: ground truth", fontsize=8)
+        figures.draw_materials(ax, view, extra=extra)
+        figures.draw_border(ax, view, task, colour="black", width=1.2)
+        ax.set_title(f"{task}: ground truth" + ("" if view is scenario else
+                                                f",\n{view.label}"), fontsize=8)
         for c, conf in enumerate(spec.configurations, 1):
             paths = results[f"{task}/{conf}"]["paths"]
-            counts = np.bincount(paths.ravel(), minlength=nx * ny) / paths.shape[0]
-            figures.draw_map(axes[r, c], counts, scenario, cmap="hot", vmin=0,
+            counts = np.bincount(paths.ravel(), minlength=len(scenario.centres)) / paths.shape[0]
+            figures.draw_map(axes[r, c], figures.field(view, counts), view, cmap="hot", vmin=0,
                              label="visits per run", title=f"{task} {conf.replace('_', ' ')}")
-            figures.draw_border(axes[r, c], scenario, task, colour=figures.HOT_BORDER, width=0.7)
+            figures.draw_border(axes[r, c], view, task, colour=figures.HOT_BORDER, width=0.7)
+    figures.axes_in_cm(axes)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def slice_heights(scenario: Scenario, count: int = 4) -> list[int]:
+    """``count`` z indices evenly spread over the heights that hold an object of a volume."""
+    background = scenario.materials.index(scenario.spec.background)
+    held = np.flatnonzero((scenario.material_map != background).any(axis=(0, 1)))
+    if not held.size:
+        held = np.arange(scenario.shape[2])
+    return sorted({int(z) for z in np.linspace(held[0], held[-1], count).round()})
+
+
+def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path,
+                configuration: str) -> None:
+    """Fig. 9 of a volume, slice by slice: per task, the visits per run of ``configuration``
+    in horizontal slices through the objects, the slice's border of the task over them."""
+    heights = slice_heights(scenario)
+    nx, ny = scenario.shape[:2]
+    fig = figures.figure(figsize=(2.6 * len(heights) + 0.6, (1.6 * ny / nx + 0.7)
+                                  * len(spec.tasks)))
+    axes = fig.subplots(len(spec.tasks), len(heights), squeeze=False)
+    for r, task in enumerate(spec.tasks):
+        paths = results[f"{task}/{configuration}"]["paths"]
+        counts = np.bincount(paths.ravel(), minlength=len(scenario.centres)) / paths.shape[0]
+        top = float(counts.max()) or 1.0  # one colour scale per task: slices compare
+        for c, z in enumerate(heights):
+            plane = figures.Plane(scenario, z)
+            figures.draw_map(axes[r, c], plane.field(counts), plane, cmap="hot", vmin=0,
+                             vmax=top, label="visits per run",
+                             title=f"{task} {configuration.replace('_', ' ')}, {plane.label}")
+            figures.draw_border(axes[r, c], plane, task, colour=figures.HOT_BORDER, width=0.7)
     figures.axes_in_cm(axes)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -203,24 +239,28 @@ class DecisionFigure:
               ("shape", "shape cue P(O | R)", "probability per cell", None),
               ("posterior", "P(O | t, i, s, u, R) (eq. 13)", "probability per cell", None)]
 
-    def __init__(self, scenario: Scenario, task: str, title: str = ""):
+    def __init__(self, scenario: Scenario, task: str, title: str = "", z: int | None = None):
+        """``z``: in a volume, the height index of the slice drawn."""
         self.scenario, self.task = scenario, task
-        nx, ny = scenario.shape  # rows as tall as the grid's aspect asks (30 x 60: 4.8 in)
+        self.view = scenario if scenario.dims == 2 else figures.Plane(scenario, z or 0)
+        view = self.view
+        nx, ny = view.shape  # rows as tall as the grid's aspect asks (30 x 60: 4.8 in)
         self.fig = figures.figure(figsize=(13, 2 * (2.0 * ny / nx + 0.8)))
         axes = self.fig.subplots(2, 4)
         self.axes = axes
         flat = list(axes.ravel())
-        nan = np.full(scenario.shape[0] * scenario.shape[1], np.nan)
+        nan = np.full(nx * ny, np.nan)
         truth = flat[0]
-        figures.draw_materials(truth, scenario)
-        figures.draw_border(truth, scenario, task, colour="black", width=1.2)
-        truth.set_title(f"ground truth, {task} border", fontsize=8)
+        figures.draw_materials(truth, view)
+        figures.draw_border(truth, view, task, colour="black", width=1.2)
+        where = "" if view is scenario else f", {view.label}"  # type: ignore[union-attr]
+        truth.set_title(f"ground truth, {task} border{where}", fontsize=8)
         self.images = {}
         for ax, (key, name, label, limits) in zip(flat[1:7], self.PANELS, strict=True):
             low, high = limits or (0, 1)
-            self.images[key] = figures.draw_map(ax, nan, scenario, vmin=low, vmax=high,
-                                                label=label, title=name)
-            figures.draw_border(ax, scenario, task, width=0.6)
+            self.images[key] = figures.draw_map(ax, nan, view, vmin=low, vmax=high,
+                                                label=label, title=name + where)
+            figures.draw_border(ax, view, task, width=0.6)
         self.path_axes = [flat[0], *flat[1:7]]
         self.lines: list = []
         self.fixed = False
@@ -229,11 +269,14 @@ class DecisionFigure:
         # video redraws only the first)
         self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8,
                                     transform=flat[7].transAxes)
-        flat[7].text(0.0, 0.84, "white line: the path so far\nwhite circle: the start cell\n"
-                     f"magenta (black in the first panel):\n  the ground-truth border of {task}"
-                     "\n\ngrey: a cell not probed (belief),\n  or a saliency with nothing "
-                     "perceived\n  to compare (the term is left out)", va="top", fontsize=8,
-                     transform=flat[7].transAxes)
+        # four lines below the caption's top, whatever the panel's height
+        flat[7].annotate("white line: the path so far" + (" (seen from above)" if where else "")
+                         + "\nwhite circle: the start cell\n"
+                         f"magenta (black in the first panel):\n  the ground-truth border of "
+                         f"{task}\n\ngrey: a cell not probed (belief),\n  or a saliency with "
+                         "nothing perceived\n  to compare (the term is left out)",
+                         xy=(0.0, 0.98), xycoords="axes fraction", xytext=(0, -4 * 8 * 1.25),
+                         textcoords="offset points", va="top", fontsize=8)
         figures.axes_in_cm(axes)
         self.fig.suptitle(title, fontsize=10)
         self.fig.tight_layout()
@@ -281,20 +324,20 @@ class DecisionFigure:
 
     def show(self, frame: dict, k: int) -> None:
         for key, _, _, limits in self.PANELS:
-            values = np.asarray(frame[key], float)
+            values = figures.field(self.view, frame[key])
             image = self.images[key]
-            image.set_data(values.reshape(self.scenario.shape).T)
+            image.set_data(values.reshape(self.view.shape).T)
             if limits is None and not self.fixed:
                 finite = values[np.isfinite(values)]
                 image.set_clim(0, float(finite.max()) if finite.size and finite.max() > 0 else 1)
         if not self.lines:  # the path, its start and the next cell: three lines per panel
             for ax in self.path_axes:
                 before = len(ax.lines)
-                figures.draw_path(ax, self.scenario, frame["path"], frame["next"])
+                figures.draw_path(ax, self.view, frame["path"], frame["next"])
                 self.lines += ax.lines[before:]
         else:  # moved, not drawn anew
-            px, py = figures.centre_cm(self.scenario, frame["path"])
-            nx_, ny_ = figures.centre_cm(self.scenario, [frame["next"]])
+            px, py = figures.centre_cm(self.view, frame["path"])
+            nx_, ny_ = figures.centre_cm(self.view, [frame["next"]])
             for i in range(0, len(self.lines), 3):
                 path, start, chosen = self.lines[i : i + 3]
                 path.set_data(px, py)
@@ -302,10 +345,10 @@ class DecisionFigure:
                 chosen.set_data(nx_, ny_)
         for line in self.lines:
             line.set_animated(self.fixed)  # in a video, never part of the static background
-        x, y = figures.centre_cm(self.scenario, [frame["next"]])
+        at = self.scenario.centres[frame["next"]] * 100
         self.caption.set_text(
             f"step k = {k}\nred star: the next cell, the MAP of\n  P(O | ...), at "
-            f"({x[0]:.1f}, {y[0]:.1f}) cm")
+            f"({', '.join(f'{v:.1f}' for v in at)}) cm")
 
 
 #: The animation's resolution: 1,040 x 770 pixels for the paper's grid (the PNG has 110 dpi);
@@ -324,8 +367,12 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     bar.close()
     title = (f"Experiment {experiment.spec.name}: task {task}, "
              f"{'full model' if configuration == 'full' else configuration}, run {run}")
-    figure = DecisionFigure(experiment.scenario, task, title)
-    figure.show(frames[min(step, len(frames) - 1)], step)
+    shown = frames[min(step, len(frames) - 1)]
+    scenario = experiment.scenario
+    # in a volume, the slice of the chosen cell (the path is drawn seen from above)
+    z = int(np.unravel_index(shown["next"], scenario.shape)[2]) if scenario.dims == 3 else None
+    figure = DecisionFigure(scenario, task, title, z)
+    figure.show(shown, step)
     figure.fig.savefig(out_png, dpi=110)
     if out_video is not None:
         figure.fig.set_dpi(VIDEO_DPI)
@@ -512,6 +559,8 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
         bar.update(1)
         plot_heatmaps(results, spec, scenario, folder / "fig9_visits.png",
                       experiment.start_cells())
+        if scenario.dims == 3:
+            plot_slices(results, spec, scenario, folder / "fig9_slices.png", shown)
         bar.update(1)
         pending()
         bar.update(1)
@@ -523,7 +572,7 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     if compare is not None:
         extra += comparison_lines(found, compare, spec.name)
     md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video,
-                   shown)
+                   shown, volume=scenario.dims == 3)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, video).encode())
     return folder
@@ -604,7 +653,7 @@ def _json_safe(rows: list[dict]) -> list[dict]:
 
 
 def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
-              animation: str | None = None, shown: str = "full") -> str:
+              animation: str | None = None, shown: str = "full", volume: bool = False) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -620,6 +669,13 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
              "the runs' start cells (crosses). Then, per configuration, the visits per run of "
              "each cell (each panel with its own colour scale: compare shapes, not colours "
              "across panels), the border in blue. Axes in cm.*", "",
+             *(["The workspace is a volume: Fig. 9 shows it from above, each column's visits "
+                "summed over z and the outline of the task's solid as seen from above. The "
+                "slices below show where the visits of the "
+                f"{'full model' if shown == 'full' else shown} lie in height, each slice with "
+                "the border of its own cross-section.", "", "![Slices](fig9_slices.png)", "",
+                "*Fig. 9, slices: horizontal slices through the objects, one colour scale per "
+                "task.*", ""] if volume else []),
              f"## One decision (paper Fig. 11): task {task}, "
              f"{'full model' if shown == 'full' else shown}, run {run}, step {step}",
              "", "![Decision](fig11_decision.png)", "",
@@ -627,7 +683,9 @@ def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
              "border over every run: the walker follows the border. The ground truth, the "
              "belief map P(M = task material) at the probed cells, the cues S, U, I, the shape "
              "cue and the posterior over the next cell O (eq. 13), each with its colour bar; "
-             "the path, its start and the chosen cell on every panel. Axes in cm.*", ""]
+             "the path, its start and the chosen cell on every panel. Axes in cm."
+             + (" In a volume the maps are the horizontal slice of the chosen cell, and the "
+                "path is drawn seen from above." if volume else "") + "*", ""]
     if animation:
         lines += [f"The animation over every step of that run: [{animation}]({animation}).", ""]
     lines += ["## Final Gamma and area under Gamma(k)", "",

@@ -28,6 +28,7 @@ from bayesprog.errors import SpecError
 from bayesprog.language.document import load_document
 from bayesprog.limits import limit
 from runner.sensor import SensorModel, load_sensor_model
+from runner.solids import SolidSpec, farthest_points, inside, outline_points, yaw
 
 
 class _Strict(BaseModel):
@@ -35,16 +36,17 @@ class _Strict(BaseModel):
 
 
 class GridSpec(_Strict):
-    shape: list[int] = Field(min_length=2, max_length=2)
+    shape: list[int] = Field(min_length=2, max_length=3, description="cells along x, y (a "
+                             "surface) or x, y, z (a volume)")
     cell: float = Field(gt=0)
 
     @model_validator(mode="after")
     def _size(self) -> GridSpec:
         if any(n < 1 for n in self.shape):
             raise ValueError(f"expected sizes >= 1, found {self.shape}")
-        cells, cap = self.shape[0] * self.shape[1], limit("states")
+        cells, cap = int(np.prod(self.shape)), limit("states")
         if cells > cap:
-            raise ValueError(f"a grid of {self.shape[0]} x {self.shape[1]} has {cells:,} cells, "
+            raise ValueError(f"a grid of {' x '.join(map(str, self.shape))} has {cells:,} cells, "
                              f"more than the limit of {cap:,} (raise it with the environment "
                              "variable BAYESPROG_MAX_STATES)")
         return self
@@ -91,18 +93,30 @@ class CurveSpec(_Strict):
         return np.stack([a * np.cos(t), b * np.sin(t)], axis=1)
 
 
-def template_polygon(template: list[list[float]] | CurveSpec) -> np.ndarray:
+def template_polygon(template: list[list[float]] | CurveSpec | SolidSpec) -> np.ndarray:
     """A template's outline as a polygon [V, 2] (a curve's corners, or the points given)."""
+    if isinstance(template, SolidSpec):
+        raise ValueError("a solid has no outline polygon: it is a template of a 3-D workspace")
     if isinstance(template, CurveSpec):
         return template.polygon()
     return np.asarray(template, float)
 
 
+_SOLIDS = ("box", "ellipsoid", "sphere", "prism")
+
+
+def _template_kind(value: Any) -> str:
+    if isinstance(value, Mapping):
+        return "<solid>" if any(k in value for k in _SOLIDS) else "<curve>"
+    return "<polygon>"
+
+
 class ObjectSpec(_Strict):
     material: str
     template: str | None = None
-    at: list[float] | None = Field(None, min_length=2, max_length=2)
-    rotation: float = Field(0.0, description="degrees, counter-clockwise")
+    at: list[float] | None = Field(None, min_length=2, max_length=3,
+                                   description="[x, y] (or [x, y, z] in a volume), metres")
+    rotation: float = Field(0.0, description="degrees, counter-clockwise (about z in a volume)")
     polygon: list[list[float]] | None = None
 
     @model_validator(mode="after")
@@ -138,11 +152,16 @@ class ScenarioSpec(_Strict):
     background: str
     templates: dict[str, Annotated[
         Annotated[list[list[float]], AfterValidator(_polygon), Tag("<polygon>")]
-        | Annotated[CurveSpec, Tag("<curve>")],
-        Discriminator(lambda v: "<curve>" if isinstance(v, Mapping) else "<polygon>")]] = Field(
-        min_length=1, description="outlines by name: a polygon [[x, y], ...] (any shape, "
-        "concave ones included) or a curve {ellipse: [a, b]} / {circle: r}")
-    template_points: int = Field(50, ge=3)
+        | Annotated[CurveSpec, Tag("<curve>")]
+        | Annotated[SolidSpec, Tag("<solid>")],
+        Discriminator(_template_kind)]] = Field(
+        min_length=1, description="shapes by name. On a 2-D grid, outlines: a polygon "
+        "[[x, y], ...] (any shape, concave ones included) or a curve {ellipse: [a, b]} / "
+        "{circle: r}. On a 3-D grid, solids: {box: [lx, ly, lz]}, {ellipsoid: [a, b, c]}, "
+        "{sphere: r} or {prism: {polygon: [[x, y], ...], height: h}}")
+    template_points: int = Field(50, ge=3, description="points spread along each template's "
+                                 "outline (over its surface on a 3-D grid): the shape cue's "
+                                 "Gaussian centres")
     shape_matcher: Literal["icp", "chamfer"] = Field(
         "icp", description="how the templates are registered onto the followed border: the "
         "paper's ICP, or a chamfer search over a grid of poses (runner/shape.py)")
@@ -151,32 +170,13 @@ class ScenarioSpec(_Strict):
     sensor: SensorSpec = Field(default_factory=SensorSpec)
 
 
+#: points of a solid's surface its templates are registered against (3-D workspaces)
+SURFACE_SAMPLES = 1500
+
+
 def _rotation(degrees: float) -> np.ndarray:
     t = np.deg2rad(degrees)
     return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
-
-
-def outline_points(polygon: np.ndarray, n: int) -> np.ndarray:
-    """``n`` points evenly spaced along the closed outline of ``polygon`` (arc length)."""
-    closed = np.vstack([polygon, polygon[:1]])
-    seg = np.diff(closed, axis=0)
-    length = np.hypot(seg[:, 0], seg[:, 1])
-    cum = np.concatenate([[0.0], np.cumsum(length)])
-    s = np.arange(n) * cum[-1] / n
-    i = np.searchsorted(cum, s, side="right") - 1
-    frac = (s - cum[i]) / length[i]
-    return closed[i] + frac[:, None] * seg[i]
-
-
-def inside(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Even-odd rule: which of ``points`` [N, 2] lie inside ``polygon`` [V, 2]."""
-    x, y = points[:, 0:1], points[:, 1:2]
-    x1, y1 = polygon[:, 0], polygon[:, 1]
-    x2, y2 = np.roll(x1, -1), np.roll(y1, -1)
-    crosses = (y1 > y) != (y2 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xint = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-    return np.logical_xor.reduce(crosses & (x < xint), axis=1)
 
 
 @dataclass
@@ -197,8 +197,14 @@ class Scenario:
         return self.spec.name
 
     @property
-    def shape(self) -> tuple[int, int]:
-        return tuple(self.spec.grid.shape)  # type: ignore[return-value]
+    def shape(self) -> tuple[int, ...]:
+        """Cells along each axis: (nx, ny), or (nx, ny, nz) for a volume."""
+        return tuple(self.spec.grid.shape)
+
+    @property
+    def dims(self) -> int:
+        """2 for a surface of cells, 3 for a volume."""
+        return len(self.spec.grid.shape)
 
     @property
     def cell(self) -> float:
@@ -206,12 +212,12 @@ class Scenario:
 
     @cached_property
     def centres(self) -> np.ndarray:
-        """Cell centres [nx*ny, 2] in row-major order (the state order of a grid variable)."""
-        nx, ny = self.shape
-        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-        return (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * self.cell
+        """Cell centres [cells, dims] in row-major order (the state order of a grid variable)."""
+        index = np.meshgrid(*[np.arange(n) for n in self.shape], indexing="ij")
+        return (np.stack([i.ravel() for i in index], axis=1) + 0.5) * self.cell
 
     def polygons(self) -> list[tuple[str, np.ndarray]]:
+        """The objects of a 2-D workspace: (material, polygon [V, 2] in metres)."""
         out = []
         for obj in self.spec.objects:
             if obj.polygon is not None:
@@ -221,12 +227,27 @@ class Scenario:
                 out.append((obj.material, base @ _rotation(obj.rotation).T + np.asarray(obj.at)))
         return out
 
+    def _solid_masks(self) -> list[tuple[str, np.ndarray]]:
+        """The objects of a 3-D workspace: (material, which cell centres they hold)."""
+        out = []
+        for obj in self.spec.objects:
+            solid = self.spec.templates[obj.template]  # type: ignore[index]
+            assert isinstance(solid, SolidSpec)
+            # into the solid's frame: undo the shift, then the rotation about z
+            local = (self.centres - np.asarray(obj.at)) @ yaw(obj.rotation)
+            out.append((obj.material, solid.inside(local)))
+        return out
+
     @cached_property
     def material_map(self) -> np.ndarray:
         """Index of each cell's true material, shape ``grid shape`` (later objects on top)."""
         flat = np.full(len(self.centres), self.materials.index(self.spec.background))
-        for material, poly in self.polygons():
-            flat[inside(self.centres, poly)] = self.materials.index(material)
+        if self.dims == 3:
+            masks = self._solid_masks()
+        else:
+            masks = [(m, inside(self.centres, poly)) for m, poly in self.polygons()]
+        for material, mask in masks:
+            flat[mask] = self.materials.index(material)
         return flat.reshape(self.shape)
 
     def task_material(self, task: str) -> int:
@@ -240,22 +261,36 @@ class Scenario:
         return sorted({self.materials.index(m) for m in present if m != own})
 
     def border(self, task: str) -> np.ndarray:
-        """Ground-truth border of a task: cells of its material 4-adjacent to another material."""
+        """Ground-truth border of a task: cells of its material that share a side (a face in a
+        volume: 4-adjacency on a surface, 6 in a volume) with a cell of another material."""
         m = self.material_map
         target = m == self.task_material(task)
         padded = np.pad(m, 1, mode="edge")
         other = np.zeros_like(target)
-        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            other |= padded[1 + dx : 1 + dx + m.shape[0], 1 + dy : 1 + dy + m.shape[1]] != m
+        for axis in range(m.ndim):
+            for step in (1, -1):
+                window = tuple(slice(1 + (step if a == axis else 0),
+                                     1 + (step if a == axis else 0) + m.shape[a])
+                               for a in range(m.ndim))
+                other |= padded[window] != m
         return target & other
 
     @cached_property
     def templates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Per template: its polygon and ``template_points`` points evenly spaced along its
-        outline, both centred on the centroid of those points (the template frame)."""
+        """Per template: what it is registered against and ``template_points`` points spread
+        evenly over it, both centred on the centroid of the first (the template frame). On a
+        2-D grid the first is the outline polygon [V, 2] and the points lie along it (by arc
+        length); on a 3-D grid the first is a dense sample of the solid's surface [M, 3] and
+        the points are spread over it."""
         out = {}
-        for name, poly in self.spec.templates.items():
-            poly_arr = template_polygon(poly)
+        for name, shape in self.spec.templates.items():
+            if isinstance(shape, SolidSpec):
+                dense = shape.surface(SURFACE_SAMPLES)
+                pts = farthest_points(dense, self.spec.template_points)
+                centre = dense.mean(axis=0)
+                out[name] = (dense - centre, pts - centre)
+                continue
+            poly_arr = template_polygon(shape)
             pts = outline_points(poly_arr, self.spec.template_points)
             centre = pts.mean(axis=0)
             out[name] = (poly_arr - centre, pts - centre)
@@ -320,7 +355,24 @@ def load_scenario(path: str | Path) -> Scenario:
         if value not in materials:
             diags.append(located.diagnostic(where, f"unknown material {value!r}: expected one of "
                                             f"{', '.join(materials)}"))
+    dims = len(spec.grid.shape)
+    for name, shape in spec.templates.items():
+        if (dims == 3) != isinstance(shape, SolidSpec):
+            diags.append(located.diagnostic(("templates", name), f"template {name!r}: a "
+                                            f"{dims}-D grid takes "
+                                            + ("solids (box, ellipsoid, sphere or prism)"
+                                               if dims == 3 else "outlines (a polygon, "
+                                               "an ellipse or a circle)")
+                                            + f", found {'a solid' if dims == 2 else 'an outline'}",
+                                            at_key=True))
     for i, obj in enumerate(spec.objects):
+        if obj.at is not None and len(obj.at) != dims:
+            diags.append(located.diagnostic(("objects", i, "at"), f"expected {dims} coordinates "
+                                            f"on a {dims}-D grid, found {len(obj.at)}"))
+        if obj.polygon is not None and dims == 3:
+            diags.append(located.diagnostic(("objects", i, "polygon"), "a 3-D grid takes "
+                                            "objects placed from solid templates ('template' "
+                                            "with 'at: [x, y, z]'), found a polygon"))
         if obj.template is not None and obj.template not in spec.templates:
             diags.append(located.diagnostic(("objects", i, "template"), f"unknown template "
                                             f"{obj.template!r}: expected one of "

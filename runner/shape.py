@@ -1,5 +1,5 @@
-"""Shape matching of the exploration path: rigid 2-D registration against each template, batched,
-by ICP (the paper's) or by a chamfer search.
+"""Shape matching of the exploration path: rigid registration against each template, batched,
+by ICP (the paper's) or by a chamfer search on a 2-D grid, by ICP on a 3-D one (``match3d``).
 
 ``match(path, outlines, points)`` registers every template onto every run's path (eq. 6-7):
 rigid ICP in which each path point is paired with its closest point on the template's outline
@@ -42,8 +42,9 @@ _NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k 
 @dataclass
 class Registration:
     """ICP results per run and template: ``error`` L in [0, 1), ``distance`` in metres,
-    ``points`` [runs, T, K, 2] the registered template points, and the rigid transform
-    (``angle``, ``shift``) taking template coordinates onto the path."""
+    ``points`` [runs, T, K, D] the registered template points, and the rigid transform
+    (``angle``, ``shift``) taking template coordinates onto the path: in 2-D ``angle`` [runs, T]
+    is the angle of the rotation, in 3-D [runs, T, 3, 3] its matrix."""
 
     error: np.ndarray
     distance: np.ndarray
@@ -186,11 +187,117 @@ def _chamfer_search(path: np.ndarray, counts: np.ndarray, outlines: np.ndarray,
     return angle, shift, distance
 
 
+def match3d(
+    path: np.ndarray,
+    surfaces: list[np.ndarray],
+    points: np.ndarray,
+    *,
+    counts: np.ndarray | None = None,
+    rotations: int = 8,
+    iterations: int = 25,
+    error_scale: float = ERROR_SCALE,
+    warm: tuple[np.ndarray, np.ndarray] | None = None,
+    trees: list | None = None,
+    offsets: np.ndarray = _OFFSETS[:1],
+) -> Registration:
+    """Register 3-D templates onto ``path`` [runs, k, 3] by ICP: each path point is paired with
+    its nearest point of the template's surface sample (``surfaces``, one [M, 3] per template, in
+    the template frame; a k-d tree finds it), then the rigid transform that brings the pairs
+    closest is solved in closed form (Kabsch: an SVD, a reflection excluded); several starts,
+    the best one wins. The starts turn the template about z (``rotations`` turns, as objects
+    rest on their base) at each of ``offsets`` (in template radii, in x and y) around the path's
+    centroid (by default the centroid alone); ``warm`` = (rotation
+    [runs, T, 3, 3], shift [runs, T, 3]) adds one more. The registration itself is not limited
+    to turns about z. ``counts``, ``points`` and the error are as in :func:`match`; ``trees``
+    are the surfaces' ``scipy.spatial.cKDTree`` when already built."""
+    from scipy.spatial import cKDTree
+
+    runs, k = path.shape[:2]
+    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
+    if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
+        raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
+    if rotations == 0 and warm is None:
+        raise ValueError("match3d needs rotations > 0 or a warm start")
+    trees = trees if trees is not None else [cKDTree(s) for s in surfaces]
+    weight = (np.arange(k)[None, :] < counts[:, None]).astype(float)  # [runs, k]
+    centroid = (weight[..., None] * path).sum(axis=1) / counts[:, None]
+    n_t = len(surfaces)
+    radius = np.array([np.linalg.norm(s, axis=1).max() for s in surfaces])
+    offsets = np.column_stack([offsets, np.zeros(len(offsets))])
+    turns = np.repeat(np.arange(rotations) * (2 * np.pi / max(rotations, 1)), len(offsets))
+    c, s = np.cos(turns), np.sin(turns)
+    start_rot = np.zeros((turns.size, 3, 3))
+    start_rot[:, 0, 0], start_rot[:, 0, 1], start_rot[:, 1, 0], start_rot[:, 1, 1] = c, -s, s, c
+    start_rot[:, 2, 2] = 1.0
+    moves = np.tile(offsets, (rotations, 1))
+    out_rot = np.empty((runs, n_t, 3, 3))
+    out_shift = np.empty((runs, n_t, 3))
+    out_dist = np.empty((runs, n_t))
+    w = weight[:, None, :, None]  # [runs, 1, k, 1]
+    for t in range(n_t):
+        rot = np.broadcast_to(start_rot, (runs, *start_rot.shape))
+        shift = centroid[:, None, :] + moves[None] * radius[t]  # [runs, S, 3]
+        if warm is not None:
+            rot = np.concatenate([rot, warm[0][:, t, None]], axis=1)
+            shift = np.concatenate([shift, warm[1][:, t, None]], axis=1)
+        rot, shift = rot.copy(), shift.copy()
+        for _ in range(iterations):
+            paired = _nearest(trees[t], surfaces[t], path, rot, shift)
+            rot, shift = _kabsch(paired, path[:, None], w)
+        dist = _mean_nearest(trees[t], path, rot, shift, weight, counts)
+        best = dist.argmin(axis=1)
+        rows = np.arange(runs)
+        out_rot[:, t], out_shift[:, t], out_dist[:, t] = rot[rows, best], shift[rows, best], \
+            dist[rows, best]
+    registered = np.einsum("rtij,tkj->rtki", out_rot, points) + out_shift[:, :, None, :]
+    return Registration(error=out_dist / (out_dist + error_scale), distance=out_dist,
+                        points=registered, angle=out_rot, shift=out_shift)
+
+
+def _local(path: np.ndarray, rot: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """The path [runs, k, 3] in the template frame of each pose (rotation [runs, S, 3, 3], shift
+    [runs, S, 3]): R^T (p - t), [runs, S, k, 3]."""
+    return np.einsum("rski,rsij->rskj", path[:, None] - shift[:, :, None], rot)
+
+
+def _nearest(tree, surface: np.ndarray, path: np.ndarray, rot: np.ndarray,
+             shift: np.ndarray) -> np.ndarray:
+    """The surface point nearest each path point at each pose, [runs, S, k, 3]."""
+    local = _local(path, rot, shift)
+    _, index = tree.query(local.reshape(-1, 3))
+    return surface[index].reshape(local.shape)
+
+
+def _mean_nearest(tree, path, rot, shift, weight, counts) -> np.ndarray:
+    """Mean distance of each run's used path points to the surface at each pose, [runs, S]."""
+    local = _local(path, rot, shift)
+    distance, _ = tree.query(local.reshape(-1, 3))
+    return (distance.reshape(local.shape[:3]) * weight[:, None]).sum(axis=2) / counts[:, None]
+
+
+def _kabsch(source: np.ndarray, target: np.ndarray, w: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The proper rotation R and shift t minimising sum w |R source + t - target|^2 per pose:
+    ``source`` [runs, S, k, 3], ``target`` broadcast to it, ``w`` [runs, 1, k, 1]."""
+    total = w.sum(axis=2)
+    mean_s = (w * source).sum(axis=2) / total
+    mean_t = (w * target).sum(axis=2) / total
+    h = np.einsum("rski,rskj->rsij", w * (source - mean_s[:, :, None]),
+                  target - mean_t[:, :, None])
+    u, _, vt = np.linalg.svd(h)
+    d = np.where(np.linalg.det(u) * np.linalg.det(vt) < 0, -1.0, 1.0)  # det(V U^T)
+    fix = np.ones(u.shape[:-1])
+    fix[..., 2] = d
+    rot = np.einsum("rsji,rsj,rskj->rsik", vt, fix, u)
+    return rot, mean_t - np.einsum("rsij,rsj->rsi", rot, mean_s)
+
+
 _FIELDS = ("error", "distance", "points", "angle", "shift")
 
 
 class ShapeTracker:
-    """ICP over point sets that change a little from one step to the next, batched over runs.
+    """ICP over point sets that change a little from one step to the next, batched over runs;
+    2-D outlines [T, V, 2] by :func:`match`, 3-D surface samples [T, M, 3] by :func:`match3d`.
 
     Each run keeps its last registration. ``update`` recomputes only the runs it is given
     (those whose point set changed), starting from their previous transform (a few
@@ -205,6 +312,14 @@ class ShapeTracker:
         if method not in METHODS:
             raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
         self.outlines, self.points, self.method = outlines, points, method
+        self.dims = points.shape[-1]
+        if self.dims == 3 and method != "icp":
+            raise ValueError(f"shape matcher {method!r} registers 2-D outlines; a 3-D grid "
+                             "takes 'icp'")
+        if self.dims == 3:
+            from scipy.spatial import cKDTree
+
+            self._trees = [cKDTree(surface) for surface in outlines]
         self.restart_every, self.short = restart_every, short
         self.warm_iterations, self.worse, self.slack = warm_iterations, worse, slack
         self.reset()
@@ -215,13 +330,14 @@ class ShapeTracker:
         self.searched: np.ndarray | None = None  # point count at each run's last full search
 
     def _allocate(self, runs: int) -> Registration:
-        n_t, n_k = self.points.shape[:2]
+        n_t, n_k, dims = self.points.shape
         nan = np.full((runs, n_t), np.nan)
         self.fitted = np.zeros(runs, bool)
         self.searched = np.zeros(runs, np.int64)
+        angle = nan.copy() if dims == 2 else np.full((runs, n_t, 3, 3), np.nan)
         return Registration(error=nan.copy(), distance=nan.copy(),
-                            points=np.full((runs, n_t, n_k, 2), np.nan), angle=nan.copy(),
-                            shift=np.full((runs, n_t, 2), np.nan))
+                            points=np.full((runs, n_t, n_k, dims), np.nan), angle=angle,
+                            shift=np.full((runs, n_t, dims), np.nan))
 
     def update(self, path: np.ndarray, counts: np.ndarray | None = None,
                runs: np.ndarray | None = None) -> Registration:
@@ -266,6 +382,10 @@ class ShapeTracker:
         top = int(counts[runs].max())
         assert self.state is not None
         start = (self.state.angle[runs], self.state.shift[runs]) if warm else None
+        if self.dims == 3:
+            return match3d(path[runs, :top], list(self.outlines), self.points,
+                           counts=counts[runs], rotations=rotations, iterations=iterations,
+                           warm=start, trees=self._trees)
         return match(path[runs, :top], self.outlines, self.points, counts=counts[runs],
                      rotations=rotations, iterations=iterations, warm=start,
                      method=self.method)

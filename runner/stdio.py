@@ -1,8 +1,8 @@
 """A step interface for a real robot: JSON lines in, JSON lines out.
 
 Each input line reports one probe, ``{"cell": [ix, iy], "texture": e, "compliance": c}`` (add
-``"maps": true`` for the full maps); the reply is the cell to probe next, with what stood behind
-the choice::
+``"maps": true`` for the full maps; in a volume of cells, ``[ix, iy, iz]``, and the maps nest
+[ix][iy][iz]); the reply is the cell to probe next, with what stood behind the choice::
 
     {"k": k, "next": [ix, iy],
      "probed": {"cell": [ix, iy], "material": name, "probability": p, "task_material": p},
@@ -56,10 +56,11 @@ def _number(x: float) -> float | None:
     return float(x) if math.isfinite(float(x)) else None
 
 
-def _grid(values: np.ndarray, shape: tuple[int, int]) -> list:
-    """A field over the grid as nested lists [ix][iy]; null where it is unknown (NaN)."""
+def _grid(values: np.ndarray, shape: tuple[int, ...]) -> list:
+    """A field over the grid as nested lists [ix][iy](...); null where it is unknown (NaN)."""
     grid = np.asarray(values, float).reshape(shape)
-    return [[_number(v) for v in row] for row in grid]
+    out: list = np.vectorize(_number, otypes=[object])(grid).tolist()
+    return out
 
 
 class _Session:
@@ -73,7 +74,7 @@ class _Session:
 
     def probed(self, cell: list[int]) -> dict:
         e = self.explorer
-        flat = int(e.flat(np.asarray(cell).reshape(1, 2))[0])
+        flat = int(e.flat(np.asarray(cell).reshape(1, -1))[0])
         belief = e.posterior[0, flat]
         best = int(np.argmax(belief))
         return {"cell": cell, "material": e.scenario.materials[best],
@@ -174,13 +175,15 @@ def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], s
                     raise ValueError(f"missing {', '.join(missing)}: expected "
                                      '{"cell": [ix, iy], "texture": e, "compliance": c}')
                 cell = obj["cell"]
-                nx, ny = explorer.scenario.shape
-                if (not isinstance(cell, list) or len(cell) != 2
+                shape = explorer.scenario.shape
+                axes = ("ix", "iy", "iz")[:len(shape)]
+                if (not isinstance(cell, list) or len(cell) != len(shape)
                         or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
-                    raise ValueError(f"expected 'cell' as two integers [ix, iy], found "
-                                     f"{_short(cell)}")
-                if not (0 <= cell[0] < nx and 0 <= cell[1] < ny):
-                    raise ValueError(f"cell {_short(cell)} is outside the {nx} x {ny} grid")
+                    raise ValueError(f"expected 'cell' as {len(shape)} integers "
+                                     f"[{', '.join(axes)}], found {_short(cell)}")
+                if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
+                    raise ValueError(f"cell {_short(cell)} is outside the "
+                                     f"{' x '.join(map(str, shape))} grid")
                 texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
                 if not started:
                     explorer.reset(start=cell, seed=seed)

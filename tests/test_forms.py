@@ -274,14 +274,14 @@ def _grid_centres(shape, cell, origin):
 
 
 def _grid_gmm_value(centres, means, weights, sigma, floor, cell):
-    """value[r, o] = (1-floor) * sum_k w_k N2(c_o; mean_rk, sigma^2 I) + floor / area."""
-    card, k, _ = means.shape
+    """value[r, o] = (1-floor) * sum_k w_k N_D(c_o; mean_rk, sigma^2 I) + floor / area."""
+    card, k, dim = means.shape
     mix = np.zeros((card, centres.shape[0]))
     for r in range(card):
         for j in range(k):
-            mvn = stats.multivariate_normal(mean=means[r, j], cov=sigma**2 * np.eye(2))
+            mvn = stats.multivariate_normal(mean=means[r, j], cov=sigma**2 * np.eye(dim))
             mix[r] += weights[r, j] * mvn.pdf(centres)
-    area = centres.shape[0] * cell**2
+    area = centres.shape[0] * cell**dim
     return (1 - floor) * mix + floor / area
 
 
@@ -381,6 +381,32 @@ def test_gmm_grid_with_runtime_input_means(case, seed):
                                    atol=1e-12)
         np.testing.assert_allclose(result.log_evidence[i], logsumexp(joint), rtol=1e-9)
 
+
+
+@SETTINGS
+@given(shape=st.tuples(st.integers(1, 4), st.integers(1, 4), st.integers(2, 4)),
+       cell=st.floats(0.05, 2), k=st.integers(1, 3), seed=st.integers(0, 2**32 - 1),
+       spread=st.floats(0.5, 3), floor=st.sampled_from([0.05, 0.5]))
+def test_gmm_3d_grid_against_multivariate_normal(shape, cell, k, seed, spread, floor):
+    """A volume of cells, the means given at run time [R, K, 3] (the shape cue of a 3-D
+    workspace): scipy's trivariate Normal densities, mixed and floored."""
+    rng = np.random.default_rng(seed)
+    means = rng.uniform(0.0, np.array(shape) * cell, size=(2, k, 3))
+    sigma = cell * spread
+    program = _load({
+        "bayesprog": 1,
+        "variables": {"O": {"grid": {"shape": list(shape), "cell": cell}},
+                      "R": {"states": ["r0", "r1"]}},
+        "inputs": {"templates": {"shape": ["R", "K", "D"]}},
+        "decomposition": [{"term": "P(O)", "form": "uniform"},
+                          {"term": "P(R | O)", "form": "gmm", "sigma": sigma, "floor": floor,
+                           "means": {"input": "templates"}}],
+    })
+    value = _grid_gmm_value(_grid_centres(shape, cell, [0.0, 0.0, 0.0]), means,
+                            np.full((2, k), 1 / k), sigma, floor, cell)
+    for r in range(2):
+        result = program.posterior("P(O | R)", {"R": f"r{r}"}, inputs={"templates": means})
+        np.testing.assert_allclose(result.probabilities, value[r] / value[r].sum(), rtol=1e-9)
 
 
 def _two_template_grid(origin, cell, sigma, means):

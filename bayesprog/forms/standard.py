@@ -223,26 +223,32 @@ class GaussianMixture(Form):
     @staticmethod
     def _separable(ctx: TermContext, grid: Any, gi: int, coords: np.ndarray, means: np.ndarray,
                    s: np.ndarray, floor: np.ndarray) -> np.ndarray | None:
-        """A 2-D grid, one sigma per mixture, a floor > 0: the Gaussians factor along the axes,
-        so the mixture over all cells is one matrix product of per-axis terms per mixture
-        (exact: where the product underflows, the floor dominates to double precision)."""
+        """A grid, one sigma per mixture, a floor > 0: the Gaussians factor along the axes, so
+        the mixture over all cells is one outer product and one matrix product of per-axis terms
+        per mixture (exact: where the product underflows, the floor dominates to double
+        precision)."""
         shape = grid.grid_shape
-        if (shape is None or len(shape) != 2 or means.shape[gi] != 1 or s.shape[-1] != 1
+        if (shape is None or len(shape) < 2 or means.shape[gi] != 1 or s.shape[-1] != 1
                 or "weights" in ctx.params or not np.all(floor > 0) or floor.shape[gi] != 1):
             return None
-        nx, ny = shape
-        m = np.take(means, 0, axis=gi)  # [b, ..other.., K, 2]
+        dim = len(shape)
+        m = np.take(means, 0, axis=gi)  # [b, ..other.., K, D]
         sig = s[..., 0]  # [b, ..other.., 1]
-        xs = coords.reshape(nx, ny, 2)[:, 0, 0]
-        ys = coords.reshape(nx, ny, 2)[0, :, 1]
-        gx = np.exp(-0.5 * ((xs - m[..., 0:1]) / sig[..., None]) ** 2)  # [.., K, nx]
-        gy = np.exp(-0.5 * ((ys - m[..., 1:2]) / sig[..., None]) ** 2)  # [.., K, ny]
+        on_grid = coords.reshape(*shape, dim)
+        along = [on_grid[tuple(slice(None) if b == a else 0 for b in range(dim)) + (a,)]
+                 for a in range(dim)]  # the coordinates of the cells along each axis
+        g = [np.exp(-0.5 * ((x - m[..., a:a + 1]) / sig[..., None]) ** 2)  # [.., K, n_a]
+             for a, x in enumerate(along)]
+        head = g[0]
+        for factor in g[1:-1]:  # [.., K, n_0 * .. * n_a]
+            head = (head[..., :, None] * factor[..., None, :]).reshape(*head.shape[:-1], -1)
         k = m.shape[-2]
-        mix = (np.swapaxes(gx, -1, -2) @ gy).reshape(gx.shape[:-2] + (nx * ny,))
-        mix = mix / (k * 2 * np.pi * sig**2)
+        cells = int(np.prod(shape))
+        mix = (np.swapaxes(head, -1, -2) @ g[-1]).reshape(head.shape[:-2] + (cells,))
+        mix = mix / (k * (2 * np.pi * sig**2) ** (dim / 2))
         cell = grid.cell or 1.0
         f = np.take(floor, 0, axis=gi)[..., None]  # [b, ..other.., 1]
-        value = (1 - f) * mix + f / (nx * ny * cell**2)
+        value = (1 - f) * mix + f / (cells * cell**dim)
         out = np.log(value)  # [b, ..other.., cells]
         return np.moveaxis(out[..., None], -2, gi)[..., 0]
 
