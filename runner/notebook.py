@@ -17,12 +17,13 @@ from typing import Any
 from bayesprog.errors import BayesprogError
 from runner.experiment import Experiment, ExperimentSpec, load_experiment, stored_experiment
 from runner.explorer import CONFIGURATIONS
-from runner.report import DecisionFigure, build_report, findings, replay
+from runner.report import DecisionFigure, build_report, decision_slice, findings, replay
 from runner.store import ResultStore
 
 #: the figures of a report, in the order a reader meets them, with their captions
 FIGURES = [("fig10_gamma.png", "Gamma(k) (paper Fig. 10)"),
            ("fig9_visits.png", "Visits (paper Fig. 9)"),
+           ("fig9_slices.png", "Visits in slices of the volume (Fig. 9 of a 3-D workspace)"),
            ("fig11_decision.png", "One decision (paper Fig. 11)")]
 
 
@@ -79,21 +80,22 @@ class StepView:
                                                                     configuration, run)
         self.frames = frames
 
-    def _figure(self) -> DecisionFigure:
+    def _figure(self, z: int | None) -> DecisionFigure:
         return DecisionFigure(self.experiment.scenario, self.task,
                               f"Experiment {self.experiment.spec.name}: task {self.task}, "
-                              f"{self.configuration}, run {self.run}")
+                              f"{self.configuration}, run {self.run}", z)
 
     def figure(self, k: int) -> Any:
-        """Step ``k`` as a matplotlib figure."""
-        figure = self._figure()
+        """Step ``k`` as a matplotlib figure (in a volume, the slice of the chosen cell)."""
+        figure = self._figure(decision_slice(self.experiment.scenario, [self.frames[k]]))
         figure.show(self.frames[k], k)
         return figure.fig
 
     def _repr_html_(self) -> str:
         import tempfile
 
-        figure = self._figure()
+        # in a volume, one slice for the whole video: where most chosen cells lie
+        figure = self._figure(decision_slice(self.experiment.scenario, self.frames))
         figure.fig.set_dpi(80)
         with tempfile.TemporaryDirectory() as folder:
             video = Path(folder) / "run.mp4"

@@ -351,6 +351,15 @@ class DecisionFigure:
             f"({', '.join(f'{v:.1f}' for v in at)}) cm")
 
 
+def decision_slice(scenario: Scenario, frames: list[dict]) -> int | None:
+    """In a volume, the height index of the slice to draw ``frames`` on: the one most of their
+    chosen cells lie in (None on a 2-D workspace). The path is drawn seen from above."""
+    if scenario.dims == 2:
+        return None
+    heights = np.unravel_index([f["next"] for f in frames], scenario.shape)[2]
+    return int(np.bincount(heights).argmax())
+
+
 #: The animation's resolution: 1,040 x 770 pixels for the paper's grid (the PNG has 110 dpi);
 #: 100 frames are drawn and encoded in about a second and a half.
 VIDEO_DPI = 80
@@ -368,10 +377,8 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     title = (f"Experiment {experiment.spec.name}: task {task}, "
              f"{'full model' if configuration == 'full' else configuration}, run {run}")
     shown = frames[min(step, len(frames) - 1)]
-    scenario = experiment.scenario
-    # in a volume, the slice of the chosen cell (the path is drawn seen from above)
-    z = int(np.unravel_index(shown["next"], scenario.shape)[2]) if scenario.dims == 3 else None
-    figure = DecisionFigure(scenario, task, title, z)
+    figure = DecisionFigure(experiment.scenario, task, title,
+                            decision_slice(experiment.scenario, [shown]))
     figure.show(shown, step)
     figure.fig.savefig(out_png, dpi=110)
     if out_video is not None:
