@@ -297,6 +297,10 @@ class DecisionFigure:
         for artist in dynamic:
             artist.set_animated(True)
         canvas = self.fig.canvas
+        width, height = canvas.get_width_height()
+        if width % 2 or height % 2:  # H.264 in yuv420p takes even sizes: one pixel more
+            dpi = self.fig.get_dpi()
+            self.fig.set_size_inches((width + width % 2) / dpi, (height + height % 2) / dpi)
         self.show(frames[0], 0)
         canvas.draw()
         background = canvas.copy_from_bbox(self.fig.bbox)
