@@ -22,7 +22,7 @@ from bayesprog import Program
 from bayesprog.errors import BayesprogError, SpecError
 from bayesprog.language.document import load_document
 from bayesprog.limits import SizeError, check_size
-from runner.explorer import CONFIGURATIONS, Explorer
+from runner.explorer import CONFIGURATIONS, Explorer, state_entries
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
 from runner.sensor import HapticSensor, ModelSensor, SyntheticSensor
@@ -111,6 +111,13 @@ def load_experiment(path: str | Path) -> Experiment:
         check_size(entries, f"{spec.runs:,} runs of {spec.iterations:,} iterations")
     except SizeError as exc:
         diags.append(located.diagnostic(("runs",), str(exc)))
+    chunk = min(spec.chunk, spec.runs)  # the runs one process explores at once
+    try:
+        check_size(state_entries(scenario, chunk), f"a chunk of {chunk:,} runs on the "
+                   f"{' x '.join(map(str, scenario.shape))} grid", hint="; a smaller chunk "
+                   "needs less")
+    except SizeError as exc:
+        diags.append(located.diagnostic(("chunk",), str(exc)))
     if diags:
         raise SpecError(diags)
     return Experiment(spec, path, scenario)

@@ -19,6 +19,7 @@ from scipy import ndimage
 
 import bayesprog
 from bayesprog import Program
+from bayesprog.limits import check_size
 from runner._kernels import perceived_sobel_2d_around
 from runner.cues import inhibition, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
@@ -49,6 +50,17 @@ class Decision:
     shape_ready: np.ndarray | None = None
 
 
+def state_entries(scenario: Scenario, runs: int) -> int:
+    """The largest array the explorer holds for ``runs`` runs on ``scenario``: the material
+    posterior of every cell (runs x cells x materials), the table of inhibition over every
+    offset between two cells (about 2^dims x cells), or the shape cue over every template and
+    cell (runs x templates x cells)."""
+    cells = int(np.prod(scenario.shape))
+    offsets = int(np.prod([2 * n - 1 for n in scenario.shape]))
+    return max(runs * cells * len(scenario.materials), offsets,
+               runs * len(scenario.spec.templates) * cells)
+
+
 class Explorer:
     """Touch-attention exploration of a grid, for ``runs`` runs in lockstep.
 
@@ -72,6 +84,9 @@ class Explorer:
         if task not in scenario.spec.tasks:
             raise bayesprog.QuestionError(f"unknown task {task!r}: expected one of "
                                           f"{', '.join(scenario.spec.tasks)}")
+        check_size(state_entries(scenario, runs), f"exploring {runs:,} run(s) of a "
+                   f"{' x '.join(map(str, scenario.shape))} grid at once",
+                   hint="; fewer runs at once (an experiment's chunk) need less")
         self.scenario = scenario
         self.task = task
         self.runs = runs

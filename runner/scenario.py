@@ -356,6 +356,10 @@ def load_scenario(path: str | Path) -> Scenario:
             diags.append(located.diagnostic(where, f"unknown material {value!r}: expected one of "
                                             f"{', '.join(materials)}"))
     dims = len(spec.grid.shape)
+    if dims == 3 and spec.shape_matcher != "icp":
+        diags.append(located.diagnostic(("shape_matcher",), f"shape matcher "
+                                        f"{spec.shape_matcher!r} registers 2-D outlines: a 3-D "
+                                        "grid takes 'icp'"))
     for name, shape in spec.templates.items():
         if (dims == 3) != isinstance(shape, SolidSpec):
             diags.append(located.diagnostic(("templates", name), f"template {name!r}: a "

@@ -151,6 +151,8 @@ def test_farthest_points_pick_the_farthest_each_time():
      r"small_volume.yaml:\d+:\d+: .*expected exactly one of"),
     ({"grid": {"shape": [10, 12, 8, 2], "cell": 0.01}},
      r"small_volume.yaml:\d+:\d+: .*at most 3"),
+    ({"shape_matcher": "chamfer"},
+     r"small_volume.yaml:\d+:\d+: shape matcher 'chamfer' registers 2-D outlines"),
 ])
 def test_volume_scenario_errors_name_file_line_and_column(tmp_path, changes, message):
     with pytest.raises(bayesprog.SpecError, match=message):
@@ -332,3 +334,20 @@ def test_robot_session_in_a_volume(volume):
     assert inhibition_map.shape == volume.shape
     np.testing.assert_allclose(inhibition_map.ravel(), explorer.last.inhibition[0])
     assert "expected 'cell' as 3 integers [ix, iy, iz], found [5, 6]" in second["error"]
+
+
+def test_a_volume_too_large_for_a_chunk_is_refused_before_anything_is_allocated(tmp_path, capsys):
+    from bayesprog.cli import main
+
+    scenario = _small_volume(tmp_path, grid={"shape": [150, 100, 100], "cell": 0.001})
+    path = tmp_path / "experiment.yaml"
+    path.write_text(yaml.safe_dump({"experiment": 1, "name": "big", "runner": "haptic",
+                                    "scenario": str(scenario), "tasks": ["T1"], "runs": 10, "chunk": 10,
+                                    "configurations": ["full"], "iterations": 5},
+                                   sort_keys=False))
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "experiment.yaml:" in err and "a chunk of 10 runs on the 150 x 100 x 100 grid needs" \
+        in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
