@@ -151,12 +151,18 @@ def inhibition(
     alpha: float = INHIBITION_ALPHA,
     beta: float = INHIBITION_BETA,
 ) -> np.ndarray:
-    """Eq. (10) for every cell: ``centres`` [cells, 2], ``last`` [runs, 2] -> [runs, cells].
+    """Eq. (10) for every cell: ``centres`` [cells, dims], ``last`` [runs, dims] -> [runs, cells].
 
     1 at the last probed cell, falling to 0 at distance ``(alpha-1)/(alpha+beta-2)`` of the
     diagonal, then rising back towards 1 far away (a locality prior that also inhibits return).
     """
     d = np.linalg.norm(centres[None, :, :] - last[:, None, :], axis=-1) / diagonal
+    return inhibition_at_distance(d, alpha, beta)
+
+
+def inhibition_at_distance(d: np.ndarray, alpha: float = INHIBITION_ALPHA,
+                           beta: float = INHIBITION_BETA) -> np.ndarray:
+    """Eq. (10) at distances ``d`` already divided by the workspace's diagonal."""
     d = np.clip(d, 0.0, 1.0)
     mode = (alpha - 1) / (alpha + beta - 2)
     log_max = _log_kernel(np.asarray(mode), alpha, beta)

@@ -80,7 +80,7 @@ class Experiment:
     scenario: Scenario
 
     def start_cells(self) -> np.ndarray:
-        """The seeded start cells [runs, 2], shared by every task and configuration."""
+        """The seeded start cells [runs, dims], shared by every task and configuration."""
         return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
 
 

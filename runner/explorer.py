@@ -21,7 +21,7 @@ import bayesprog
 from bayesprog import Program
 from bayesprog.limits import check_size
 from runner._kernels import perceived_sobel_2d_around
-from runner.cues import inhibition, perceived_border, saliency, uncertainty
+from runner.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
 from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
 
@@ -109,11 +109,10 @@ class Explorer:
         self.diagonal = float(np.linalg.norm(np.asarray(scenario.shape) * scenario.cell))
         self.tracker = ShapeTracker(self.outlines, self.template_points,
                                     method=scenario.spec.shape_matcher)
-        shape = np.asarray(scenario.shape)
-        offsets = np.stack(np.meshgrid(*[np.arange(-n + 1, n) for n in shape], indexing="ij"),
-                           axis=-1).reshape(-1, self.dims)
-        self._inhibition_table = inhibition(offsets * scenario.cell, np.zeros((1, self.dims)),
-                                            self.diagonal).reshape(tuple(2 * shape - 1))
+        # I over every offset between two cells, from the offsets' lengths built axis by axis
+        squares = np.ix_(*[(np.arange(-n + 1, n) * scenario.cell) ** 2 for n in scenario.shape])
+        self._inhibition_table = inhibition_at_distance(
+            np.sqrt(sum(squares, np.zeros(()))) / self.diagonal)
         self.last: Decision | None = None
         self.registration: Registration | None = None
         #: seconds spent per phase since construction (perception, cues, shape, decision)
@@ -123,7 +122,12 @@ class Explorer:
     def reset(self, start: Sequence[int] | np.ndarray, seed: int | Sequence[int] = 0) -> None:
         """Start new runs: ``start`` is a cell (ix, iy(, iz)) or one per run [runs, dims];
         ``seed`` one integer (run r then uses seed ``(seed, r)``) or one seed per run."""
-        start = np.asarray(start, dtype=int).reshape(-1, self.dims)
+        start = np.asarray(start, dtype=int)
+        if start.ndim not in (1, 2) or start.shape[-1] != self.dims:
+            raise bayesprog.QuestionError(f"expected a start cell of {self.dims} coordinates, or "
+                                          f"one per run [runs, {self.dims}], found the shape "
+                                          f"{list(start.shape)}")
+        start = start.reshape(-1, self.dims)
         if start.shape[0] == 1 and self.runs > 1:
             start = np.repeat(start, self.runs, axis=0)
         if start.shape[0] != self.runs:
@@ -164,8 +168,11 @@ class Explorer:
         """Flat cell indices of ``cells`` [..., dims] (ix, iy(, iz)), checked against the grid."""
         cells = np.asarray(cells, dtype=int)
         shape = self.scenario.shape
-        if cells.shape[-1:] != (len(shape),) or np.any(cells < 0) \
-                or np.any(cells >= np.asarray(shape)):
+        if cells.shape[-1:] != (len(shape),):
+            raise bayesprog.QuestionError(f"expected cells of {len(shape)} coordinates on the "
+                                          f"{' x '.join(map(str, shape))} grid, found "
+                                          f"{cells.tolist()}")
+        if np.any(cells < 0) or np.any(cells >= np.asarray(shape)):
             raise bayesprog.QuestionError(f"cell outside the {' x '.join(map(str, shape))} grid: "
                                           f"{cells.tolist()}")
         return np.ravel_multi_index(tuple(np.moveaxis(cells, -1, 0)), shape)
@@ -202,7 +209,7 @@ class Explorer:
         """The perceived stimulus of the task: where the task's material is perceived (its
         posterior P(M_v = material) >= 1/2), and where a side of the task's discontinuity is
         perceived at all: a probed cell perceived as the task's material or as one of the
-        remaining materials of the workspace; [runs, nx, ny] each. A probed cell perceived as
+        remaining materials of the workspace; [runs, *grid shape] each. A probed cell perceived as
         neither (a misperception, another material than any of the task) says nothing about
         the task's discontinuity: it counts as not perceived."""
         shape = (self.runs, *self.scenario.shape)
@@ -211,11 +218,11 @@ class Explorer:
     def cue_fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inhibition I (eq. 10), saliency S (eq. 12) and uncertainty U (eq. 11): [runs, cells]."""
         target, perceived = self.percept()
-        if self.dims == 2:
-            for cells in self._changed:
+        for cells in self._changed:
+            if self.dims == 2:
                 perceived_sobel_2d_around(target, perceived, self._saliency, cells)
-        elif self._changed:
-            self._saliency = saliency(target.astype(float), perceived, dims=self.dims)
+            else:
+                self._saliency_around(target, perceived, cells)
         self._changed.clear()
         s = self._saliency.reshape(self.runs, -1).copy()
         # a run where no cell has any saliency (nothing left to compare: the probed region is
@@ -224,10 +231,33 @@ class Explorer:
         s[vetoed] = np.nan
         return self.inhibition_at(self.path[-1]), s, self.uncertainty.copy()
 
+    def _saliency_around(self, target: np.ndarray, perceived: np.ndarray,
+                         cells: np.ndarray) -> None:
+        """Eq. (12) brought up to date around each run's probed cell ``cells`` [runs] (flat):
+        only the 3^dims cells around it read it. They are computed on the 5^dims block around
+        it, whose inner cells have their whole neighbourhood in the block (cells outside the
+        grid are not perceived, there as in the whole map)."""
+        shape = self.scenario.shape
+        dims = len(shape)
+        at = np.unravel_index(np.asarray(cells), shape)
+        steps = np.arange(-2, 3)
+        index, valid = [np.arange(self.runs).reshape((-1,) + (1,) * dims)], True
+        for axis, (a, n) in enumerate(zip(at, shape, strict=True)):
+            along = (a[:, None] + steps).reshape((-1,) + tuple(5 if b == axis else 1
+                                                             for b in range(dims)))
+            valid = valid & (along >= 0) & (along < n)
+            index.append(np.clip(along, 0, n - 1))
+        block = tuple(index)
+        values = saliency(target[block].astype(float), perceived[block] & valid, dims=dims)
+        inner = (slice(None),) + (slice(1, 4),) * dims
+        keep = np.broadcast_to(valid, values.shape)[inner]
+        where = tuple(np.broadcast_to(i, values.shape)[inner][keep] for i in block)
+        self._saliency[where] = values[inner][keep]
+
     def border_cells(self) -> np.ndarray:
         """The probed cells of the perceived border that the walker follows, [runs, cells]: of
-        the perceived border of the task's material, the connected part (8-neighbours) that
-        holds the last probed border cell."""
+        the perceived border of the task's material, the connected part (8-neighbours; 26 in a
+        volume) that holds the last probed border cell."""
         border = perceived_border(*self.percept(), dims=self.dims)
         structure = np.zeros((3,) * (1 + self.dims), bool)
         structure[1] = True  # connected within a run's grid, never across runs

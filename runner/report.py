@@ -381,11 +381,16 @@ def plot_decision(experiment, task: str, configuration: str, run: int, step: int
     title = (f"Experiment {experiment.spec.name}: task {task}, "
              f"{'full model' if configuration == 'full' else configuration}, run {run}")
     shown = frames[min(step, len(frames) - 1)]
-    figure = DecisionFigure(experiment.scenario, task, title,
-                            decision_slice(experiment.scenario, [shown]))
+    z = decision_slice(experiment.scenario, [shown])  # in a volume, the chosen cell's slice
+    figure = DecisionFigure(experiment.scenario, task, title, z)
     figure.show(shown, step)
     figure.fig.savefig(out_png, dpi=110)
     if out_video is not None:
+        # in a volume the video keeps one slice: the one most chosen cells lie in (as a
+        # notebook's step view)
+        whole = decision_slice(experiment.scenario, frames)
+        if whole != z:
+            figure = DecisionFigure(experiment.scenario, task, title, whole)
         figure.fig.set_dpi(VIDEO_DPI)
         figure.video(frames, out_video)
 

@@ -28,7 +28,18 @@ from bayesprog.errors import SpecError
 from bayesprog.language.document import load_document
 from bayesprog.limits import limit
 from runner.sensor import SensorModel, load_sensor_model
-from runner.solids import SolidSpec, farthest_points, inside, outline_points, yaw
+from runner.solids import (
+    SolidSpec,
+    check_outline,
+    farthest_points,
+    inside,
+    outline_points,
+    yaw,
+)
+
+#: points of a solid's surface its templates are registered against (3-D workspaces); also
+#: the most template points a scenario may ask for
+SURFACE_SAMPLES = 1500
 
 
 class _Strict(BaseModel):
@@ -52,18 +63,8 @@ class GridSpec(_Strict):
         return self
 
 
-def _outline(points: list[list[float]], what: str) -> None:
-    """A closed outline: at least three points of two finite coordinates."""
-    if len(points) < 3:
-        raise ValueError(f"{what}: expected at least 3 points [x, y], found {len(points)}")
-    for point in points:
-        if len(point) != 2 or not all(np.isfinite(point)):
-            raise ValueError(f"{what}: expected points [x, y] of two finite numbers, found "
-                             f"{point}")
-
-
 def _polygon(points: list[list[float]]) -> list[list[float]]:
-    _outline(points, "polygon")
+    check_outline(points, "polygon")
     return points
 
 
@@ -124,9 +125,10 @@ class ObjectSpec(_Strict):
         if (self.template is None) == (self.polygon is None):
             raise ValueError("expected exactly one of 'template' (with 'at') or 'polygon'")
         if self.template is not None and self.at is None:
-            raise ValueError("an object placed from a template needs 'at: [x, y]'")
+            raise ValueError("an object placed from a template needs 'at: [x, y]' ('at: [x, y, "
+                             "z]' in a volume)")
         if self.polygon is not None:
-            _outline(self.polygon, "polygon")
+            check_outline(self.polygon, "polygon")
         return self
 
 
@@ -159,7 +161,8 @@ class ScenarioSpec(_Strict):
         "[[x, y], ...] (any shape, concave ones included) or a curve {ellipse: [a, b]} / "
         "{circle: r}. On a 3-D grid, solids: {box: [lx, ly, lz]}, {ellipsoid: [a, b, c]}, "
         "{sphere: r} or {prism: {polygon: [[x, y], ...], height: h}}")
-    template_points: int = Field(50, ge=3, description="points spread along each template's "
+    template_points: int = Field(50, ge=3, le=SURFACE_SAMPLES, description="points spread "
+                                 "along each template's "
                                  "outline (over its surface on a 3-D grid): the shape cue's "
                                  "Gaussian centres")
     shape_matcher: Literal["icp", "chamfer"] = Field(
@@ -168,15 +171,6 @@ class ScenarioSpec(_Strict):
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
-
-
-#: points of a solid's surface its templates are registered against (3-D workspaces)
-SURFACE_SAMPLES = 1500
-
-
-def _rotation(degrees: float) -> np.ndarray:
-    t = np.deg2rad(degrees)
-    return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
 
 
 @dataclass
@@ -224,11 +218,14 @@ class Scenario:
                 out.append((obj.material, np.asarray(obj.polygon, float)))
             else:
                 base = template_polygon(self.spec.templates[obj.template])  # type: ignore[index]
-                out.append((obj.material, base @ _rotation(obj.rotation).T + np.asarray(obj.at)))
+                turn = yaw(obj.rotation)[:2, :2]
+                out.append((obj.material, base @ turn.T + np.asarray(obj.at)))
         return out
 
-    def _solid_masks(self) -> list[tuple[str, np.ndarray]]:
-        """The objects of a 3-D workspace: (material, which cell centres they hold)."""
+    def object_cells(self) -> list[tuple[str, np.ndarray]]:
+        """Per object: its material and which cells (flat) have their centre inside it."""
+        if self.dims == 2:
+            return [(m, inside(self.centres, poly)) for m, poly in self.polygons()]
         out = []
         for obj in self.spec.objects:
             solid = self.spec.templates[obj.template]  # type: ignore[index]
@@ -242,12 +239,8 @@ class Scenario:
     def material_map(self) -> np.ndarray:
         """Index of each cell's true material, shape ``grid shape`` (later objects on top)."""
         flat = np.full(len(self.centres), self.materials.index(self.spec.background))
-        if self.dims == 3:
-            masks = self._solid_masks()
-        else:
-            masks = [(m, inside(self.centres, poly)) for m, poly in self.polygons()]
-        for material, mask in masks:
-            flat[mask] = self.materials.index(material)
+        for material, cells in self.object_cells():
+            flat[cells] = self.materials.index(material)
         return flat.reshape(self.shape)
 
     def task_material(self, task: str) -> int:
@@ -278,22 +271,25 @@ class Scenario:
     @cached_property
     def templates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per template: what it is registered against and ``template_points`` points spread
-        evenly over it, both centred on the centroid of the first (the template frame). On a
-        2-D grid the first is the outline polygon [V, 2] and the points lie along it (by arc
-        length); on a 3-D grid the first is a dense sample of the solid's surface [M, 3] and
-        the points are spread over it."""
+        evenly over it, in the template frame. On a 2-D grid: the outline polygon [V, 2] and
+        points along it (by arc length), centred on the centroid of the points; on a 3-D grid:
+        a dense sample of the solid's surface [M, 3] and points spread over it, centred on the
+        centroid of the sample."""
         out = {}
         for name, shape in self.spec.templates.items():
-            if isinstance(shape, SolidSpec):
-                dense = shape.surface(SURFACE_SAMPLES)
-                pts = farthest_points(dense, self.spec.template_points)
-                centre = dense.mean(axis=0)
-                out[name] = (dense - centre, pts - centre)
-                continue
-            poly_arr = template_polygon(shape)
-            pts = outline_points(poly_arr, self.spec.template_points)
-            centre = pts.mean(axis=0)
-            out[name] = (poly_arr - centre, pts - centre)
+            try:
+                if isinstance(shape, SolidSpec):
+                    dense = shape.surface(SURFACE_SAMPLES)
+                    pts = farthest_points(dense, self.spec.template_points)
+                    centre = dense.mean(axis=0)
+                    out[name] = (dense - centre, pts - centre)
+                    continue
+                poly_arr = template_polygon(shape)
+                pts = outline_points(poly_arr, self.spec.template_points)
+                centre = pts.mean(axis=0)
+                out[name] = (poly_arr - centre, pts - centre)
+            except ValueError as exc:
+                raise _TemplateProblem(name, str(exc)) from None
         return out
 
     def program_path(self, which: str) -> Path:
@@ -392,4 +388,30 @@ def load_scenario(path: str | Path) -> Scenario:
             sensor_model = load_sensor_model(model_path, materials)
     if diags:
         raise SpecError(diags)
-    return Scenario(spec, path, materials, perception, target, sensor_model)
+    scenario = Scenario(spec, path, materials, perception, target, sensor_model)
+    try:  # built once, here, where a problem can say where its template is written
+        scenario.templates  # noqa: B018
+    except _TemplateProblem as problem:
+        raise SpecError([located.diagnostic(("templates", problem.name), f"template "
+                                            f"{problem.name!r}: {problem.message}",
+                                            at_key=True)]) from None
+    empty = [located.diagnostic(("objects", i), f"object {i + 1} ({obj.material}) holds no "
+                                "cell's centre: it lies outside the grid or is thinner than a "
+                                f"cell (the grid spans {_extent(spec)} metres)")
+             for i, ((_, cells), obj) in enumerate(zip(scenario.object_cells(), spec.objects,
+                                                       strict=True)) if not cells.any()]
+    if empty:
+        raise SpecError(empty)
+    return scenario
+
+
+def _extent(spec: ScenarioSpec) -> str:
+    return " x ".join(f"{n * spec.grid.cell:g}" for n in spec.grid.shape)
+
+
+class _TemplateProblem(ValueError):
+    """A template whose points cannot be built."""
+
+    def __init__(self, name: str, message: str):
+        super().__init__(f"template {name!r}: {message}")
+        self.name, self.message = name, message

@@ -103,15 +103,8 @@ def match(
     """
     if method not in METHODS:
         raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
-    runs, k = path.shape[:2]
-    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
-    if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
-        raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
-    if rotations == 0 and warm is None:
-        raise ValueError("match needs rotations > 0 or a warm start")
+    counts, _, centroid = _path_set_up(path, counts, rotations, warm)
     radius = np.linalg.norm(outlines, axis=-1).max(axis=-1)  # [T]
-    used = np.arange(k)[None, :] < counts[:, None]
-    centroid = np.where(used[..., None], path, 0.0).sum(axis=1) / counts[:, None]
     path = np.ascontiguousarray(path, dtype=float)
     outlines = np.ascontiguousarray(outlines, float)
     nverts = np.array([_vertex_count(o) for o in outlines], dtype=np.int64)
@@ -130,6 +123,21 @@ def match(
         angle=angle,
         shift=shift,
     )
+
+
+def _path_set_up(path: np.ndarray, counts: np.ndarray | None, rotations: int,
+                 warm: tuple | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The checks and set-up shared by the matchers: each run's count of points [runs], the
+    points it uses as weights [runs, k] (1 or 0) and their centroid [runs, D]."""
+    runs, k = path.shape[:2]
+    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
+    if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
+        raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
+    if rotations == 0 and warm is None:
+        raise ValueError("a match needs rotations > 0 or a warm start")
+    weight = (np.arange(k)[None, :] < counts[:, None]).astype(float)
+    centroid = (weight[..., None] * path).sum(axis=1) / counts[:, None]
+    return counts, weight, centroid
 
 
 def _poses(turns: int, offsets: np.ndarray, radius: np.ndarray, centroid: np.ndarray,
@@ -218,23 +226,15 @@ def match3d(
     are the surfaces' ``scipy.spatial.cKDTree`` when already built."""
     from scipy.spatial import cKDTree
 
-    runs, k = path.shape[:2]
-    counts = np.full(runs, k, np.int64) if counts is None else np.asarray(counts, np.int64)
-    if counts.shape != (runs,) or np.any(counts < 1) or np.any(counts > k):
-        raise ValueError(f"counts must be {runs} integers in 1..{k}, got {counts.tolist()}")
-    if rotations == 0 and warm is None:
-        raise ValueError("match3d needs rotations > 0 or a warm start")
+    runs = path.shape[0]
+    counts, weight, centroid = _path_set_up(path, counts, rotations, warm)
     trees = trees if trees is not None else [cKDTree(s) for s in surfaces]
-    weight = (np.arange(k)[None, :] < counts[:, None]).astype(float)  # [runs, k]
-    centroid = (weight[..., None] * path).sum(axis=1) / counts[:, None]
     n_t = len(surfaces)
     radius = np.array([np.linalg.norm(s, axis=1).max() for s in surfaces])
     offsets = np.column_stack([offsets, np.zeros(len(offsets))])
     turns = np.repeat(np.arange(rotations) * (2 * np.pi / max(rotations, 1)), len(offsets))
-    c, s = np.cos(turns), np.sin(turns)
-    start_rot = np.zeros((turns.size, 3, 3))
-    start_rot[:, 0, 0], start_rot[:, 0, 1], start_rot[:, 1, 0], start_rot[:, 1, 1] = c, -s, s, c
-    start_rot[:, 2, 2] = 1.0
+    start_rot = np.zeros((turns.size, 3, 3))  # turns about z
+    start_rot[:, :2, :2], start_rot[:, 2, 2] = rotation(turns), 1.0
     moves = np.tile(offsets, (rotations, 1))
     out_rot = np.empty((runs, n_t, 3, 3))
     out_shift = np.empty((runs, n_t, 3))

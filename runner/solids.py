@@ -28,27 +28,44 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 _DENSITY = 12
 
 
+def polygon_area(polygon: np.ndarray) -> float:
+    """The area enclosed by a simple polygon [V, 2] (shoelace formula)."""
+    x, y = polygon[:, 0], polygon[:, 1]
+    return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2)
+
+
+def check_outline(points: list[list[float]], what: str) -> None:
+    """A closed outline: at least three points of two finite coordinates, enclosing an area."""
+    if len(points) < 3:
+        raise ValueError(f"{what}: expected at least 3 points [x, y], found {len(points)}")
+    for point in points:
+        if len(point) != 2 or not all(np.isfinite(point)):
+            raise ValueError(f"{what}: expected points [x, y] of two finite numbers, found "
+                             f"{point}")
+    if not polygon_area(np.asarray(points, float)) > 0:
+        raise ValueError(f"{what}: expected a simple polygon enclosing an area (corners in "
+                         "order, sides that do not cross), found an area of 0")
+
+
 class PrismSpec(BaseModel):
     """A polygon [[x, y], ...] (metres, any simple polygon) extruded over ``height`` along z,
-    centred on z = 0."""
+    from z = -height/2 to height/2."""
 
     model_config = ConfigDict(extra="forbid")
-    polygon: list[list[float]] = Field(min_length=3)
-    height: float = Field(gt=0)
+    polygon: list[list[float]]
+    height: float = Field(gt=0, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _points(self) -> PrismSpec:
-        for point in self.polygon:
-            if len(point) != 2 or not all(np.isfinite(point)):
-                raise ValueError(f"prism polygon: expected points [x, y] of two finite numbers, "
-                                 f"found {point}")
+        check_outline(self.polygon, "prism polygon")
         return self
 
 
 class SolidSpec(BaseModel):
     """A 3-D template: exactly one of ``box: [lx, ly, lz]`` (edge lengths), ``ellipsoid:
     [a, b, c]`` (semi-axes), ``sphere: r`` or ``prism: {polygon: [...], height: h}``, all in
-    metres and centred on the origin."""
+    metres, in the solid's own frame (a box, an ellipsoid and a sphere centred on its origin, a
+    prism's polygon where it is written, from z = -h/2 to h/2)."""
 
     model_config = ConfigDict(extra="forbid")
     box: list[float] | None = None
@@ -89,14 +106,23 @@ class SolidSpec(BaseModel):
 
     def surface(self, n: int) -> np.ndarray:
         """``n`` points [n, 3] spread evenly over the surface (see the module)."""
-        return farthest_points(self._dense(_DENSITY * n), n)
+        m = _DENSITY * n
+        for _ in range(4):  # a sliver's caps hold few of their lattice's points: finer
+            dense = self._dense(m)
+            if len(dense) >= n:
+                return farthest_points(dense, n)
+            m *= 4
+        raise ValueError(f"the solid is too thin to spread {n:,} points over its surface "
+                         f"({len(dense):,} found)")
 
     def _dense(self, m: int) -> np.ndarray:
         """About ``m`` points on the surface, roughly evenly spaced."""
         if self.box is not None:
             size = np.asarray(self.box, float)
             area = 2 * (size[0] * size[1] + size[1] * size[2] + size[0] * size[2])
-            h = np.sqrt(area / m)
+            # no coarser than the area asks, and no finer than the edges allow (a thin box would
+            # otherwise take a lattice as long as its edges over a tiny spacing): about 7 m points
+            h = max(np.sqrt(area / m), 4 * size.sum() / m)
             out = []
             for axis in range(3):
                 u, v = [a for a in range(3) if a != axis]
@@ -114,9 +140,10 @@ class SolidSpec(BaseModel):
             closed = np.vstack([poly, poly[:1]])
             perimeter = np.hypot(*np.diff(closed, axis=0).T).sum()
             extent = poly.max(axis=0) - poly.min(axis=0)
-            area = abs(np.dot(poly[:, 0], np.roll(poly[:, 1], -1))
-                       - np.dot(poly[:, 1], np.roll(poly[:, 0], -1))) / 2
-            h = np.sqrt((perimeter * height + 2 * area) / m)
+            # the caps are sampled over the polygon's bounding box: its area bounds their count;
+            # the lengths bound the lattices' edges (as for a box)
+            h = max(np.sqrt((perimeter * height + 2 * extent[0] * extent[1]) / m),
+                    (2 * perimeter + height + 2 * extent.sum()) / m)
             ring = outline_points(poly, max(int(np.ceil(perimeter / h)), 3))
             zs = _lattice(height, h)
             walls = np.concatenate([np.column_stack([ring, np.full(len(ring), z)]) for z in zs])
@@ -134,11 +161,6 @@ class SolidSpec(BaseModel):
         phi = np.pi * (3 - np.sqrt(5)) * i
         r = np.sqrt(1 - z ** 2)
         return np.column_stack([r * np.cos(phi), r * np.sin(phi), z]) * self._semi_axes
-
-    def radius(self) -> float:
-        """The largest distance from the origin to the solid's surface."""
-        return float(np.linalg.norm(self._dense(2000), axis=1).max())
-
 
 def outline_points(polygon: np.ndarray, n: int) -> np.ndarray:
     """``n`` points evenly spaced along the closed outline of ``polygon`` (arc length)."""
@@ -173,7 +195,7 @@ def farthest_points(points: np.ndarray, n: int) -> np.ndarray:
     """``n`` of ``points`` [m, d] chosen greedily, each the farthest from those already chosen,
     starting from the point farthest from their centroid (deterministic)."""
     points = np.asarray(points, float)
-    if n >= len(points):
+    if n > len(points):
         raise ValueError(f"asked for {n} points of a sample of {len(points)}")
     first = int(np.argmax(((points - points.mean(axis=0)) ** 2).sum(axis=1)))
     chosen = [first]

@@ -170,13 +170,14 @@ def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], s
                 explorer.last = None  # the maps of the last session are not this one's
                 reply = {"reset": True, "seed": seed}
             else:
+                shape = explorer.scenario.shape
+                axes = ("ix", "iy", "iz")[:len(shape)]
                 missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
                 if missing:
                     raise ValueError(f"missing {', '.join(missing)}: expected "
-                                     '{"cell": [ix, iy], "texture": e, "compliance": c}')
+                                     f'{{"cell": [{", ".join(axes)}], "texture": e, '
+                                     '"compliance": c}')
                 cell = obj["cell"]
-                shape = explorer.scenario.shape
-                axes = ("ix", "iy", "iz")[:len(shape)]
                 if (not isinstance(cell, list) or len(cell) != len(shape)
                         or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
                     raise ValueError(f"expected 'cell' as {len(shape)} integers "

@@ -179,8 +179,9 @@ class GaussianMixture(Form):
 
     * continuous child ``X``: ``P(x | parents) = sum_k w_k N(x; mean_k, sigma)``;
     * discrete child ``R`` and a grid parent ``O``: a potential
-      ``P(R = r | O = o) = (1 - floor) sum_k w_k N2(c(o); mean_{r,k}, sigma^2 I) + floor / area``,
-      where ``c(o)`` are the cell's coordinates and ``area`` the grid's area. The ``floor``
+      ``P(R = r | O = o) = (1 - floor) sum_k w_k N_D(c(o); mean_{r,k}, sigma^2 I) + floor / V``,
+      where ``c(o)`` are the cell's D coordinates (D = 2, or 3 in a volume) and ``V`` the grid's
+      area (its volume). The ``floor``
       (a uniform component) makes the mixture modulate the other terms instead of vetoing every
       cell away from the means. This term is not normalised over ``R``.
     """
@@ -239,12 +240,19 @@ class GaussianMixture(Form):
                  for a in range(dim)]  # the coordinates of the cells along each axis
         g = [np.exp(-0.5 * ((x - m[..., a:a + 1]) / sig[..., None]) ** 2)  # [.., K, n_a]
              for a, x in enumerate(along)]
-        head = g[0]
-        for factor in g[1:-1]:  # [.., K, n_0 * .. * n_a]
-            head = (head[..., :, None] * factor[..., None, :]).reshape(*head.shape[:-1], -1)
         k = m.shape[-2]
         cells = int(np.prod(shape))
-        mix = (np.swapaxes(head, -1, -2) @ g[-1]).reshape(head.shape[:-2] + (cells,))
+        # the outer product of the leading axes' terms holds K x (all cells but the last axis)
+        # values: taken over a few components at a time, it never exceeds the mixture's size
+        step = k if dim == 2 else max(1, shape[-1])
+        mix: Any = 0.0
+        for lo in range(0, k, step):
+            head = g[0][..., lo:lo + step, :]
+            for factor in g[1:-1]:  # [.., step, n_0 * .. * n_a]
+                part = factor[..., lo:lo + step, :]
+                head = (head[..., :, None] * part[..., None, :]).reshape(*head.shape[:-1], -1)
+            mix = mix + np.swapaxes(head, -1, -2) @ g[-1][..., lo:lo + step, :]
+        mix = mix.reshape(mix.shape[:-2] + (cells,))
         mix = mix / (k * (2 * np.pi * sig**2) ** (dim / 2))
         cell = grid.cell or 1.0
         f = np.take(floor, 0, axis=gi)[..., None]  # [b, ..other.., 1]

@@ -22,7 +22,9 @@ MODELS = (Path(__file__).parents[2] / "models").resolve()
 
 
 def write(tmp_path: Path, grid=(20, 24), tasks="T1: plush\n  T2: silicone\n  T3: wood",
-          templates=None, name="small.yaml") -> Path:
+          templates=None, name="small.yaml",
+          objects="  - {template: rectangle, material: silicone, at: [0.10, 0.12], "
+                  "rotation: 15}") -> Path:
     templates = templates or (
         "  rectangle: [[-0.07, -0.05], [0.07, -0.05], [0.07, 0.05], [-0.07, 0.05]]\n"
         "  triangle: [[-0.09, -0.06], [0.09, -0.06], [0.0, 0.09]]")
@@ -38,7 +40,7 @@ background: wood
 templates:
 {templates}
 objects:
-  - {{template: rectangle, material: silicone, at: [0.10, 0.12], rotation: 15}}
+{objects}
 tasks:
   {tasks}
 """
@@ -130,7 +132,7 @@ def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):
     brings saliency back."""
     from runner.explorer import Explorer
 
-    scenario = load_scenario(write(tmp_path, grid=(4, 4)))
+    scenario = load_scenario(write(tmp_path, grid=(4, 4), objects="  []"))
     readings = {"wood": (0.52, 0.08), "silicone": (0.12, 0.35)}  # texture, compliance in pi_per
     fields = []
     for odd in (None, (3, 3)):

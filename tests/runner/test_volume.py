@@ -151,6 +151,15 @@ def test_farthest_points_pick_the_farthest_each_time():
      r"small_volume.yaml:\d+:\d+: .*expected exactly one of"),
     ({"grid": {"shape": [10, 12, 8, 2], "cell": 0.01}},
      r"small_volume.yaml:\d+:\d+: .*at most 3"),
+    ({"templates": {"box": {"prism": {"polygon": [[0, 0], [0, 0], [0, 0]], "height": 0.04}},
+                    "ball": {"sphere": 0.03}}},
+     r"small_volume.yaml:\d+:\d+: .*prism polygon: expected a simple polygon enclosing an area"),
+    ({"templates": {"box": {"prism": {"polygon": [[0, 0], [0.05, 0], [0, 0.05]],
+                                      "height": float("inf")}}, "ball": {"sphere": 0.03}}},
+     r"small_volume.yaml:\d+:\d+: .*finite number"),
+    ({"template_points": 2000}, r"small_volume.yaml:\d+:\d+: .*less than or equal to 1500"),
+    ({"objects": [{"template": "box", "material": "plush", "at": [1.0, 1.0, 1.0]}]},
+     r"small_volume.yaml:\d+:\d+: object 1 \(plush\) holds no cell's centre"),
     ({"shape_matcher": "chamfer"},
      r"small_volume.yaml:\d+:\d+: shape matcher 'chamfer' registers 2-D outlines"),
 ])
@@ -234,6 +243,11 @@ def test_explorer_cues_in_a_volume(volume):
     assert explorer.flat(np.array([[1, 2, 3]]))[0] == (1 * 24 + 2) * 12 + 3
     with pytest.raises(bayesprog.QuestionError, match="outside the 20 x 24 x 12 grid"):
         explorer.flat(np.array([[3, 4, 12]]))
+    with pytest.raises(bayesprog.QuestionError, match="expected cells of 3 coordinates"):
+        explorer.flat(np.array([[3, 4]]))
+    for start in ([1, 2], [[1, 2], [3, 4], [5, 6]]):
+        with pytest.raises(bayesprog.QuestionError, match="expected a start cell of 3 coord"):
+            explorer.reset(start)
 
 
 # --- 3-D ICP -----------------------------------------------------------------------------------
@@ -339,7 +353,7 @@ def test_robot_session_in_a_volume(volume):
 def test_a_volume_too_large_for_a_chunk_is_refused_before_anything_is_allocated(tmp_path, capsys):
     from bayesprog.cli import main
 
-    scenario = _small_volume(tmp_path, grid={"shape": [150, 100, 100], "cell": 0.001})
+    scenario = _small_volume(tmp_path, grid={"shape": [150, 100, 100], "cell": 0.0015})
     path = tmp_path / "experiment.yaml"
     path.write_text(yaml.safe_dump({"experiment": 1, "name": "big", "runner": "haptic",
                                     "scenario": str(scenario), "tasks": ["T1"], "runs": 10, "chunk": 10,
