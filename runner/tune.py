@@ -407,9 +407,10 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
                 ratios = [float(areas(s, runs, objective, b["budget"]).mean()) / b["area"]
                           for (s, _), runs, b in zip(pairs, found, baseline, strict=True)]
                 # the share of probes on the border, relative to the hand-chosen profiles'
+                # (which, if they never probe it, any candidate keeps: 1)
+                hand = float(np.mean([b["precision"] for b in baseline]))
                 kept = float(np.mean([_precision(s, t, runs["paths"]) for (s, t), runs
-                                      in zip(pairs, found, strict=True)])
-                             / np.mean([b["precision"] for b in baseline]))
+                                      in zip(pairs, found, strict=True)])) / hand if hand else 1.0
                 trial.set_user_attr("precision", kept)
                 if min_precision is not None:  # Optuna's constrained TPE: <= 0 is feasible
                     trial.set_constraint("precision", min_precision - kept)
@@ -659,12 +660,11 @@ def _pair(row: dict, key: str, scale: Any) -> str:
 
 
 def plot(result: dict, path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from runner.figures import figure
 
     rows = result["validation"]
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, max(4.2, 1.5 + 0.28 * len(rows))))
+    fig = figure(figsize=(11, max(4.2, 1.5 + 0.28 * len(rows))))
+    left, right = fig.subplots(1, 2)
     numbers = np.array([t["number"] for t in result["trials"]])
     values = np.array([t["objective"] for t in result["trials"]])
     least = result.get("min_precision")
@@ -693,36 +693,35 @@ def plot(result: dict, path: Path) -> None:
     right.set_title("validation (green: better, red: worse, Holm p < 0.05)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_visits(search: Search, result: dict, path: Path) -> None:
     """Visits per cell of the hand-chosen and the tuned profiles on the first task of each
     validation scenario, side by side on one colour scale per scenario."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from runner.figures import draw_border, draw_map
+    from runner import figures
 
     rows = {}
     for row in result["validation"]:
         rows.setdefault(row["scenario"], row)
     scenarios = {s.name: s for s in search.validation}
-    fig, axes = plt.subplots(len(rows), 2, figsize=(8, 2.3 * len(rows)), squeeze=False)
+    fig = figures.figure(figsize=(8, 2.3 * len(rows)))
+    axes = fig.subplots(len(rows), 2, squeeze=False)
     for (name, row), (left, right) in zip(rows.items(), axes, strict=True):
         scenario = scenarios[name]
-        top = max(max(row["hand_visits"]), max(row["tuned_visits"]), 1)
+        # a volume seen from above: its visits summed over z
+        view = scenario if scenario.dims == 2 else figures.Plane(scenario)
+        visits = {who: figures.field(view, row[f"{who}_visits"]) for who in ("hand", "tuned")}
+        top = max(visits["hand"].max(), visits["tuned"].max(), 1)
         for ax, who in ((left, "hand"), (right, "tuned")):
-            visits = np.asarray(row[f"{who}_visits"], float)
-            draw_map(ax, np.log10(1 + visits), scenario, cmap="magma", vmin=0,
-                     vmax=np.log10(1 + top), label="log10(1 + probes)" if who == "tuned" else None,
-                     title=f"{name} {row['task']}: {'hand-chosen' if who == 'hand' else 'tuned'}"
-                     f" (precision {100 * row[f'{who}_behaviour']['precision']:.0f}%)")
-            draw_border(ax, scenario, row["task"], colour="cyan", width=0.6)
+            figures.draw_map(ax, np.log10(1 + visits[who]), view, cmap="magma", vmin=0,
+                             vmax=np.log10(1 + top),
+                             label="log10(1 + probes)" if who == "tuned" else None,
+                             title=f"{name} {row['task']}: "
+                             f"{'hand-chosen' if who == 'hand' else 'tuned'} (precision "
+                             f"{100 * row[f'{who}_behaviour']['precision']:.0f}%)")
+            figures.draw_border(ax, view, row["task"], colour="cyan", width=0.6)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def tune(experiment: Path, out: Path, options: Mapping[str, Any]) -> int:

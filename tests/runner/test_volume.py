@@ -365,3 +365,25 @@ def test_a_volume_too_large_for_a_chunk_is_refused_before_anything_is_allocated(
         in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
 
+
+
+def test_tune_on_volumes_draws_them_from_above(tmp_path, capsys):
+    """`bayesprog tune` with volumes for training and validation: the search runs and its
+    figures draw the validation volume seen from above."""
+    from bayesprog.cli import main
+
+    spec = {"experiment": 1, "name": "tune_volume", "runner": "haptic",
+            "scenario": str(MODELS / "scenarios" / "volume.yaml"), "tasks": ["T1"],
+            "configurations": ["full"], "runs": 4, "iterations": 15, "seed": 1, "chunk": 4,
+            "tune": {"training": [str(MODELS / "scenarios" / "volume.yaml")],
+                     "validation": [str(MODELS / "scenarios" / "volume_prisms.yaml")],
+                     "trials": 2, "runs": 2, "validation_runs": 2}}
+    path = tmp_path / "tune.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    assert main(["tune", str(path), "--out", str(tmp_path / "out"), "-q"]) == 0
+    result = json.loads((tmp_path / "out" / "tune.json").read_text())
+    assert {row["scenario"] for row in result["validation"]} == {"volume_prisms"}
+    visits = np.asarray(result["validation"][0]["hand_visits"])
+    assert visits.size == 26 * 18 * 10 and visits.sum() == 2 * 15
+    for name in ("tune.png", "tune-visits.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 5_000
