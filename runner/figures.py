@@ -78,8 +78,9 @@ class Plane:
 
     @property
     def label(self) -> str:
+        """Where the plane is: "seen from above", or the slice's height."""
         if self.z is None:
-            return "seen from above (summed over z)"
+            return "seen from above"
         return f"slice z = {(self.z + 0.5) * self.cell * 100:.1f} cm"
 
 

@@ -156,7 +156,9 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
             paths = results[f"{task}/{conf}"]["paths"]
             counts = np.bincount(paths.ravel(), minlength=len(scenario.centres)) / paths.shape[0]
             figures.draw_map(axes[r, c], figures.field(view, counts), view, cmap="hot", vmin=0,
-                             label="visits per run", title=f"{task} {conf.replace('_', ' ')}")
+                             label="visits per run" + ("" if view is scenario else
+                                                       ", summed over z"),
+                             title=f"{task} {conf.replace('_', ' ')}")
             figures.draw_border(axes[r, c], view, task, colour=figures.HOT_BORDER, width=0.7)
     figures.axes_in_cm(axes)
     fig.tight_layout()
@@ -187,9 +189,13 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
         top = float(counts.max()) or 1.0  # one colour scale per task: slices compare
         for c, z in enumerate(heights):
             plane = figures.Plane(scenario, z)
+            # a slice the task's material does not reach has no border to draw: say so
+            absent = "" if (plane.material_map == scenario.task_material(task)).any() else \
+                f"\n(no {scenario.spec.tasks[task]} at this height)"
             figures.draw_map(axes[r, c], plane.field(counts), plane, cmap="hot", vmin=0,
                              vmax=top, label="visits per run",
-                             title=f"{task} {configuration.replace('_', ' ')}, {plane.label}")
+                             title=f"{task} {configuration.replace('_', ' ')}, {plane.label}"
+                             + absent)
             figures.draw_border(axes[r, c], plane, task, colour=figures.HOT_BORDER, width=0.7)
     figures.axes_in_cm(axes)
     fig.tight_layout()

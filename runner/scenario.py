@@ -395,7 +395,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise SpecError([located.diagnostic(("templates", problem.name), f"template "
                                             f"{problem.name!r}: {problem.message}",
                                             at_key=True)]) from None
-    empty = [located.diagnostic(("objects", i), f"object {i + 1} ({obj.material}) holds no "
+    empty = [located.diagnostic(("objects", i), f"this object ({obj.material}) holds no "
                                 "cell's centre: it lies outside the grid or is thinner than a "
                                 f"cell (the grid spans {_extent(spec)} metres)")
              for i, ((_, cells), obj) in enumerate(zip(scenario.object_cells(), spec.objects,

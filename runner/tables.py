@@ -24,6 +24,7 @@ COLUMNS = {
     "cell": "the probed cell (flat index, x-major)",
     "x_cm": "its centre, cm",
     "y_cm": "its centre, cm",
+    "z_cm": "its centre, cm (in a volume; absent on a 2-D grid)",
     "near_border": "within one cell of the task's ground-truth border",
     "gamma_m": "Gamma(k): summed distance from the border cells to the probed ones, m",
     "inhibition": "I at the probed cell when it was chosen (none at step 0)",
@@ -55,6 +56,8 @@ def runs_table(out: str | Path) -> Any:
                 "run": np.repeat(r["runs"], steps), "step": np.tile(np.arange(steps), runs),
                 "cell": paths.ravel(), "x_cm": x, "y_cm": y,
                 "near_border": band[paths.ravel()], "gamma_m": r["gamma"].ravel()}
+            if scenario.dims == 3:
+                columns["z_cm"] = scenario.centres[paths.ravel(), 2] * 100
             for name in CUES:
                 columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
             frames.append(pd.DataFrame(columns))
@@ -63,7 +66,7 @@ def runs_table(out: str | Path) -> Any:
     table = pd.concat(frames, ignore_index=True)
     for name in ("task", "configuration"):
         table[name] = table[name].astype("category")
-    return table[list(COLUMNS)]
+    return table[[c for c in COLUMNS if c in table.columns]]
 
 
 def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:

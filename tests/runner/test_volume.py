@@ -159,7 +159,7 @@ def test_farthest_points_pick_the_farthest_each_time():
      r"small_volume.yaml:\d+:\d+: .*finite number"),
     ({"template_points": 2000}, r"small_volume.yaml:\d+:\d+: .*less than or equal to 1500"),
     ({"objects": [{"template": "box", "material": "plush", "at": [1.0, 1.0, 1.0]}]},
-     r"small_volume.yaml:\d+:\d+: object 1 \(plush\) holds no cell's centre"),
+     r"small_volume.yaml:\d+:\d+: this object \(plush\) holds no cell's centre"),
     ({"shape_matcher": "chamfer"},
      r"small_volume.yaml:\d+:\d+: shape matcher 'chamfer' registers 2-D outlines"),
 ])
@@ -322,6 +322,11 @@ def test_experiment_and_report_on_a_volume(tmp_path, capsys):
     assert {(r["task"], r["configuration"]) for r in rows} == {
         (t, c) for t in ("T1", "T2") for c in ("full", "without_S")}
     assert all(np.isfinite(r["final_mean"]) and r["final_mean"] > 0 for r in rows)
+    from runner.tables import runs_table
+
+    table = runs_table(tmp_path / "out")
+    probed = load_scenario(scenario).centres[table["cell"].to_numpy()] * 100
+    np.testing.assert_allclose(table[["x_cm", "y_cm", "z_cm"]].to_numpy(), probed)
     assert "fig9_slices.png" in (folder / "report.md").read_text()
 
 
