@@ -176,15 +176,38 @@ def draw_materials(ax: Any, scenario: View, legend: bool = True,
     ax.tick_params(labelsize=6)
 
 
-def draw_path(ax: Any, scenario: View, path: list[int] | np.ndarray,
-              chosen: int | None = None) -> None:
-    """The probed path (line), its start (circle) and the chosen next cell (star)."""
+def path_points(scenario: View, path: list[int] | np.ndarray,
+                chosen: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(x, y) in cm of what :func:`draw_path` draws, in its order: the path, its start, the
+    chosen cell (when given) and, on a slice of a volume, the probes that lie in the slice."""
+    path = np.asarray(path, dtype=np.int64)
     px, py = centre_cm(scenario, path)
-    ax.plot(px, py, "-", color=PATH, lw=0.7, label="path")
-    ax.plot(px[:1], py[:1], "o", mfc="none", mec=START, ms=5, mew=1.2, label="start")
+    out = [(px, py), (px[:1], py[:1])]
     if chosen is not None:
-        cx, cy = centre_cm(scenario, [chosen])
-        ax.plot(cx, cy, "*", color=CHOSEN, ms=9, mec="black", mew=0.4, label="next cell")
+        out.append(centre_cm(scenario, [chosen]))
+    if isinstance(scenario, Plane) and scenario.z is not None:
+        here = np.unravel_index(path, scenario.scenario.shape)[2] == scenario.z
+        out.append((px[here], py[here]))
+    return out
+
+
+def draw_path(ax: Any, scenario: View, path: list[int] | np.ndarray,
+              chosen: int | None = None) -> list[Any]:
+    """The probed path (line), its start (circle) and the chosen next cell (star); on a slice
+    of a volume the path is seen from above (faint) and the probes in the slice are dots.
+    Returns the lines drawn, in the order of :func:`path_points`."""
+    points = path_points(scenario, path, chosen)
+    sliced = isinstance(scenario, Plane) and scenario.z is not None
+    styles = [("-", {"color": PATH, "lw": 0.7, "alpha": 0.45 if sliced else 1.0,
+                     "label": "path, seen from above" if sliced else "path"}),
+              ("o", {"mfc": "none", "mec": START, "ms": 5, "mew": 1.2, "label": "start"})]
+    if chosen is not None:
+        styles.append(("*", {"color": CHOSEN, "ms": 9, "mec": "black", "mew": 0.4,
+                             "label": "next cell"}))
+    if sliced:
+        styles.append(("o", {"color": PATH, "ms": 2.5, "mew": 0, "label": "probes in this slice"}))
+    return [ax.plot(x, y, marker, **style)[0]
+            for (x, y), (marker, style) in zip(points, styles, strict=True)]
 
 
 def axes_in_cm(axes: np.ndarray) -> None:

@@ -276,7 +276,9 @@ class DecisionFigure:
         self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8,
                                     transform=flat[7].transAxes)
         # four lines below the caption's top, whatever the panel's height
-        flat[7].annotate("white line: the path so far" + (" (seen from above)" if where else "")
+        flat[7].annotate("white line: the path so far" + (" (seen from above;\n  dots: its "
+                                                           "probes in this slice)" if where
+                                                           else "")
                          + "\nwhite circle: the start cell\n"
                          f"magenta (black in the first panel):\n  the ground-truth border of "
                          f"{task}\n\ngrey: a cell not probed (belief),\n  or a saliency with "
@@ -340,19 +342,14 @@ class DecisionFigure:
             if limits is None and not self.fixed:
                 finite = values[np.isfinite(values)]
                 image.set_clim(0, float(finite.max()) if finite.size and finite.max() > 0 else 1)
-        if not self.lines:  # the path, its start and the next cell: three lines per panel
+        if not self.lines:  # the path, its start, the next cell (and a slice's probes)
             for ax in self.path_axes:
-                before = len(ax.lines)
-                figures.draw_path(ax, self.view, frame["path"], frame["next"])
-                self.lines += ax.lines[before:]
+                self.lines += figures.draw_path(ax, self.view, frame["path"], frame["next"])
         else:  # moved, not drawn anew
-            px, py = figures.centre_cm(self.view, frame["path"])
-            nx_, ny_ = figures.centre_cm(self.view, [frame["next"]])
-            for i in range(0, len(self.lines), 3):
-                path, start, chosen = self.lines[i : i + 3]
-                path.set_data(px, py)
-                start.set_data(px[:1], py[:1])
-                chosen.set_data(nx_, ny_)
+            points = figures.path_points(self.view, frame["path"], frame["next"])
+            for i in range(0, len(self.lines), len(points)):
+                for line, (x, y) in zip(self.lines[i : i + len(points)], points, strict=True):
+                    line.set_data(x, y)
         for line in self.lines:
             line.set_animated(self.fixed)  # in a video, never part of the static background
         at = self.scenario.centres[frame["next"]] * 100
