@@ -315,9 +315,13 @@ def test_experiment_and_report_on_a_volume(tmp_path, capsys):
     path = tmp_path / "experiment.yaml"
     path.write_text(yaml.safe_dump(spec, sort_keys=False))
     run_experiment(load_experiment(path), tmp_path / "out", progress=False)
-    folder = build_report(tmp_path / "out", animation=False)
+    folder = build_report(tmp_path / "out")
     for name in ("fig9_visits.png", "fig9_slices.png", "fig10_gamma.png", "fig11_decision.png"):
         assert (folder / name).stat().st_size > 10_000, name
+    import imageio_ffmpeg
+
+    frames, _ = imageio_ffmpeg.count_frames_and_secs(str(folder / "fig11_decision.mp4"))
+    assert frames == 24  # every step of the run replayed (25 iterations: 24 decisions)
     rows = json.loads((folder / "statistics.json").read_text())
     assert {(r["task"], r["configuration"]) for r in rows} == {
         (t, c) for t in ("T1", "T2") for c in ("full", "without_S")}
