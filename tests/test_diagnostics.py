@@ -613,7 +613,8 @@ decomposition:
 @pytest.mark.parametrize(
     "text, key, words",
     [
-        (T_UNKNOWN_TOP_KEY, "questons", ("unknown key 'questons'",)),
+        (T_UNKNOWN_TOP_KEY, "questons", ("unknown key 'questons'", "expected ", "ablate",
+                                          "(did you mean 'questions'?)")),
         (T_UNKNOWN_PARAM_BLOCK, "meen", ("unknown parameter 'meen'", "expected mean, sigma")),
     ],
     ids=["top-level-key", "term-parameter"],

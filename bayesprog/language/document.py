@@ -6,10 +6,12 @@ states in tables, parameter constraints) is checked by :mod:`bayesprog.language.
 
 from __future__ import annotations
 
+import difflib
 import math
+import typing
 from collections import Counter
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -281,6 +283,8 @@ def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[D
                 msg = f"unknown key {loc[-1]!r}"
                 if ")" in str(loc[-1]):
                     msg += " (inside a flow mapping {...}, quote text that contains a comma)"
+                else:
+                    msg += _expected_keys(model, raw_loc[:-1], str(loc[-1]))
                 at_key = True
             elif err["type"] == "literal_error" and loc == ("bayesprog",):
                 msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
@@ -293,6 +297,50 @@ def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[D
                 seen.add((d.line, d.column))
                 out.append(d)
         return None, out
+
+
+def _expected_keys(model: type[BaseModel], where: tuple, key: str) -> str:
+    """What the mapping at ``where`` (pydantic's location, union tags included) takes: ":
+    expected a, b or c" and the nearest spelling of ``key`` among them; "" when unknown."""
+    types: list[Any] = [model]
+    for part in where:
+        if isinstance(part, str) and (part in _UNION_TAGS or (part.startswith("<")
+                                                              and part.endswith(">"))):
+            continue  # a branch of a union: its members stay in view
+        types = [t for member in types for t in _inside(member, part)]
+    keys = sorted({name for member in types for leaf in _leaves(member)
+                   if isinstance(leaf, type) and issubclass(leaf, BaseModel)
+                   for name in leaf.model_fields})
+    if not keys:
+        return ""
+    near = difflib.get_close_matches(key, keys, n=1, cutoff=0.6)
+    listed = ", ".join(keys[:-1]) + f" or {keys[-1]}" if len(keys) > 1 else keys[0]
+    return f": expected {listed}" + (f" (did you mean {near[0]!r}?)" if near else "")
+
+
+def _leaves(annotation: Any) -> list[Any]:
+    """The types an annotation may hold: the members of a union, without ``Annotated``."""
+    origin = get_origin(annotation)
+    if origin is typing.Annotated:
+        return _leaves(get_args(annotation)[0])
+    if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
+        return [leaf for arg in get_args(annotation) for leaf in _leaves(arg)]
+    return [annotation]
+
+
+def _inside(annotation: Any, part: Any) -> list[Any]:
+    """The annotations found at ``part`` (a key or an index) of a value of ``annotation``."""
+    out = []
+    for leaf in _leaves(annotation):
+        origin = get_origin(leaf)
+        if isinstance(leaf, type) and issubclass(leaf, BaseModel):
+            if isinstance(part, str) and part in leaf.model_fields:
+                out.append(leaf.model_fields[part].annotation)
+        elif origin in (list, tuple) and isinstance(part, int) and get_args(leaf):
+            out.append(get_args(leaf)[0])
+        elif origin is dict and isinstance(part, str) and len(get_args(leaf)) == 2:
+            out.append(get_args(leaf)[1])
+    return out
 
 
 def load_document(path: Path, model: type[M]) -> tuple[Located, M]:

@@ -160,6 +160,11 @@ def test_farthest_points_pick_the_farthest_each_time():
     ({"template_points": 2000}, r"small_volume.yaml:\d+:\d+: .*less than or equal to 1500"),
     ({"objects": [{"template": "box", "material": "plush", "at": [1.0, 1.0, 1.0]}]},
      r"small_volume.yaml:\d+:\d+: this object \(plush\) holds no cell's centre"),
+    ({"templates": {"box": {"cube": [0.06, 0.045, 0.045]}, "ball": {"spere": 0.03}}},
+     r"small_volume.yaml:\d+:\d+: unknown key 'cube': expected box, circle, ellipse, "
+     r"ellipsoid, prism, sphere or vertices\n"),
+    ({"templates": {"box": {"box": [0.06, 0.045, 0.045]}, "ball": {"spere": 0.03}}},
+     r"small_volume.yaml:\d+:\d+: unknown key 'spere': .* \(did you mean 'sphere'\?\)"),
     ({"shape_matcher": "chamfer"},
      r"small_volume.yaml:\d+:\d+: shape matcher 'chamfer' registers 2-D outlines"),
 ])
