@@ -290,6 +290,13 @@ def validate_located(located: Located, model: type[M]) -> tuple[M | None, list[D
                 msg = f"unsupported format version: expected 'bayesprog: 1', found {err['input']!r}"
             elif err["type"] == "value_error":
                 msg = f"{'.'.join(map(str, loc))}: {msg}"
+            elif err["type"] in ("too_long", "too_short") and "actual_length" in err.get("ctx", {}):
+                ctx = err["ctx"]
+                bound = ("at most", ctx.get("max_length")) if err["type"] == "too_long" else \
+                    ("at least", ctx.get("min_length"))
+                kind = "entries" if ctx.get("field_type") == "Dictionary" else "items"
+                msg = (f"{'.'.join(map(str, loc))}: expected {bound[0]} {bound[1]} {kind}, found "
+                       f"{ctx['actual_length']}: {short_repr(err.get('input'))}")
             else:
                 msg = f"{'.'.join(map(str, loc))}: {msg}, found {short_repr(err.get('input'))}"
             d = located.diagnostic(loc, msg, at_key=at_key)

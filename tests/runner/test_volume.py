@@ -150,7 +150,7 @@ def test_farthest_points_pick_the_farthest_each_time():
     ({"templates": {"box": {"box": [0.06, 0.045, 0.04], "sphere": 0.02}}},
      r"small_volume.yaml:\d+:\d+: .*expected exactly one of"),
     ({"grid": {"shape": [10, 12, 8, 2], "cell": 0.01}},
-     r"small_volume.yaml:\d+:\d+: .*at most 3"),
+     r"small_volume.yaml:\d+:\d+: grid.shape: expected at most 3 items, found 4: "),
     ({"templates": {"box": {"prism": {"polygon": [[0, 0], [0, 0], [0, 0]], "height": 0.04}},
                     "ball": {"sphere": 0.03}}},
      r"small_volume.yaml:\d+:\d+: .*prism polygon: expected a simple polygon enclosing an area"),
