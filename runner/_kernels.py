@@ -48,6 +48,12 @@ def _mean_distance(points, k, poly, nv, a, tx, ty):
     return total / k
 
 
+@njit(cache=True, inline="always")
+def _job(job, n_t, n_s):
+    """The (run, template, start) of a flat job index over runs x templates x starts."""
+    return job // (n_t * n_s), (job // n_s) % n_t, job % n_s
+
+
 @njit(cache=True, parallel=True)
 def icp(path, counts, outlines, nverts, angle, shift, iterations):
     """Refine every start in place; returns the mean distance per start.
@@ -59,9 +65,7 @@ def icp(path, counts, outlines, nverts, angle, shift, iterations):
     runs, n_t, n_s = angle.shape
     dist = np.empty((runs, n_t, n_s))
     for job in prange(runs * n_t * n_s):
-        r = job // (n_t * n_s)
-        t = (job // n_s) % n_t
-        s = job % n_s
+        r, t, s = _job(job, n_t, n_s)
         poly = outlines[t]
         nv = nverts[t]
         k = counts[r]
@@ -175,9 +179,7 @@ def chamfer(path, counts, outlines, nverts, angle, shift):
     runs, n_t, n_s = angle.shape
     dist = np.empty((runs, n_t, n_s))
     for job in prange(runs * n_t * n_s):
-        r = job // (n_t * n_s)
-        t = (job // n_s) % n_t
-        s = job % n_s
+        r, t, s = _job(job, n_t, n_s)
         dist[r, t, s] = _mean_distance(path[r], counts[r], outlines[t], nverts[t],
                                        angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1])
     return dist

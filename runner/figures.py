@@ -88,6 +88,12 @@ class Plane:
 View = Scenario | Plane
 
 
+def view(scenario: Scenario, z: int | None = None) -> View:
+    """What to draw of ``scenario``: itself on a 2-D grid; in a volume, the slice at height
+    index ``z``, or (``z`` None) the volume seen from above."""
+    return scenario if scenario.dims == 2 else Plane(scenario, z)
+
+
 def field(view: View, values: np.ndarray) -> np.ndarray:
     """A field over the workspace as drawn on ``view`` (unchanged on a 2-D workspace)."""
     return view.field(values) if isinstance(view, Plane) else np.asarray(values, float)

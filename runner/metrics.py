@@ -47,6 +47,11 @@ def border_band(border: np.ndarray) -> np.ndarray:
     return ndimage.maximum_filter(border, size=3, mode="constant")
 
 
+def visits(paths: np.ndarray, cells: int) -> np.ndarray:
+    """Probes per cell over all runs ``paths`` [runs, K] (flat cells of a grid of ``cells``)."""
+    return np.bincount(paths.ravel(), minlength=cells)
+
+
 def moves(paths: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """The length (metres) of each move of runs ``paths`` [runs, K] (flat cells, ``centres``
     [cells, 2] in metres): [runs, K - 1]."""

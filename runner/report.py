@@ -27,7 +27,7 @@ from runner.experiment import (
     stored_experiment,
 )
 from runner.explorer import CONFIGURATIONS, Explorer
-from runner.metrics import behaviour, border_band
+from runner.metrics import behaviour, border_band, visits
 from runner.scenario import Scenario
 from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write
@@ -131,7 +131,7 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
     visits per run of each configuration (each with its colour bar), the border over them."""
     from matplotlib.lines import Line2D
 
-    view = scenario if scenario.dims == 2 else figures.Plane(scenario)
+    view = figures.view(scenario)
     nx, ny = view.shape
     cols = len(spec.configurations) + 1
     # panels as tall as the grid's aspect asks (the paper's 30 x 60: 3.9 in), the first column
@@ -154,7 +154,7 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
                                                 f",\n{view.label}"), fontsize=8)
         for c, conf in enumerate(spec.configurations, 1):
             paths = results[f"{task}/{conf}"]["paths"]
-            counts = np.bincount(paths.ravel(), minlength=len(scenario.centres)) / paths.shape[0]
+            counts = visits(paths, len(scenario.centres)) / paths.shape[0]
             figures.draw_map(axes[r, c], figures.field(view, counts), view, cmap="hot", vmin=0,
                              label="visits per run" + ("" if view is scenario else
                                                        ", summed over z"),
@@ -185,7 +185,7 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
     axes = fig.subplots(len(spec.tasks), len(heights), squeeze=False)
     for r, task in enumerate(spec.tasks):
         paths = results[f"{task}/{configuration}"]["paths"]
-        counts = np.bincount(paths.ravel(), minlength=len(scenario.centres)) / paths.shape[0]
+        counts = visits(paths, len(scenario.centres)) / paths.shape[0]
         top = float(counts.max()) or 1.0  # one colour scale per task: slices compare
         for c, z in enumerate(heights):
             plane = figures.Plane(scenario, z)
@@ -248,7 +248,7 @@ class DecisionFigure:
     def __init__(self, scenario: Scenario, task: str, title: str = "", z: int | None = None):
         """``z``: in a volume, the height index of the slice drawn."""
         self.scenario, self.task = scenario, task
-        self.view = scenario if scenario.dims == 2 else figures.Plane(scenario, z or 0)
+        self.view = figures.view(scenario, z or 0)
         view = self.view
         nx, ny = view.shape  # rows as tall as the grid's aspect asks (30 x 60: 4.8 in)
         self.fig = figures.figure(figsize=(13, 2 * (2.0 * ny / nx + 0.8)))

@@ -29,6 +29,7 @@ from bayesprog.language.document import load_document
 from bayesprog.limits import limit
 from runner.sensor import SensorModel, load_sensor_model
 from runner.solids import (
+    SOLID_KEYS,
     SolidSpec,
     check_outline,
     farthest_points,
@@ -103,12 +104,9 @@ def template_polygon(template: list[list[float]] | CurveSpec | SolidSpec) -> np.
     return np.asarray(template, float)
 
 
-_SOLIDS = ("box", "ellipsoid", "sphere", "prism")
-
-
 def _template_kind(value: Any) -> str:
     if isinstance(value, Mapping):
-        return "<solid>" if any(k in value for k in _SOLIDS) else "<curve>"
+        return "<solid>" if any(k in value for k in SOLID_KEYS) else "<curve>"
     return "<polygon>"
 
 

@@ -26,6 +26,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 #: dense surface samples per kept point before farthest-point sampling
 _DENSITY = 12
+#: the keys of a solid template, one of which it gives
+SOLID_KEYS = ("box", "ellipsoid", "sphere", "prism")
 
 
 def polygon_area(polygon: np.ndarray) -> float:
@@ -75,7 +77,7 @@ class SolidSpec(BaseModel):
 
     @model_validator(mode="after")
     def _one_solid(self) -> SolidSpec:
-        given = [k for k in ("box", "ellipsoid", "sphere", "prism") if getattr(self, k) is not None]
+        given = [k for k in SOLID_KEYS if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError("expected exactly one of 'box: [lx, ly, lz]', 'ellipsoid: [a, b, c]', "
                              "'sphere: r' or 'prism: {polygon: [[x, y], ...], height: h}', found "

@@ -37,7 +37,7 @@ from bayesprog.language.document import load_document
 from bayesprog.limits import SizeError, check_size
 from runner.experiment import ExperimentSpec, TuneSpec, progress_bar, simulate, start_cells
 from runner.explorer import Explorer
-from runner.metrics import behaviour, moves
+from runner.metrics import behaviour, moves, visits
 from runner.report import area_under, paired_test
 from runner.scenario import Scenario, load_scenario
 
@@ -470,13 +470,8 @@ def _compare(scenario: Scenario, task: str, hand: Mapping[str, np.ndarray],
             "tuned": areas(scenario, tuned, objective, budget).tolist(),
             "hand_behaviour": _moves(scenario, hand["paths"], border),
             "tuned_behaviour": _moves(scenario, tuned["paths"], border),
-            "hand_visits": _visits(scenario, hand["paths"]),
-            "tuned_visits": _visits(scenario, tuned["paths"])}
-
-
-def _visits(scenario: Scenario, paths: np.ndarray) -> list[int]:
-    """Probes per cell over all runs (flat, row-major)."""
-    return np.bincount(paths.ravel(), minlength=len(scenario.centres)).tolist()
+            "hand_visits": visits(hand["paths"], len(scenario.centres)).tolist(),
+            "tuned_visits": visits(tuned["paths"], len(scenario.centres)).tolist()}
 
 
 def _moves(scenario: Scenario, paths: np.ndarray, border: np.ndarray) -> dict[str, float]:
@@ -709,7 +704,7 @@ def plot_visits(search: Search, result: dict, path: Path) -> None:
     for (name, row), (left, right) in zip(rows.items(), axes, strict=True):
         scenario = scenarios[name]
         # a volume seen from above: its visits summed over z
-        view = scenario if scenario.dims == 2 else figures.Plane(scenario)
+        view = figures.view(scenario)
         visits = {who: figures.field(view, row[f"{who}_visits"]) for who in ("hand", "tuned")}
         top = max(visits["hand"].max(), visits["tuned"].max(), 1)
         for ax, who in ((left, "hand"), (right, "tuned")):
