@@ -114,6 +114,8 @@ class Program:
     @cached_property
     def active_terms(self) -> list[Term]:
         """The terms with every ablated term replaced by a uniform."""
+        if not self.ablated:
+            return list(self.terms)
         uniform = get_form("uniform")
         out = []
         for t in self.terms:

@@ -84,6 +84,14 @@ def test_the_methods_agree_on_a_batch():
                                    brute(tables["joint"], "A", {"B": b, "C": c}), rtol=1e-12)
 
 
+def switch(first: float, per_call: float, table) -> int:
+    """The question of a layout at which the cost model first takes the table: the first
+    question is answered without a plan (spending ``first``), each later one by contraction
+    (``per_call``) until the table's setup is paid (ski rental)."""
+    return next(k for k in range(1, 1000) if table.operations + table.fixed
+                + max(table.setup - first - (k - 1) * per_call, 0.0) < per_call)
+
+
 def test_cost_model_compiles_the_table_once_it_pays():
     """A table's compilation is a setup: the table is chosen once the questions of its layout
     have spent as much on contraction (ski rental), at once for a large batch."""
@@ -95,9 +103,11 @@ def test_cost_model_compiles_the_table_once_it_pays():
     per_call = costs["contraction"].operations + costs["contraction"].fixed
     table = costs["table"]
     assert table.setup > per_call
-    expected = next(k for k in range(1000) if table.operations + table.fixed
-                    + max(table.setup - k * per_call, 0.0) < per_call)
-    used = [program.ask("P(A | C)", {"C": k % 2}).method for k in range(expected + 5)]
+    used = [program.ask("P(A | C)", {"C": 0}).method]
+    first = plan.layout.spent  # the first question's elimination
+    assert 0 < first < table.setup
+    expected = switch(first, per_call, table)
+    used += [program.ask("P(A | C)", {"C": k % 2}).method for k in range(1, expected + 5)]
     assert used == ["contraction"] * expected + ["table"] * 5
     # a batch large enough pays for the table at once
     rows = 100_000
@@ -373,13 +383,116 @@ def test_quick_estimates_choose_as_the_full_ones_do(monkeypatch):
     costs = {method.name: cost for method, cost in ranked(plan)}
     per_call = costs["contraction"].operations + costs["contraction"].fixed
     table = costs["table"]
-    switch = next(k for k in range(12) if table.operations + table.fixed
-                  + max(table.setup - k * per_call, 0.0) < per_call)
+    program.ask("P(X9_9 | X9_0, X0_9, X4_4)", {"X9_0": 0, "X0_9": 0, "X4_4": 0})
+    at = switch(plan.layout.spent, per_call, table)
+    assert at < 12
     quick_table = {m.name: c for m, c in ranked(plan, quick=True)}["table"]
     assert quick_table.floor and quick_table.setup < table.setup  # a bound, below the cost
     quick = run()
     monkeypatch.setattr(TableMethod, "quick_estimate", TableMethod.estimate)
     full = run()
-    assert quick[0] == full[0] == ["contraction"] * switch + ["table"] * (16 - switch)
+    assert quick[0] == full[0] == ["contraction"] * at + ["table"] * (16 - at)
     for a, b in zip(quick[1], full[1], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
+# -- a layout's first question: answered by elimination, nothing planned -----------------------
+
+def random_factors(rng: np.random.Generator, names: str, count: int
+                   ) -> tuple[list[tuple[tuple[str, ...], np.ndarray]], dict[str, int]]:
+    """``count`` random positive tables over random subsets of ``names`` (2 to 4 states)."""
+    cards = {n: int(rng.integers(2, 5)) for n in names}
+    factors = []
+    for _ in range(count):
+        k = int(rng.integers(1, 4))
+        axes = tuple(str(a) for a in rng.choice(list(names), size=k, replace=False))
+        factors.append((axes, rng.uniform(0.05, 1.0, size=[cards[a] for a in axes])))
+    return factors, cards
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_eliminate_equals_one_einsum_over_every_factor(seed):
+    """Variable elimination in greedy order against numpy's einsum of all the factors at once
+    (the joint, then summed), for outputs of zero to two variables."""
+    from bayesprog.inference.contract import eliminate
+
+    rng = np.random.default_rng(seed)
+    names = "ABCDEFG"
+    factors, cards = random_factors(rng, names, int(rng.integers(2, 9)))
+    present = sorted({a for axes, _ in factors for a in axes})
+    output = tuple(str(a) for a in rng.choice(present, size=int(rng.integers(0, 3)),
+                                              replace=False))
+    output += ("Z",) if seed % 5 == 0 else ()  # a variable in no factor: uniform
+    cards["Z"] = 3
+    found = eliminate(factors, output, cards, limit=1e9)
+    assert found is not None
+    table, work = found
+    letter = {n: chr(97 + i) for i, n in enumerate(sorted(cards))}
+    text = ",".join("".join(letter[a] for a in axes) for axes, _ in factors)
+    joint = np.einsum(text + "->" + "".join(letter[a] for a in output if a != "Z"),
+                      *(t for _, t in factors))
+    if "Z" in output:
+        joint = joint[..., np.newaxis] * np.ones(3)
+    np.testing.assert_allclose(table, joint, rtol=1e-12)
+    assert work >= table.size
+    assert eliminate(factors, output, cards, limit=work - 1) is None  # refused before the end
+
+
+def test_first_question_is_answered_without_a_plan_then_planned():
+    """The first question of a layout makes no path nor compiled table; the next one of the
+    same layout is planned; both equal brute force."""
+    program, tables = chain(3)
+    first = program.ask("P(A | C)", {"C": 1})
+    layout = next(iter(program.inference_cache.layouts.values()))
+    assert layout.asked and not layout.rankings and not layout.prepared
+    assert not program.inference_cache.plans._paths  # no contraction path searched
+    second = program.ask("P(A | C)", {"C": 1})
+    assert layout.rankings and layout.prepared
+    for answer in (first, second):
+        np.testing.assert_allclose(answer.probabilities, brute(tables["joint"], "A", {"C": 1}),
+                                   rtol=1e-12)
+    np.testing.assert_allclose(first.log_evidence, second.log_evidence, rtol=1e-12)
+    # a batch, soft evidence or a named method never take that way
+    for ask in (lambda p: p.ask("P(A | C)", {"C": [0, 1]}),
+                lambda p: p.ask("P(A | C)", {"C": 1}, soft={"B": [0.2, 0.5, 0.3]}),
+                lambda p: p.ask("P(A | C)", {"C": 1}, method="contraction")):
+        fresh, _ = chain(3)
+        ask(fresh)
+        assert fresh.inference_cache.plans._paths or any(
+            layout.prepared for layout in fresh.inference_cache.layouts.values())
+
+
+def test_first_question_gives_way_to_the_plan_when_large(monkeypatch):
+    """Above FIRST_WORK entries the first question is planned (a path searched), and answers
+    as the elimination would."""
+    from bayesprog.inference.methods import contraction
+
+    question, evidence = "P(X9_9 | X9_0, X0_9, X4_4)", {"X9_0": 1, "X0_9": 0, "X4_4": 1}
+    direct = grid(10, seed=4)
+    answer = direct.ask(question, evidence)
+    assert not direct.inference_cache.plans._paths
+    monkeypatch.setattr(contraction, "FIRST_WORK", 100)
+    planned = grid(10, seed=4)
+    again = planned.ask(question, evidence)
+    assert planned.inference_cache.plans._paths
+    np.testing.assert_allclose(answer.probabilities, again.probabilities, rtol=1e-12)
+    np.testing.assert_allclose(answer.log_evidence, again.log_evidence, rtol=1e-12)
+
+
+def test_first_question_gives_way_when_the_tables_underflow():
+    """Evidence whose probability is below what the tables' arithmetic resolves (1e-400, a
+    chain of 40 observations of probability 1e-10 each): the first question falls back to
+    the planned path, whose rows are redone in log space; the answer is brute force's."""
+    lines = ["bayesprog: 1", "variables:", "  A: {states: [a0, a1]}"]
+    lines += [f"  O{i}: {{states: [o0, o1]}}" for i in range(40)]
+    lines += ["decomposition:", "  - {term: P(A), form: table, table: [0.3, 0.7]}"]
+    lines += [f"  - {{term: 'P(O{i} | A)', form: table, table: {{a0: [0.9999999999, 1e-10], "
+              f"a1: [0.99999999995, 5e-11]}}}}" for i in range(40)]
+    program = bayesprog.loads("\n".join(lines))
+    evidence = {f"O{i}": "o1" for i in range(40)}
+    answer = program.ask(f"P(A | {', '.join(evidence)})", evidence)
+    assert any(layout.prepared for layout in program.inference_cache.layouts.values())
+    log_joint = np.log([0.3, 0.7]) + 40 * np.log([1e-10, 5e-11])
+    expected = np.exp(log_joint - np.logaddexp.reduce(log_joint))
+    np.testing.assert_allclose(answer.probabilities, expected, rtol=1e-12)
+    np.testing.assert_allclose(answer.log_evidence, np.logaddexp.reduce(log_joint), rtol=1e-12)

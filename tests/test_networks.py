@@ -120,6 +120,23 @@ def test_posteriors_equal_pgmpy_and_pyagrum(networks, name):
         lazy.eraseAllEvidence()
 
 
+@pytest.mark.parametrize("name", ["alarm", "child", "insurance", "hailfinder", "hepar2"])
+def test_a_first_question_equals_the_planned_contraction(networks, name):
+    """A question asked first of a fresh program is answered by elimination, nothing planned;
+    the planned contraction (the method named) gives the same posterior and evidence
+    probability to 1e-12."""
+    net = networks[name]
+    for target, evidence in _questions(net, seed=11, n=5):
+        question = f"P({target} | {', '.join(evidence)})"
+        program = bayesprog.load(net.yaml)
+        first = program.posterior(question, evidence)
+        assert not program.inference_cache.plans._paths
+        planned = program.posterior(question, evidence, method="contraction")
+        np.testing.assert_allclose(first.probabilities, planned.probabilities, rtol=1e-12,
+                                   atol=1e-15)
+        np.testing.assert_allclose(first.log_evidence, planned.log_evidence, rtol=1e-12)
+
+
 @pytest.mark.parametrize("name", ["alarm", "child", "hepar2"])
 def test_batched_equals_single(networks, name):
     """Evidence sets that share the question go in one call and give the single answers."""

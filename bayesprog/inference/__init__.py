@@ -36,6 +36,8 @@ from bayesprog.inference.methods import (
     registered_methods,
     registry_version,
 )
+from bayesprog.inference.methods.base import PER_CALL, PER_FACTOR
+from bayesprog.inference.methods.contraction import first_question
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size, limit
@@ -63,6 +65,16 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
         else:
             rows, logs = np.repeat(row, bound.size, axis=0), np.full(bound.size, normaliser)
         return _with_evidence(plan, base.answer(plan, rows, logs, method=name))
+    if not layout.asked:
+        layout.asked = True
+        direct = first_question(plan)
+        if direct is not None:  # answered without planning the layout: see first_question
+            rows, logs, operations = direct
+            # what it spent counts towards a compiled table's setup (ski rental, below)
+            layout.spent += operations + PER_CALL + PER_FACTOR * len(plan.terms)
+            if layout.constant:
+                layout.fixed = (rows.copy(), float(logs[0]), "contraction")
+            return _with_evidence(plan, base.answer(plan, rows, logs, method="contraction"))
     size, version, cap = bound.size, registry_version(), limit("entries")
     settled = layout.settled.get((version, size, cap))
     if settled is not None:

@@ -3,6 +3,7 @@ elimination used for rows whose scaled contraction underflows."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,6 +16,10 @@ from bayesprog.variables import discrete
 
 #: Below this, a row's normaliser is recomputed in log space (underflow, or subnormal precision).
 TINY = 1e-280
+#: numpy's einsum names axes by letters: a step of :func:`eliminate` joins at most this many.
+LETTERS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+#: numpy's einsum takes at most this many operands in one call (32 before numpy 2).
+MAX_OPERANDS = 32
 
 
 def contract(program: ProgramLike, operands: list[Factor], searched: tuple[str, ...],
@@ -33,6 +38,68 @@ def contract(program: ProgramLike, operands: list[Factor], searched: tuple[str, 
         operands.append(Factor((), np.ones(size), True))
     expr = program.inference_cache.plans.get(operands, searched, batched_out)
     return expr(*(f.log for f in operands))
+
+
+def eliminate(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tuple[str, ...],
+              cards: dict[str, int], limit: float) -> tuple[np.ndarray, int] | None:
+    """The product of ``factors`` (probability tables over their axes) summed down to
+    ``output`` (in its order), and the entries its steps joined (its operations), by variable
+    elimination: each step sums out the variable whose
+    factors join into the smallest table (the first such in the order of the factors, so the
+    same factors give the same arithmetic), in one einsum over those factors. None, before
+    the step that would bring the entries its steps join past ``limit`` (their work, which
+    bounds what they allocate), or that joins more axes or operands than one einsum takes. An
+    output variable in no factor is uniform (ones)."""
+    pool: dict[int, tuple[tuple[str, ...], np.ndarray]] = dict(enumerate(factors))
+    holders: dict[str, dict[int, None]] = {}
+    for i, (axes, _) in pool.items():
+        for a in axes:
+            holders.setdefault(a, {})[i] = None
+    todo = [a for a in holders if a not in output]
+    made, work = len(pool), 0
+    while todo:
+        best: tuple[int, str, dict[str, None]] | None = None
+        for name in todo:
+            joined = {a: None for i in holders[name] for a in pool[i][0]}
+            size = math.prod(cards[a] for a in joined)
+            if best is None or size < best[0]:
+                best = (size, name, joined)
+        assert best is not None
+        size, name, joined = best
+        taken = holders.pop(name)
+        work += size
+        if work > limit or len(joined) > len(LETTERS) or len(taken) > MAX_OPERANDS:
+            return None
+        todo.remove(name)
+        letter = dict(zip(joined, LETTERS, strict=False))
+        kept = tuple(a for a in joined if a != name)
+        operands = [pool.pop(i) for i in taken]
+        text = ",".join("".join(letter[a] for a in axes) for axes, _ in operands)
+        result = np.einsum(text + "->" + "".join(letter[a] for a in kept),
+                           *(table for _, table in operands))
+        for i in taken:
+            for a in joined:
+                if a != name:
+                    holders[a].pop(i, None)
+        pool[made] = (kept, result)
+        for a in kept:
+            holders[a][made] = None
+        made += 1
+    cards_out = [cards[a] for a in output]
+    work += math.prod(cards_out)
+    if work > limit:
+        return None
+    operands = list(pool.values())
+    operands += [((a,), np.ones(card)) for a, card in zip(output, cards_out, strict=True)
+                 if a not in holders]
+    if len(operands) > MAX_OPERANDS:
+        return None
+    letter = dict(zip(output, LETTERS, strict=False))
+    text = ",".join("".join(letter[a] for a in axes) for axes, _ in operands)
+    if not operands:
+        return np.ones(cards_out), work
+    return np.einsum(text + "->" + "".join(letter[a] for a in output),
+                     *(table for _, table in operands)), work
 
 
 def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]],

@@ -75,6 +75,23 @@ def static_table(program: ProgramLike, term: Term) -> tuple[np.ndarray, float]:
     return found
 
 
+def plain_table(program: ProgramLike, term: Term
+                ) -> tuple[tuple[str, ...], np.ndarray, float] | None:
+    """A static term's table with its axes and the log of what it was divided by: a table
+    given as probabilities as the program holds it (parents' axes, then the child's: nothing
+    made), any other static term as :func:`static_table` makes it; None for a term that reads
+    evidence values or inputs."""
+    if not is_static(term):
+        return None
+    param = next(iter(term.params.values()), None) if len(term.params) == 1 else None
+    if (isinstance(term.form, Categorical) and isinstance(param, ParamValue)
+            and not param.batched and param.axes == tuple(p.name for p in term.parents)
+            and param.array.dtype == np.float64):
+        return param.axes + (term.child.name,), param.array, 0.0
+    table, top = static_table(program, term)
+    return term.axes, table, top
+
+
 def _bound_param(term: Term, key: str, ref: InputRef, bound: Bound) -> ParamValue:
     """An input bound to a parameter, checked against the parameter's declaration."""
     if ref.name not in bound.inputs:

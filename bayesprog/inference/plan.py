@@ -16,9 +16,9 @@ import numpy as np
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import equation
-from bayesprog.inference.factors import is_static, latent_continuous, relevant_terms
+from bayesprog.inference.factors import is_static, latent_continuous
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.inference.relevance import requisite_terms
+from bayesprog.inference.relevance import family, requisite
 from bayesprog.language.check import Term
 
 #: (searched, observed discrete, observed continuous, inputs, soft evidence): names only
@@ -76,43 +76,70 @@ class Layout:
     #: when the answer is :attr:`constant`: its one row of probabilities, the log of its
     #: normaliser, and the method that made it
     fixed: tuple[np.ndarray, float, str] | None = None
+    #: whether a question of this layout was asked (the first is answered without a plan)
+    asked: bool = False
 
     @property
     def searched(self) -> tuple[str, ...]:
         return self.key[0]
 
     @once
-    def ancestral_terms(self) -> list[Term]:
-        """The terms of the ancestors of searched, observed and soft-evidence variables."""
+    def ancestral_names(self) -> set[str]:
+        """The searched, observed and soft-evidence variables and their ancestors (with the
+        variables of unnormalised terms: see :func:`~bayesprog.inference.factors.
+        relevant_terms`)."""
         searched, observed, continuous, _, soft = self.key
-        return relevant_terms(self.program, searched, observed + continuous, soft)
+        graph = family(self.program)
+        return graph.ancestors({*searched, *observed, *continuous, *soft, *graph.unnormalised})
+
+    @once
+    def ancestral_terms(self) -> list[Term]:
+        """The terms of :attr:`ancestral_names`, in the program's order."""
+        names = self.ancestral_names
+        return [t for t in self.program.active_terms if t.child.name in names]
 
     @once
     def latent(self) -> list[str]:
         """The unknown continuous variables that matter (searched, or parents of a relevant
         term): only the methods for continuous variables answer when there are some."""
+        if not family(self.program).continuous:
+            return []
         return latent_continuous(self.ancestral_terms, set(self.key[2]))
 
     @once
-    def terms(self) -> list[Term]:
-        """The requisite terms (:mod:`~bayesprog.inference.relevance`) when every unknown
-        variable is discrete, else the ancestral ones."""
+    def requisite_names(self) -> set[str] | None:
+        """The variables whose terms the answer needs (:mod:`~bayesprog.inference.relevance`)
+        when every unknown variable is discrete; None: those of :attr:`ancestral_names`."""
         searched, observed, continuous, _, soft = self.key
         if self.latent or not searched:
+            return None
+        return requisite(self.program, searched, observed + continuous, soft)
+
+    @once
+    def terms(self) -> list[Term]:
+        """The requisite terms when every unknown variable is discrete, else the ancestral
+        ones, in the program's order (soft-evidence terms of the program with the variables
+        they are on)."""
+        names = self.requisite_names
+        if names is None:
             return self.ancestral_terms
-        found = requisite_terms(self.program, searched, observed + continuous, soft)
-        return self.ancestral_terms if found is None else found
+        return [t for t in self.program.active_terms if t.child.name in names]
+
+    @once
+    def touched(self) -> set[str]:
+        """The variables the terms read (children and parents)."""
+        return {v.name for t in self.terms for v in (t.child, *t.parents)}
 
     @once
     def pruned(self) -> bool:
         """Whether the requisite terms leave out some the evidence depends on: the answer's
-        normaliser is then not the evidence's probability, which is computed when asked."""
-        if self.terms is self.ancestral_terms:
+        normaliser is then not the evidence's probability, which is computed when asked.
+        (Every variable has a term: fewer variables are fewer terms.)"""
+        names = self.requisite_names
+        if names is None:
             return False
-        touched = {v.name for t in self.terms for v in (t.child, *t.parents)}
-        return len(self.terms) < len(self.ancestral_terms) or any(
-            name not in touched for name in self.key[1] + self.key[2] + self.key[4])
-
+        return len(names) < len(self.ancestral_names) or any(
+            name not in self.touched for name in self.key[1] + self.key[2] + self.key[4])
 
     @once
     def constant(self) -> bool:
@@ -122,9 +149,8 @@ class Layout:
         searched, observed, continuous, inputs, soft = self.key
         if inputs or soft or not searched or self.latent:
             return False
-        touched = {v.name for t in self.terms for v in (t.child, *t.parents)}
         return all(is_static(t) for t in self.terms) and not any(
-            name in touched for name in observed + continuous)
+            name in self.touched for name in observed + continuous)
 
     @once
     def cards(self) -> tuple[int, ...]:

@@ -19,7 +19,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.language.check import Term
 
 
 @dataclass
@@ -33,6 +32,8 @@ class Family:
     soft: set[str] = field(default_factory=set)
     #: variables whose term is unnormalised (a potential) or soft evidence
     unnormalised: set[str] = field(default_factory=set)
+    #: the real (continuous) variables
+    continuous: set[str] = field(default_factory=set)
 
     def ancestors(self, names: Iterable[str]) -> set[str]:
         """``names`` and all their ancestors."""
@@ -59,6 +60,8 @@ def family(program: ProgramLike) -> Family:
                 continue
             if not t.form.is_normalized(t.child):
                 found.unnormalised.add(name)
+            if not t.child.is_discrete:
+                found.continuous.add(name)
             found.parents[name] = [p.name for p in t.parents]
             for p in t.parents:
                 found.children.setdefault(p.name, []).append(name)
@@ -99,13 +102,3 @@ def requisite(program: ProgramLike, searched: Iterable[str], observed: Iterable[
             if name in virtual:  # the virtual child is observed: the ball comes back up
                 schedule.append((name, True))
     return top
-
-
-def requisite_terms(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
-                    soft: Iterable[str] = ()) -> list[Term] | None:
-    """The terms of :func:`requisite` in the program's order (soft-evidence terms of the
-    program on requisite variables with them), or None as it returns."""
-    names = requisite(program, searched, observed, soft)
-    if names is None:
-        return None
-    return [t for t in program.active_terms if t.child.name in names]

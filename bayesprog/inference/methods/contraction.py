@@ -12,9 +12,15 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.contract import TINY, contract, log_contract
+from bayesprog.inference.contract import TINY, contract, eliminate, log_contract
 from bayesprog.inference.core import Factor
-from bayesprog.inference.factors import is_static, question_factors, rescaled, static_table
+from bayesprog.inference.factors import (
+    is_static,
+    plain_table,
+    question_factors,
+    rescaled,
+    static_table,
+)
 from bayesprog.inference.methods.base import (
     PER_CALL,
     PER_FACTOR,
@@ -25,6 +31,7 @@ from bayesprog.inference.methods.base import (
     register_method,
 )
 from bayesprog.inference.plan import QuestionPlan
+from bayesprog.limits import limit
 
 
 @register_method
@@ -58,6 +65,59 @@ def contract_question(plan: QuestionPlan) -> Posterior:
     return answer(plan, *_normalised(plan, operands, offset, plan.searched,
                                      lambda: question_factors(plan.program, plan.terms,
                                                               plan.bound)))
+
+
+#: The entries the steps of a layout's first question may join in all (about 10 ms of
+#: einsum): beyond, the question is planned (a path search that may find smaller steps,
+#: checked against the memory limit) as every later question of its layout is.
+FIRST_WORK = 1 << 23
+
+
+def first_question(plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """The answer to the first question of a layout, when it has one row of evidence on
+    discrete variables and every requisite term is a table: the tables sliced by the evidence
+    and the unobserved variables eliminated one at a time (:func:`~bayesprog.inference.
+    contract.eliminate`), with nothing planned nor compiled. The normalised table
+    ``[1] + cards`` and the log normaliser ``[1]``, as :meth:`Sliceable.one_row` gives them,
+    and the operations it took; None when the question needs the planned path (other evidence, steps above
+    ``FIRST_WORK`` entries in all, or probabilities below what the tables' arithmetic resolves).
+
+    Planning a question (its path searched, its tables made ready to slice, its runner built)
+    costs several times what answering it this way does, and pays off only over the questions
+    of a layout asked again: the cost model plans a layout at its second question."""
+    bound, program = plan.bound, plan.program
+    if bound.size != 1 or bound.continuous or bound.inputs or bound.soft or not plan.searched \
+            or plan.latent:
+        return None
+    values = {k: v if type(v) is int else int(np.ravel(v)[0]) for k, v in bound.discrete.items()}
+    factors: list[tuple[tuple[str, ...], np.ndarray]] = []
+    cards: dict[str, int] = {}
+    scale, log_scale = 1.0, 0.0
+    for term in plan.terms:
+        found = plain_table(program, term)
+        if found is None:
+            return None
+        axes, table, top = found
+        log_scale += top
+        if any(a in values for a in axes):
+            table = table[tuple(values[a] if a in values else slice(None) for a in axes)]
+            axes = tuple(a for a in axes if a not in values)
+            if not axes:
+                scale *= float(table)
+                continue
+        factors.append((axes, table))
+        cards.update(zip(axes, table.shape, strict=True))
+    for name in plan.searched:
+        cards.setdefault(name, plan.card(name))
+    eliminated = eliminate(factors, plan.searched, cards, min(FIRST_WORK, limit("entries")))
+    if eliminated is None:
+        return None
+    table, work = eliminated
+    total = float(table.sum())
+    if not (TINY < total < math.inf and TINY < scale):
+        return None
+    return (table / total)[np.newaxis], np.array([math.log(total) + math.log(scale)
+                                                  + log_scale]), work
 
 
 class Sliceable:
