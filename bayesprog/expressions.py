@@ -15,6 +15,11 @@ from bayesprog.errors import BayesprogError
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 _SHAPE = re.compile(r"^\s*P\s*\((?P<body>.*)\)\s*$", re.DOTALL)
+_N = r"[A-Za-z_][A-Za-z0-9_.\-]*"
+#: ``P(A B | C, D)`` without values: the common case, read by one match
+_PLAIN = re.compile(rf"\s*P\s*\(\s*({_N}(?:[\s,]+{_N})*)\s*(?:\|\s*({_N}(?:\s*,\s*{_N})*)\s*)?\)\s*")
+_SPLIT_LEFT = re.compile(r"[\s,]+")
+_SPLIT_RIGHT = re.compile(r"\s*,\s*")
 
 
 class ExpressionError(BayesprogError, ValueError):
@@ -59,6 +64,17 @@ def parse_expression(text: str) -> Expression:
     """Parse ``P(A B | C, D=d)``. Names on the left are separated by spaces or commas."""
     if not isinstance(text, str):
         raise ExpressionError(f"expected a string like 'P(A | B)', found {text!r}")
+    plain = _PLAIN.fullmatch(text)
+    if plain is not None:  # names only: one match
+        left = _SPLIT_LEFT.split(plain[1])
+        right = _SPLIT_RIGHT.split(plain[2]) if plain[2] else []
+        if len({*left, *right}) == len(left) + len(right):
+            return Expression(tuple(left), tuple(right), {})
+    return _parse_general(text)
+
+
+def _parse_general(text: str) -> Expression:
+    """:func:`parse_expression` of any text, saying what is wrong with it."""
     match = _SHAPE.match(text)
     if not match:
         raise ExpressionError(f"expected the form 'P(A B | C, D=d)', found {text!r}")

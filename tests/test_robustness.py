@@ -339,3 +339,30 @@ questions:
                            "other in a circle (a.yaml -> b.yaml -> a.yaml): expected a program "
                            "that does not lead back to this one")
     assert "(self.yaml -> self.yaml)" in err[2]
+
+
+_NAMES = st.sampled_from(["A", "B", "b_2", "x.y", "r-1", "A"])
+_GAP = st.sampled_from(["", " ", "  ", ",", " , ", "\t"])
+
+
+@settings(max_examples=300, deadline=None)
+@given(left=st.lists(st.tuples(_NAMES, _GAP), min_size=0, max_size=3),
+       right=st.lists(st.tuples(_NAMES, _GAP, st.sampled_from(["", "=s1", "= 2"])),
+                      min_size=0, max_size=3),
+       bar=st.sampled_from(["|", " | ", "", "||"]), pad=_GAP)
+def test_the_quick_reading_of_a_question_is_the_general_one(left, right, bar, pad):
+    """Texts of names only are read by one match; any text reads (or fails) as the general
+    parser reads it."""
+    from bayesprog.expressions import ExpressionError, _parse_general, parse_expression
+
+    text = (f"{pad}P({pad}" + "".join(n + g for n, g in left) + bar
+            + ",".join(n + g + v for n, g, v in right) + f"){pad}")
+
+    def read(parse):
+        try:
+            e = parse(text)
+        except ExpressionError as exc:
+            return str(exc)
+        return e.left, e.right, e.values
+
+    assert read(parse_expression) == read(_parse_general)

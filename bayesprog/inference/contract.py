@@ -92,12 +92,17 @@ def eliminate(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tuple[s
     operands = list(pool.values())
     operands += [((a,), np.ones(card)) for a, card in zip(output, cards_out, strict=True)
                  if a not in holders]
+    if not operands:
+        return np.ones(cards_out), work
+    if all(axes == output for axes, _ in operands):  # a product, entry by entry
+        product = operands[0][1].copy()
+        for _, table in operands[1:]:
+            product *= table
+        return product, work
     if len(operands) > MAX_OPERANDS:
         return None
     letter = dict(zip(output, LETTERS, strict=False))
     text = ",".join("".join(letter[a] for a in axes) for axes, _ in operands)
-    if not operands:
-        return np.ones(cards_out), work
     return np.einsum(text + "->" + "".join(letter[a] for a in output),
                      *(table for _, table in operands)), work
 
