@@ -452,6 +452,11 @@ def test_first_question_is_answered_without_a_plan_then_planned():
         np.testing.assert_allclose(answer.probabilities, brute(tables["joint"], "A", {"C": 1}),
                                    rtol=1e-12)
     np.testing.assert_allclose(first.log_evidence, second.log_evidence, rtol=1e-12)
+    # a batch of one row is one row
+    fresh, _ = chain(3)
+    one = fresh.ask("P(A | C)", {"C": np.array([1])})
+    assert one.probabilities.shape == (1, 2) and not fresh.inference_cache.plans._paths
+    np.testing.assert_allclose(one.probabilities[0], first.probabilities, rtol=1e-12)
     # a batch, soft evidence or a named method never take that way
     for ask in (lambda p: p.ask("P(A | C)", {"C": [0, 1]}),
                 lambda p: p.ask("P(A | C)", {"C": 1}, soft={"B": [0.2, 0.5, 0.3]}),

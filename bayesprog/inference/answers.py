@@ -236,6 +236,7 @@ def zero_rows_message(posterior: Posterior | Density) -> str:
 
 def check_zero(posterior: Posterior | Density) -> None:
     known = getattr(posterior, "impossible", None)
-    # NaN in log_evidence: a method that estimates no evidence
-    if (known if known is not None else np.asarray(posterior.log_evidence) == -np.inf).any():
+    if known is None:  # NaN in log_evidence: a method that estimates no evidence
+        known = np.asarray(posterior.log_evidence) == -np.inf
+    if known.any() if known.ndim else known:  # (one row: its truth, without a reduction)
         raise ZeroEvidenceError(zero_rows_message(posterior))
