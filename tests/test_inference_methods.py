@@ -151,6 +151,9 @@ def test_a_registered_method_is_used_when_it_is_the_cheapest(monkeypatch):
 
     answer = program.ask("P(B | A)", {"A": "a1"})
     assert calls and answer.probabilities.tolist() == pytest.approx([1 / 3] * 3)
+    # from the first question of a layout: a method from outside the package is ranked at once
+    fresh, _ = chain(2)
+    assert fresh.ask("P(B | A)", {"A": "a1"}).method == "uniform-for-test"
 
 
 def test_one_row_and_batched_answers_agree_on_every_path():
@@ -457,6 +460,10 @@ def test_first_question_is_answered_without_a_plan_then_planned():
     one = fresh.ask("P(A | C)", {"C": np.array([1])})
     assert one.probabilities.shape == (1, 2) and not fresh.inference_cache.plans._paths
     np.testing.assert_allclose(one.probabilities[0], first.probabilities, rtol=1e-12)
+    # a question that named its method has prepared the layout: the next one uses it
+    named, _ = chain(3)
+    named.ask("P(A | C)", {"C": 0}, method="table")
+    assert named.ask("P(A | C)", {"C": 1}).method == "table"
     # a batch, soft evidence or a named method never take that way
     for ask in (lambda p: p.ask("P(A | C)", {"C": [0, 1]}),
                 lambda p: p.ask("P(A | C)", {"C": 1}, soft={"B": [0.2, 0.5, 0.3]}),

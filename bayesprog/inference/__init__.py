@@ -36,7 +36,7 @@ from bayesprog.inference.methods import (
     registered_methods,
     registry_version,
 )
-from bayesprog.inference.methods.base import PER_CALL, PER_FACTOR
+from bayesprog.inference.methods.base import PER_CALL, PER_FACTOR, own_methods_only
 from bayesprog.inference.methods.contraction import first_question
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
@@ -53,10 +53,14 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                       options: Mapping[str, Any] | None = None) -> Posterior | Density:
     """The posterior of ``question`` for bound evidence (a density when it searches real
     variables): by ``method`` when it is named, else by the cheapest exact method that answers
-    (or, when none does, the cheapest approximate one that states its error)."""
+    (or, when none does, the cheapest approximate one that states its error). The first
+    question of a layout is answered by elimination without ranking the methods when it can
+    (:func:`~bayesprog.inference.methods.contraction.first_question`), unless a method from
+    outside the package is registered."""
     plan = QuestionPlan(program, question, bound, dict(options) if options else {})
     layout = plan.layout
     if method is not None:
+        layout.asked = True  # its method prepares what the layout's later questions use
         return _with_evidence(plan, _by(method, plan), registered_methods()[method].exact)
     if layout.fixed is not None:  # the same answer whatever the evidence's values
         row, normaliser, name = layout.fixed
@@ -65,7 +69,7 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
         else:
             rows, logs = np.repeat(row, bound.size, axis=0), np.full(bound.size, normaliser)
         return _with_evidence(plan, base.answer(plan, rows, logs, method=name))
-    if not layout.asked:
+    if not layout.asked and own_methods_only():  # (a method of one's own is ranked at once)
         layout.asked = True
         direct = first_question(plan)
         if direct is not None:  # answered without planning the layout: see first_question

@@ -3,6 +3,7 @@ elimination used for rows whose scaled contraction underflows."""
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -18,7 +19,8 @@ from bayesprog.variables import discrete
 TINY = 1e-280
 #: numpy's einsum names axes by letters: a step of :func:`eliminate` joins at most this many.
 LETTERS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
-#: numpy's einsum takes at most this many operands in one call (32 before numpy 2).
+#: numpy's einsum takes at most 32 operands in one call before numpy 2 (64 from it): a step of
+#: :func:`eliminate` takes at most this many, whichever numpy is installed.
 MAX_OPERANDS = 32
 
 
@@ -43,48 +45,55 @@ def contract(program: ProgramLike, operands: list[Factor], searched: tuple[str, 
 def eliminate(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tuple[str, ...],
               cards: dict[str, int], limit: float) -> tuple[np.ndarray, int] | None:
     """The product of ``factors`` (probability tables over their axes) summed down to
-    ``output`` (in its order), and the entries its steps joined (its operations), by variable
-    elimination: each step sums out the variable whose
-    factors join into the smallest table (the first such in the order of the factors, so the
-    same factors give the same arithmetic), in one einsum over those factors. None, before
-    the step that would bring the entries its steps join past ``limit`` (their work, which
-    bounds what they allocate), or that joins more axes or operands than one einsum takes. An
-    output variable in no factor is uniform (ones)."""
+    ``output`` (in its order), a new array, and the entries its steps joined (its operations),
+    by variable elimination: each step sums out the variable whose factors join into the
+    smallest table (of equal ones, the first to appear in the factors, so the same factors give
+    the same arithmetic), in one einsum over those factors. The sizes wait in a heap, and a
+    step recomputes only those of the variables it joined: choosing costs a logarithm per
+    change, not a scan of every variable. None, before the step that would bring the entries
+    its steps join past ``limit`` (their work, which bounds what they allocate), or that joins
+    more axes or operands than one einsum takes. An output variable in no factor is uniform
+    (ones)."""
     pool: dict[int, tuple[tuple[str, ...], np.ndarray]] = dict(enumerate(factors))
     holders: dict[str, dict[int, None]] = {}
     for i, (axes, _) in pool.items():
         for a in axes:
             holders.setdefault(a, {})[i] = None
-    todo = [a for a in holders if a not in output]
+    rank = {a: r for r, a in enumerate(a for a in holders if a not in output)}
+
+    def joined_by(name: str) -> dict[str, None]:
+        return {a: None for i in holders[name] for a in pool[i][0]}
+
+    size_of = {a: math.prod(cards[b] for b in joined_by(a)) for a in rank}
+    heap = [(size, rank[a], a) for a, size in size_of.items()]
+    heapq.heapify(heap)
     made, work = len(pool), 0
-    while todo:
-        best: tuple[int, str, dict[str, None]] | None = None
-        for name in todo:
-            joined = {a: None for i in holders[name] for a in pool[i][0]}
-            size = math.prod(cards[a] for a in joined)
-            if best is None or size < best[0]:
-                best = (size, name, joined)
-        assert best is not None
-        size, name, joined = best
+    while heap:
+        size, _, name = heapq.heappop(heap)
+        if size_of.get(name) != size:
+            continue  # eliminated, or its size changed since
+        del size_of[name]
+        joined = joined_by(name)
         taken = holders.pop(name)
         work += size
         if work > limit or len(joined) > len(LETTERS) or len(taken) > MAX_OPERANDS:
             return None
-        todo.remove(name)
         letter = dict(zip(joined, LETTERS, strict=False))
         kept = tuple(a for a in joined if a != name)
         operands = [pool.pop(i) for i in taken]
         text = ",".join("".join(letter[a] for a in axes) for axes, _ in operands)
         result = np.einsum(text + "->" + "".join(letter[a] for a in kept),
                            *(table for _, table in operands))
-        for i in taken:
-            for a in joined:
-                if a != name:
-                    holders[a].pop(i, None)
-        pool[made] = (kept, result)
         for a in kept:
+            for i in taken:
+                holders[a].pop(i, None)
             holders[a][made] = None
+        pool[made] = (kept, result)
         made += 1
+        for a in kept:
+            if a in size_of:
+                size_of[a] = math.prod(cards[b] for b in joined_by(a))
+                heapq.heappush(heap, (size_of[a], rank[a], a))
     cards_out = [cards[a] for a in output]
     work += math.prod(cards_out)
     if work > limit:
@@ -103,8 +112,9 @@ def eliminate(factors: list[tuple[tuple[str, ...], np.ndarray]], output: tuple[s
         return None
     letter = dict(zip(output, LETTERS, strict=False))
     text = ",".join("".join(letter[a] for a in axes) for axes, _ in operands)
-    return np.einsum(text + "->" + "".join(letter[a] for a in output),
-                     *(table for _, table in operands)), work
+    found = np.einsum(text + "->" + "".join(letter[a] for a in output),
+                      *(table for _, table in operands))
+    return (found if found.flags.owndata else found.copy()), work  # never a program's table
 
 
 def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]],

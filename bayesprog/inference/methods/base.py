@@ -127,3 +127,9 @@ def registry_version() -> int:
 def registered_methods() -> dict[str, Method]:
     """The registered methods by name, in registration order."""
     return dict(_METHODS)
+
+
+def own_methods_only() -> bool:
+    """Whether every registered method is one of this package's (no method registered from
+    outside it, which the cost model must weigh from a layout's first question)."""
+    return all(type(m).__module__.startswith("bayesprog.") for m in _METHODS.values())
