@@ -222,7 +222,7 @@ def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> di
         try:
             with time_budget(PEER_BUDGET):
                 row[key]["pgmpy"] = 1e3 * statistics.median(cold_pgmpy(flush)
-                                                             for _ in range(repeats))
+                                                             for _ in range(cold_repeats))
         except (MemoryError, TimeoutError):  # an order of pgmpy's greedy heuristic too large
             row[key]["pgmpy"] = float("nan")
         row[key]["pyagrum"] = 1e3 * statistics.median(cold_agrum(flush)
