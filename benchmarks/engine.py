@@ -561,7 +561,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"measured the {n} x {n} grid", file=sys.stderr)
         table_method.TABLE_LIMIT = TABLE_LIMIT
         model = cost_model(args.networks, [n for n in args.grids if n <= 16] or [12, 16],
-                           min(args.repeats, 3), Path(tmp))
+                           max(args.repeats, 7), Path(tmp))
         print("measured the cost model", file=sys.stderr)
     print(table(rows))
     if approximate:
