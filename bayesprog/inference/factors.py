@@ -20,16 +20,27 @@ from bayesprog.language.check import Term
 from bayesprog.variables import Continuous, discrete
 
 
-def relevant_terms(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
-                   soft: Iterable[str] = ()) -> list[Term]:
-    """The terms of ancestors of searched, observed or soft-evidence variables.
+def relevant_names(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
+                   soft: Iterable[str] = ()) -> set[str]:
+    """The searched, observed and soft-evidence variables and all their ancestors.
 
     A barren variable (no observed descendant, not searched) sums out to one with its term,
     unless a term is unnormalised (a potential): those children are always kept.
     """
     graph = family(program)
-    keep = graph.ancestors({*searched, *observed, *soft, *graph.unnormalised})
-    return [t for t in program.active_terms if t.child.name in keep]
+    return graph.ancestors({*searched, *observed, *soft, *graph.unnormalised})
+
+
+def terms_of(program: ProgramLike, names: Collection[str]) -> list[Term]:
+    """The program's terms (ablations applied) of the variables ``names``, in its order (with
+    the soft-evidence terms it writes on them)."""
+    return [t for t in program.active_terms if t.child.name in names]
+
+
+def relevant_terms(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],
+                   soft: Iterable[str] = ()) -> list[Term]:
+    """The terms of :func:`relevant_names`."""
+    return terms_of(program, relevant_names(program, searched, observed, soft))
 
 
 def latent_continuous(terms: list[Term], observed: Collection[str]) -> list[str]:

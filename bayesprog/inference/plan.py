@@ -16,7 +16,12 @@ import numpy as np
 from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import equation
-from bayesprog.inference.factors import is_static, latent_continuous
+from bayesprog.inference.factors import (
+    is_static,
+    latent_continuous,
+    relevant_names,
+    terms_of,
+)
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family, requisite
 from bayesprog.language.check import Term
@@ -85,18 +90,15 @@ class Layout:
 
     @once
     def ancestral_names(self) -> set[str]:
-        """The searched, observed and soft-evidence variables and their ancestors (with the
-        variables of unnormalised terms: see :func:`~bayesprog.inference.factors.
-        relevant_terms`)."""
+        """The searched, observed and soft-evidence variables and their ancestors
+        (:func:`~bayesprog.inference.factors.relevant_names`)."""
         searched, observed, continuous, _, soft = self.key
-        graph = family(self.program)
-        return graph.ancestors({*searched, *observed, *continuous, *soft, *graph.unnormalised})
+        return relevant_names(self.program, searched, observed + continuous, soft)
 
     @once
     def ancestral_terms(self) -> list[Term]:
         """The terms of :attr:`ancestral_names`, in the program's order."""
-        names = self.ancestral_names
-        return [t for t in self.program.active_terms if t.child.name in names]
+        return terms_of(self.program, self.ancestral_names)
 
     @once
     def latent(self) -> list[str]:
@@ -121,9 +123,7 @@ class Layout:
         ones, in the program's order (soft-evidence terms of the program with the variables
         they are on)."""
         names = self.requisite_names
-        if names is None:
-            return self.ancestral_terms
-        return [t for t in self.program.active_terms if t.child.name in names]
+        return self.ancestral_terms if names is None else terms_of(self.program, names)
 
     @once
     def touched(self) -> set[str]:

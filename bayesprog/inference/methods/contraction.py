@@ -12,6 +12,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayesprog.inference.answers import Posterior
+from bayesprog.inference.binding import Bound
 from bayesprog.inference.contract import TINY, contract, eliminate, log_contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import (
@@ -75,6 +76,13 @@ def contract_question(plan: QuestionPlan) -> Posterior:
 FIRST_WORK = 1 << 20
 
 
+def _one_row(bound: Bound) -> dict[str, int]:
+    """The observed discrete values of a one-row ``bound`` (a batch of one row, or none)."""
+    if not bound.batch_shape:  # nothing batched: numbers
+        return bound.discrete  # type: ignore[return-value]
+    return {k: int(np.ravel(v)[0]) for k, v in bound.discrete.items()}
+
+
 def first_question(plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | None:
     """The answer to the first question of a layout, when it has one row of evidence on
     discrete variables and every requisite term is a table: the tables sliced by the evidence
@@ -92,8 +100,7 @@ def first_question(plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | N
     if bound.size != 1 or bound.continuous or bound.inputs or bound.soft or not plan.searched \
             or plan.latent:
         return None
-    values = bound.discrete if not bound.batch_shape else {  # a batch of one row
-        k: int(np.ravel(v)[0]) for k, v in bound.discrete.items()}
+    values = _one_row(bound)
     factors: list[tuple[tuple[str, ...], np.ndarray]] = []
     cards: dict[str, int] = {}
     scale, log_scale = 1.0, 0.0
@@ -151,8 +158,7 @@ class Sliceable:
         """The answer to one row of evidence when every term is prepared, in scalars: the
         normalised table ``[1] + cards`` and the log normaliser ``[1]``; None when it needs
         the general path (a probability below what scaled arithmetic resolves)."""
-        values = {k: v if type(v) is int else int(np.ravel(v)[0])
-                  for k, v in plan.bound.discrete.items()}
+        values = _one_row(plan.bound)
         arrays: list[np.ndarray] = []
         scale = 1.0
         for fixed, rest, table in self.tables:
