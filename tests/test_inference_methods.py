@@ -220,8 +220,9 @@ def test_an_independent_target_is_answered_from_its_own_terms():
 
 
 def test_the_contraction_runner_matches_numpy_einsum():
-    """The step-by-step runner (einsum steps, tensordot for large matrix products) against
-    one numpy einsum, on random equations, batched or not."""
+    """The step-by-step runner (einsum steps, aligned for large ones, tensordot for large
+    matrix products, stacks of them) against one numpy einsum, on random equations, batched or
+    not."""
     from bayesprog.inference.core import Contraction, contraction_path, equation
 
     rng = np.random.default_rng(11)
@@ -244,7 +245,33 @@ def test_the_contraction_runner_matches_numpy_einsum():
         runner = Contraction(info)
         kinds |= {kind for _, kind, _ in runner.steps}
         np.testing.assert_allclose(runner(*arrays), expected, rtol=1e-12)
-    assert kinds == {"einsum", "tensordot", "matmul"}  # every kind of step was run
+    assert kinds == {"einsum", "aligned", "tensordot", "matmul"}  # every kind was run
+
+
+def test_an_aligned_einsum_equals_numpy_einsum_whatever_the_layouts():
+    """Small operands laid out in the largest's memory order give numpy einsum's answer, when
+    the largest is itself a transposed view, with summed, kept and broadcast indices."""
+    from bayesprog.inference.core import aligned_einsum
+
+    rng = np.random.default_rng(5)
+    letters = "abcdefghijklmn"
+    for _ in range(60):
+        n = int(rng.integers(4, 13))
+        big = "".join(letters[:n])
+        cards = {s: int(rng.integers(1, 4)) for s in big}
+        smalls = [tuple(rng.choice(list(big), size=int(rng.integers(1, 4)), replace=False))
+                  for _ in range(int(rng.integers(1, 3)))]
+        kept = [s for s in big if rng.random() < 0.7]
+        output = "".join(rng.permutation(kept)) if rng.random() < 0.5 else "".join(kept)
+        array = rng.random(tuple(cards[s] for s in big))
+        if rng.random() < 0.5:  # the largest as a view in another memory order
+            order = rng.permutation(n)
+            array = np.ascontiguousarray(array.transpose(order)).transpose(np.argsort(order))
+        others = [rng.random(tuple(cards[s] for s in t)) for t in smalls]
+        subscripts = ",".join([big, *("".join(t) for t in smalls)]) + "->" + output
+        np.testing.assert_allclose(aligned_einsum(subscripts, array, *others),
+                                   np.einsum(subscripts, array, *others), rtol=1e-12,
+                                   atol=1e-300)
 
 
 def _letters(equation: str) -> dict[int, str]:

@@ -42,10 +42,10 @@ PER_FACTOR = 2e4
 #: lookups, the answer: about 12 microseconds, measured by benchmarks/engine.py).
 PER_CALL = 1.4e4
 #: What a factor prepared once per layout (a term that reads no evidence value) costs a
-#: contraction's call beyond its operations: an index into its table and one einsum step,
-#: whose loops over many small indices run slower than their operations count (from about 3
-#: microseconds on the bnlearn networks to 40 on a 12 x 12 grid; 8 keeps both within 3x).
-PER_PREPARED = 8e3
+#: contraction's call beyond its operations: an index into its table and one einsum step
+#: (about 2.4 microseconds, fitted over the bnlearn networks and grids of 6 x 6 to 16 x 16 in
+#: benchmarks/engine.py, with ``PER_CALL`` and one rate for the operations).
+PER_PREPARED = 3e3
 
 
 class Method:

@@ -84,14 +84,14 @@ class TableMethod(Method):
             return Cost(operations=float(bound.size * lookup), memory=float(joint),
                         fixed=PER_CALL)
         # compiling builds every factor whole and contracts them with the observed variables
-        # left open, on the path the full estimate has just found: measured
-        # (benchmarks/engine.py) at the contraction's time per operation, 1.3 times its time
-        # per factor and seven factors' worth of fixed work (finding the terms, storing the
-        # table); its operations are at least one per entry of the table (the bound of a quick
-        # estimate, which spares the path search)
+        # left open, on the path the full estimate has just found: fitted (benchmarks/engine.py,
+        # the bnlearn networks and grids of 6 x 6 to 16 x 16) at the contraction's time per
+        # operation, 1.2 times its time per factor and five and a half factors' worth of fixed
+        # work (finding the terms, storing the table); its operations are at least one per
+        # entry of the table (the bound of a quick estimate, which spares the path search)
         compile_ops, compile_memory = (plan.contraction_cost(observed + searched, sliced=False)
                                        if full else (float(joint), float(joint)))
-        setup = compile_ops + PER_FACTOR * (7 + 1.3 * len(plan.terms))
+        setup = compile_ops + PER_FACTOR * (5.5 + 1.2 * len(plan.terms))
         return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory),
                     fixed=PER_CALL, setup=setup, floor=not full)
 
