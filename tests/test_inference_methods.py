@@ -250,7 +250,8 @@ def test_the_contraction_runner_matches_numpy_einsum():
 
 def test_an_aligned_einsum_equals_numpy_einsum_whatever_the_layouts():
     """Small operands laid out in the largest's memory order give numpy einsum's answer, when
-    the largest is itself a transposed view, with summed, kept and broadcast indices."""
+    the largest is itself a transposed view, with summed, kept and broadcast indices, and
+    0-d operands."""
     from bayesprog.inference.core import aligned_einsum
 
     rng = np.random.default_rng(5)
@@ -259,8 +260,8 @@ def test_an_aligned_einsum_equals_numpy_einsum_whatever_the_layouts():
         n = int(rng.integers(4, 13))
         big = "".join(letters[:n])
         cards = {s: int(rng.integers(1, 4)) for s in big}
-        smalls = [tuple(rng.choice(list(big), size=int(rng.integers(1, 4)), replace=False))
-                  for _ in range(int(rng.integers(1, 3)))]
+        smalls = [tuple(rng.choice(list(big), size=int(rng.integers(0, 4)), replace=False))
+                  for _ in range(int(rng.integers(1, 3)))]  # (a 0-d operand: a number)
         kept = [s for s in big if rng.random() < 0.7]
         output = "".join(rng.permutation(kept)) if rng.random() < 0.5 else "".join(kept)
         array = rng.random(tuple(cards[s] for s in big))

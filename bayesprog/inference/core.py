@@ -271,7 +271,7 @@ def aligned_einsum(subscripts: str, *arrays: np.ndarray) -> np.ndarray:
         if i == big or 16 * array.size > arrays[big].size:
             continue
         order = sorted(range(len(term)), key=lambda a: (rank.get(term[a], -1), a))
-        laid[i] = np.ascontiguousarray(array.transpose(order))
+        laid[i] = np.asarray(array.transpose(order), order="C")  # (0-d stays 0-d)
         if order != list(range(len(term))):
             terms[i] = "".join(term[a] for a in order)
             changed = True
