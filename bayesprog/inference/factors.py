@@ -63,6 +63,16 @@ def is_static(term: Term) -> bool:
     )
 
 
+def given_table(term: Term) -> ParamValue | None:
+    """The table of a term written as one (a categorical form with one table over its
+    parents' axes, then the child's, not batched), or None."""
+    param = next(iter(term.params.values()), None) if len(term.params) == 1 else None
+    if (isinstance(term.form, Categorical) and isinstance(param, ParamValue)
+            and not param.batched and param.axes == tuple(p.name for p in term.parents)):
+        return param
+    return None
+
+
 def static_table(program: ProgramLike, term: Term) -> tuple[np.ndarray, float]:
     """A static term's factor (axes ``term.axes``) in the probability domain, divided by its
     largest entry, and the log of that entry (0 for a factor of zeros); made once per program.
@@ -71,9 +81,8 @@ def static_table(program: ProgramLike, term: Term) -> tuple[np.ndarray, float]:
     found = cache.get(id(term))
     if found is not None:
         return found
-    param = next(iter(term.params.values()), None) if len(term.params) == 1 else None
-    if (isinstance(term.form, Categorical) and isinstance(param, ParamValue)
-            and not param.batched and param.axes == tuple(p.name for p in term.parents)):
+    param = given_table(term)
+    if param is not None:
         table = np.moveaxis(np.asarray(param.array, dtype=float), -1, 0)
         top = float(table.max()) if table.size else 0.0
         found = (table / top, math.log(top)) if top > 0 else (table.copy(), 0.0)
@@ -94,10 +103,8 @@ def plain_table(program: ProgramLike, term: Term
     evidence values or inputs."""
     if not is_static(term):
         return None
-    param = next(iter(term.params.values()), None) if len(term.params) == 1 else None
-    if (isinstance(term.form, Categorical) and isinstance(param, ParamValue)
-            and not param.batched and param.axes == tuple(p.name for p in term.parents)
-            and param.array.dtype == np.float64):
+    param = given_table(term)
+    if param is not None and param.array.dtype == np.float64:
         return param.axes + (term.child.name,), param.array, 0.0
     table, top = static_table(program, term)
     return term.axes, table, top
