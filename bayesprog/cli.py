@@ -347,10 +347,12 @@ def cmd_results(args: argparse.Namespace) -> int:
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
-    if not args.stdio:
-        raise _UserError("explore needs --stdio (JSON lines on standard input and output)")
+    if args.stdio == args.ros:
+        raise _UserError("explore needs one of --stdio (JSON lines on standard input and "
+                         "output) or --ros (a ROS 2 node)")
     runner = _runner(args.runner)
-    options = {"task": args.task, "seed": _check_seed(args.seed), "ablate": args.ablate}
+    options = {"task": args.task, "seed": _check_seed(args.seed), "ablate": args.ablate,
+               "ros": args.ros, "namespace": args.namespace, "frame": args.frame}
     return int(runner.explore(Path(args.target), options))
 
 
@@ -557,7 +559,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", metavar="SCENARIO_OR_MODELS",
                    help="a scenario file, or a models folder (its scenarios/paper.yaml)")
     p.add_argument("--stdio", action="store_true",
-                   help="JSON lines on stdin/stdout (required: the only interface)")
+                   help="JSON lines on stdin/stdout (this or --ros)")
+    p.add_argument("--ros", action="store_true",
+                   help="a ROS 2 node that takes the same lines on a topic (install "
+                   "bayesprog[ros]; this or --stdio)")
+    p.add_argument("--namespace", default="/bayesprog", metavar="NS",
+                   help="with --ros: the node's namespace (default: %(default)s)")
+    p.add_argument("--frame", default="workspace", metavar="ID",
+                   help="with --ros: the frame of what it publishes (default: %(default)s)")
     p.add_argument("--task", help="task of the scenario (default: its first)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the decisions' tie breaking (default: %(default)s)")
@@ -570,7 +579,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="FILE",
                    help="write the schema there (default: print it)")
     p.set_defaults(func=cmd_schema)
+    _plugin_commands(sub)
     return parser
+
+
+def _plugin_commands(sub: argparse._SubParsersAction) -> None:
+    """The commands runner plugins add (their module's ``add_commands(subparsers)``); a plugin
+    that cannot be loaded adds none, and says why on stderr."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group="bayesprog.runners"), key=lambda ep: ep.name):
+        try:
+            plugin = ep.load()
+        except Exception as exc:  # a broken plugin must not take the framework's CLI down
+            print(f"bayesprog: runner {ep.name!r} not loaded: {exc}", file=sys.stderr)
+            continue
+        add = getattr(plugin, "add_commands", None)
+        if add is not None:
+            add(sub)
 
 
 def _version() -> str:

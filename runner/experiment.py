@@ -84,10 +84,31 @@ class Experiment:
         return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
 
 
+def start_cell(shape: tuple[int, ...], seed: int, run: int) -> np.ndarray:
+    """The start cell [dims] of run ``run`` of an experiment of ``seed`` on a grid of ``shape``:
+    drawn from (seed, run) alone, so a run starts where it does whatever the number of runs
+    (and a simulated robot, ``bayesprog robot --seed S --run R``, starts there too).
+
+    >>> start_cell((30, 60), seed=2024, run=3).tolist() == start_cells((30, 60), 8, 2024)[3].tolist()
+    True
+    """
+    rng = np.random.default_rng([seed, 0xC0FFEE, run])
+    return np.array([rng.integers(0, n) for n in shape], dtype=np.int64)
+
+
+def decision_seed(seed: int, run: int) -> tuple[int, int, int]:
+    """The seed of the decisions' tie breaking of run ``run`` of an experiment of ``seed``."""
+    return (seed, run, 0)
+
+
+def reading_seed(seed: int, run: int) -> tuple[int, int, int]:
+    """The seed of the simulated sensor's readings of run ``run`` of an experiment of ``seed``."""
+    return (seed, run, 1)
+
+
 def start_cells(shape: tuple[int, ...], runs: int, seed: int) -> np.ndarray:
-    """``runs`` start cells [runs, dims] on a grid of ``shape``, drawn from ``seed``."""
-    rng = np.random.default_rng([seed, 0xC0FFEE])
-    return np.stack([rng.integers(0, n, runs) for n in shape], 1)
+    """``runs`` start cells [runs, dims] on a grid of ``shape``, run r's from (seed, r)."""
+    return np.stack([start_cell(shape, seed, r) for r in range(runs)]).reshape(runs, len(shape))
 
 
 def load_experiment(path: str | Path) -> Experiment:
@@ -146,8 +167,9 @@ def simulate(
     """Run the loop for the given runs in lockstep. Returns gamma [runs, K] and paths [runs, K]."""
     runs = len(run_ids)
     explorer = explorer or Explorer(scenario, task, ablate=CONFIGURATIONS[configuration], runs=runs)
-    explorer.reset(starts, seed=[(seed, int(r), 0) for r in run_ids])
-    sensor = make_sensor(scenario, explorer.perception, [(seed, int(r), 1) for r in run_ids])
+    explorer.reset(starts, seed=[decision_seed(seed, int(r)) for r in run_ids])
+    sensor = make_sensor(scenario, explorer.perception,
+                         [reading_seed(seed, int(r)) for r in run_ids])
     gamma = BorderDistance(scenario.centres, scenario.border(task), runs)
     out_gamma = np.empty((runs, iterations))
     out_paths = np.empty((runs, iterations), dtype=np.int64)

@@ -204,13 +204,13 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
 
 def replay(experiment, task: str, configuration: str, run: int, steps: int):
     """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
-    from runner.experiment import make_sensor
+    from runner.experiment import decision_seed, make_sensor, reading_seed
 
     spec = experiment.spec
     scenario = experiment.scenario
     explorer = Explorer(scenario, task, ablate=CONFIGURATIONS[configuration])
-    explorer.reset(experiment.start_cells()[run : run + 1], seed=[(spec.seed, run, 0)])
-    sensor = make_sensor(scenario, explorer.perception, [(spec.seed, run, 1)])
+    explorer.reset(experiment.start_cells()[run : run + 1], seed=[decision_seed(spec.seed, run)])
+    sensor = make_sensor(scenario, explorer.perception, [reading_seed(spec.seed, run)])
     shape_only = explorer.target.ablate("P(I | O)", "P(S | O, T)", "P(U | O)")
     cells = explorer.expected
     for _ in range(steps):

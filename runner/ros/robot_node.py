@@ -1,0 +1,155 @@
+"""``bayesprog robot SCENARIO --ros``: a simulated robot, the ROS 2 node ``bayesprog_robot``.
+
+It probes its start cell with the scenario's sensor, publishes the reading on ``probe`` (one
+JSON line, as ``explore --stdio`` reads it), and on each ``next_target`` probes that cell and
+publishes again, for N probes. With ``--seed S --run R`` its start cell and readings are run
+R's of an experiment of seed S, and it asks the explorer to decide as in that run
+(``{"reset": {"seed": S, "run": R}}``), so the closed loop repeats that run's path.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from runner.experiment import make_sensor, reading_seed, start_cell
+from runner.metrics import BorderDistance, moves
+from runner.ros.explorer_node import PROBES, STREAM
+from runner.scenario import Scenario
+
+
+@dataclass
+class RobotOptions:
+    task: str
+    steps: int = 100
+    seed: int | None = None
+    run: int | None = None
+    #: seconds to wait for the explorer to appear, and for each of its answers
+    timeout: float = 60.0
+
+
+@dataclass
+class Outcome:
+    """How the session ended: ``error`` None when every probe was answered."""
+
+    cells: list[int] = field(default_factory=list)
+    error: str | None = None
+
+
+class RobotNode(Node):
+    """A simulated robot on ``scenario``; :meth:`advance` drives it from a spin loop."""
+
+    def __init__(self, scenario: Scenario, options: RobotOptions, namespace: str = "/bayesprog"):
+        super().__init__("bayesprog_robot", namespace=namespace)
+        self.scenario, self.options = scenario, options
+        seed, run = options.seed or 0, options.run or 0
+        self.sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)])
+        self.start = start_cell(scenario.shape, seed, run)
+        self.gamma = BorderDistance(scenario.centres, scenario.border(options.task), 1)
+        self.outcome = Outcome()
+        self.probe = self.create_publisher(String, "probe", PROBES)
+        self.create_subscription(PointStamped, "next_target", self.on_next_target, STREAM)
+        self.create_subscription(String, "reply", self.on_reply, STREAM)
+        self._reset_sent: float | None = None
+        self._ready = False  # the explorer answered the reset
+        self._waiting_since = time.monotonic()
+        self._created = time.monotonic()
+        self.done = False
+
+    # the loop ---------------------------------------------------------------------------------
+    def reset_line(self) -> str:
+        opts: dict[str, int] = {}
+        if self.options.seed is not None:
+            opts["seed"] = self.options.seed
+        if self.options.run is not None:
+            opts["run"] = self.options.run
+        return json.dumps({"reset": opts})
+
+    def advance(self) -> None:
+        """Called between spins: find the explorer, reset it, watch the time."""
+        now = time.monotonic()
+        if self.done:
+            return
+        if not self._ready:
+            found = (self.probe.get_subscription_count() > 0
+                     and self.count_publishers("next_target") > 0
+                     and self.count_publishers("reply") > 0)
+            if not found:
+                if now - self._created > self.options.timeout:
+                    self.fail(f"no explorer answers on {self.probe.topic_name} after "
+                              f"{self.options.timeout:g} s: start bayesprog explore SCENARIO "
+                              "--ros first (same namespace and ROS_DOMAIN_ID)")
+                return
+            if self._reset_sent is None or now - self._reset_sent > 1.0:
+                self.send(self.reset_line())  # again each second until it is answered
+                self._reset_sent = now
+            if now - self._created > self.options.timeout:
+                self.fail(f"the explorer on {self.probe.topic_name} does not answer its reset "
+                          f"after {self.options.timeout:g} s")
+            return
+        if now - self._waiting_since > self.options.timeout:
+            if len(self.outcome.cells) >= self.options.steps:
+                self.done = True  # every probe was sent; the last one's answer is not needed
+                return
+            self.fail(f"no next_target after {self.options.timeout:g} s (probe "
+                      f"{len(self.outcome.cells)})")
+
+    def on_reply(self, msg: String) -> None:
+        try:
+            reply = json.loads(msg.data)
+        except ValueError:
+            return
+        if "error" in reply and not self.done:
+            self.fail(f"the explorer refused a probe: {reply['error']}")
+        elif reply.get("reset") is True and not self._ready:
+            self._ready = True
+            self.probe_cell(self.start)
+
+    def on_next_target(self, msg: PointStamped) -> None:
+        if not self._ready or self.done:
+            return
+        if len(self.outcome.cells) >= self.options.steps:
+            self.done = True  # the explorer has taken the last probe
+            return
+        p = msg.point
+        centre = np.array([p.x, p.y, p.z][:self.scenario.dims])
+        cell = np.floor(centre / self.scenario.cell).astype(int)
+        if np.any(cell < 0) or np.any(cell >= np.asarray(self.scenario.shape)):
+            self.fail(f"next_target {centre.tolist()} m lies outside the grid")
+            return
+        self.probe_cell(cell)
+
+    def probe_cell(self, cell: np.ndarray) -> None:
+        flat = int(np.ravel_multi_index(tuple(int(i) for i in cell), self.scenario.shape))
+        texture, compliance = self.sensor.probe(np.array([flat]))
+        self.gamma.probe(np.array([flat]))
+        self.outcome.cells.append(flat)
+        self.send(json.dumps({"cell": [int(i) for i in cell], "texture": float(texture[0]),
+                              "compliance": float(compliance[0])}))
+        self._waiting_since = time.monotonic()
+
+    def send(self, line: str) -> None:
+        self.probe.publish(String(data=line))
+
+    def fail(self, why: str) -> None:
+        self.outcome.error = why
+        self.done = True
+
+    # what it prints at the end ----------------------------------------------------------------
+    def summary(self) -> dict:
+        """The run's Gamma (eq. 16, metres, and per border cell in mm) and path length."""
+        cells = np.asarray(self.outcome.cells, dtype=np.int64)
+        border = int(self.scenario.border(self.options.task).sum())
+        gamma = float(self.gamma.gamma()[0]) if len(cells) else float("nan")
+        length = float(moves(cells[None], self.scenario.centres).sum()) if len(cells) else 0.0
+        shape = self.scenario.shape
+        path = [[int(i) for i in np.unravel_index(c, shape)] for c in cells]
+        return {"probes": len(cells), "gamma": gamma, "border_cells": border,
+                "gamma_per_border_cell_mm": 1000 * gamma / max(border, 1),
+                "path_length": length, "path": path}

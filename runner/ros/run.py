@@ -1,0 +1,102 @@
+"""Starting the nodes from the command line, and ending them on SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from bayesprog.errors import BayesprogError
+from runner.ros import require
+
+
+@contextmanager
+def _ros() -> Iterator[threading.Event]:
+    """rclpy started with our own SIGINT and SIGTERM handlers: they set the event, and the
+    spin loop ends at its next turn (a tenth of a second), so a node stops cleanly."""
+    require()
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        yield stop
+    finally:
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _node(make: Callable[[], Any]) -> Any:
+    """A node from ``make``, a bad namespace or name reported as a user error."""
+    from rclpy.exceptions import InvalidNamespaceException, NameValidationException
+
+    try:
+        return make()
+    except (InvalidNamespaceException, NameValidationException) as exc:
+        raise BayesprogError(f"--namespace: {exc}") from None
+
+
+def _spin(node: Any, stop: threading.Event, until: Callable[[], bool] = lambda: False,
+          tick: Callable[[], None] = lambda: None) -> None:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and not until() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+            tick()
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def explore(session: Any, namespace: str, frame: str) -> int:
+    """Serve ``session`` as ``bayesprog_explorer`` until SIGINT or SIGTERM."""
+    with _ros() as stop:
+        from runner.ros.explorer_node import ExplorerNode
+
+        node = _node(lambda: ExplorerNode(session, namespace=namespace, frame=frame))
+        e, name = session.explorer, node.get_fully_qualified_name()
+        print(f"{name}: task {e.task} of {e.scenario.name} "
+              f"({' x '.join(map(str, e.scenario.shape))} cells of {e.scenario.cell:g} m), "
+              f"probes on {node.get_namespace().rstrip('/')}/probe, frame {frame!r}",
+              file=sys.stderr, flush=True)
+        _spin(node, stop)
+        print(f"{name}: stopped after {node.answered} probe(s)",
+              file=sys.stderr, flush=True)
+    return 0
+
+
+def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) -> int:
+    """Drive an explorer with the simulated robot; print the run's Gamma and path length."""
+    with _ros() as stop:
+        from runner.ros.robot_node import RobotNode
+
+        node = _node(lambda: RobotNode(scenario, options, namespace=namespace))
+        name = node.get_fully_qualified_name()
+        _spin(node, stop, until=lambda: node.done, tick=node.advance)
+        outcome, summary = node.outcome, node.summary()
+    if outcome.error is not None:
+        print(f"{name}: {outcome.error}", file=sys.stderr)
+        return 1
+    if as_json:
+        print(json.dumps(summary))
+    else:
+        what = f"{summary['probes']} probe(s)"
+        if stop.is_set():
+            what += " (interrupted)"
+        print(f"{name}: task {options.task}, {what}; Gamma (eq. 16) {summary['gamma']:.4f} m "
+              f"over {summary['border_cells']} border cells "
+              f"({summary['gamma_per_border_cell_mm']:.1f} mm per cell); path length "
+              f"{summary['path_length']:.3f} m")
+    return 0

@@ -1,0 +1,238 @@
+"""One exploration driven line by line: a JSON object in, a JSON object out.
+
+The step interfaces, JSON lines over standard input and output (:mod:`runner.stdio`) and the
+ROS 2 node (:mod:`runner.ros`), hand each input line to :meth:`Session.answer` and send back
+what it returns, so the same lines get the same replies whichever way they travel.
+
+A probe reports the cell just probed and its readings, ``{"cell": [ix, iy], "texture": e,
+"compliance": c}`` (add ``"maps": true`` for the full maps; in a volume of cells,
+``[ix, iy, iz]``, and the maps nest [ix][iy][iz]); the reply is the cell to probe next, with
+what stood behind the choice::
+
+    {"k": k, "next": [ix, iy],
+     "probed": {"cell": [ix, iy], "material": name, "probability": p, "task_material": p},
+     "chosen": {"inhibition": i, "saliency": s or null, "uncertainty": u, "probability": p},
+     "shape": {"in_force": bool, "posterior": {"rectangle": p, "triangle": p} or null},
+     "maps": {"belief": [[...]], "inhibition": ..., "saliency": ..., "uncertainty": ...,
+              "posterior": ...}}                           (only when asked; null: unknown)
+
+``{"maps": true}`` alone answers the maps of the last decision. ``{"reset": {"seed": s}}``
+starts a new exploration; ``{"reset": {"seed": s, "run": r}}`` starts it with the decisions'
+random stream of run ``r`` of an experiment of seed ``s`` (the seed may then be left out: the
+session's). A malformed line gets ``{"error": "line N: ..."}`` and the session goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+import bayesprog
+from bayesprog.errors import BayesprogError, short_repr
+from runner.experiment import decision_seed
+from runner.explorer import Explorer
+
+#: The longest line read (characters); a longer one is answered with an error.
+MAX_LINE = 1 << 20
+
+
+def _reading(obj: dict, key: str) -> float:
+    value = obj.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"expected a finite number for {key!r}, found {value!r}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ValueError(f"expected a finite number for {key!r}, found {_short(value)}")
+    return number
+
+
+def _short(value: object) -> str:
+    return short_repr(value, 40)
+
+
+def _natural(value: object, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"expected a non-negative integer {what}, found {_short(value)}")
+    return value
+
+
+def _number(x: float) -> float | None:
+    return float(x) if math.isfinite(float(x)) else None
+
+
+def _grid(values: np.ndarray, shape: tuple[int, ...]) -> list:
+    """A field over the grid as nested lists [ix][iy](...); null where it is unknown (NaN)."""
+    grid = np.asarray(values, float).reshape(shape)
+    out: list = np.vectorize(_number, otypes=[object])(grid).tolist()
+    return out
+
+
+class Session:
+    """One exploration of ``explorer`` (one run) answered line by line.
+
+    ``seed`` is the seed of the decisions' tie breaking until a reset names another. Lines are
+    numbered from 1 as they arrive, blank ones included (they get no reply).
+
+    >>> from runner.scenario import load_scenario
+    >>> session = Session(Explorer(load_scenario("models/scenarios/paper.yaml"), "T2"))
+    >>> reply = session.answer('{"cell": [5, 7], "texture": 0.52, "compliance": 0.08}')
+    >>> reply["k"], reply["probed"]["material"], session.stepped
+    (0, 'wood', True)
+    >>> session.answer("not json")
+    {'error': 'line 2: Expecting value: line 1 column 1 (char 0)'}
+    >>> session.answer("   ") is None
+    True
+    """
+
+    def __init__(self, explorer: Explorer, seed: int = 0):
+        self.explorer = explorer
+        self.seed = seed
+        #: the decisions' seeds of the current exploration (an experiment run's when reset so)
+        self._seeds: int | list[tuple[int, int, int]] = seed
+        self.line_no = 0
+        #: the number of the next step (probes answered since the start or the last reset)
+        self.k = 0
+        self._started = False
+        #: whether the last line answered was a probe (a decision was made)
+        self.stepped = False
+        self.shape_program: bayesprog.Program | None = None
+        if "P(R | O)" not in explorer.target.ablated:
+            self.shape_program = explorer.scenario.load_shape()
+
+    # what a reply says beyond the next cell --------------------------------------------------
+    def probed(self, cell: list[int]) -> dict:
+        e = self.explorer
+        flat = int(e.flat(np.asarray(cell).reshape(1, -1))[0])
+        belief = e.posterior[0, flat]
+        best = int(np.argmax(belief))
+        return {"cell": cell, "material": e.scenario.materials[best],
+                "probability": float(belief[best]),
+                "task_material": float(belief[e.target_material])}
+
+    def chosen(self) -> dict:
+        e = self.explorer
+        assert e.last is not None
+        d, nxt = e.last, int(e.last.next_cell[0])
+        return {"inhibition": _number(d.inhibition[0, nxt]),
+                "saliency": _number(d.saliency[0, nxt]),
+                "uncertainty": _number(d.uncertainty[0, nxt]),
+                "probability": float(e.target_probabilities[0, nxt])}
+
+    def shape_posterior(self) -> dict[str, float] | None:
+        """pi_obj's posterior over the templates at the last decision; None where the shape cue
+        was not in force (too few probed cells on the followed border, or ablated)."""
+        d = self.explorer.last
+        if d is None or self.shape_program is None or d.shape_error is None:
+            return None
+        if d.shape_ready is None or not d.shape_ready[0]:
+            return None
+        answer = self.shape_program.ask("shape", {"L": d.shape_error[0]})
+        states = answer.states[answer.variables[0]]
+        probabilities = [float(x) for x in answer.probabilities]
+        return dict(zip(states, probabilities, strict=True))
+
+    def shape(self) -> dict:
+        posterior = self.shape_posterior()
+        return {"in_force": posterior is not None, "posterior": posterior}
+
+    def maps(self) -> dict:
+        e = self.explorer
+        if e.last is None:
+            raise ValueError("no decision yet: send a probe first")
+        shape = e.scenario.shape
+        belief = e.belief()[0]
+        return {"belief": _grid(belief, shape), "inhibition": _grid(e.last.inhibition[0], shape),
+                "saliency": _grid(e.last.saliency[0], shape),
+                "uncertainty": _grid(e.last.uncertainty[0], shape),
+                "posterior": _grid(e.target_probabilities[0], shape)}
+
+    # one line --------------------------------------------------------------------------------
+    def answer(self, line: str) -> dict | None:
+        """The reply to one input line (None for a blank line, which is counted all the same)."""
+        self.line_no += 1
+        self.stepped = False
+        if not line.strip():
+            return None
+        try:
+            return self._answer(line)
+        except (ValueError, BayesprogError) as exc:
+            return {"error": f"line {self.line_no}: {exc}"}
+
+    def _answer(self, line: str) -> dict:
+        if len(line.rstrip("\n")) >= MAX_LINE:
+            raise ValueError(f"a line of more than {MAX_LINE:,} characters: expected one "
+                             "JSON object of a probe (the rest of the line is skipped)")
+        try:
+            obj = json.loads(line)
+        except RecursionError:
+            raise ValueError("JSON nested too deeply: expected one flat JSON object") from None
+        if not isinstance(obj, dict):
+            raise ValueError("expected a JSON object")
+        if set(obj) == {"maps"}:
+            if obj["maps"] is not True:
+                raise ValueError(f'expected {{"maps": true}}, found {_short(obj)}')
+            return {"k": self.k - 1, "maps": self.maps()}
+        if "reset" in obj:
+            return self._reset(obj)
+        return self._probe(obj)
+
+    def _reset(self, obj: dict) -> dict:
+        if set(obj) != {"reset"}:
+            raise ValueError('expected {"reset": {"seed": S}} alone, found other keys: '
+                             + ", ".join(sorted(set(obj) - {"reset"})))
+        opts = obj["reset"]
+        if not isinstance(opts, dict) or set(opts) - {"seed", "run"}:
+            raise ValueError('expected {"reset": {"seed": S}}, {"reset": {"seed": S, "run": R}} '
+                             f'or {{"reset": {{}}}}, found {_short(opts)}')
+        seed = _natural(opts.get("seed", self.seed), "seed")
+        reply: dict = {"reset": True, "seed": seed}
+        if "run" in opts:
+            run = _natural(opts["run"], "run")
+            self._seeds = [decision_seed(seed, run)]
+            reply["run"] = run
+        else:
+            self._seeds = seed
+        self.seed = seed
+        self.k, self._started = 0, False
+        self.explorer.last = None  # the maps of the last session are not this one's
+        return reply
+
+    def _probe(self, obj: dict) -> dict:
+        explorer = self.explorer
+        shape = explorer.scenario.shape
+        axes = ("ix", "iy", "iz")[:len(shape)]
+        missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
+        if missing:
+            raise ValueError(f"missing {', '.join(missing)}: expected "
+                             f'{{"cell": [{", ".join(axes)}], "texture": e, "compliance": c}}')
+        cell = obj["cell"]
+        if (not isinstance(cell, list) or len(cell) != len(shape)
+                or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
+            raise ValueError(f"expected 'cell' as {len(shape)} integers "
+                             f"[{', '.join(axes)}], found {_short(cell)}")
+        if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
+            raise ValueError(f"cell {_short(cell)} is outside the "
+                             f"{' x '.join(map(str, shape))} grid")
+        texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
+        if not self._started:
+            explorer.reset(start=cell, seed=self._seeds)
+            self._started = True
+        extra = set(obj) - {"cell", "texture", "compliance", "maps"}
+        if extra:
+            raise ValueError(f"unknown key(s) {', '.join(sorted(extra))}: expected cell, "
+                             "texture, compliance and maybe maps")
+        if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
+            raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
+        nxt = explorer.observe(cell, texture, compliance)
+        reply = {"k": self.k, "next": list(nxt), "probed": self.probed(cell),
+                 "chosen": self.chosen(), "shape": self.shape()}
+        if obj.get("maps"):
+            reply["maps"] = self.maps()
+        self.k += 1
+        self.stepped = True
+        return reply
