@@ -9,6 +9,7 @@ shape. The topics, types and QoS are the contract of ``docs/robot.md``.
 from __future__ import annotations
 
 import sys
+import time
 import traceback
 
 import numpy as np
@@ -72,6 +73,7 @@ class ExplorerNode(Node):
         if reply is None:
             return
         stepped = self.session.stepped
+        self.await_listener()
         head = self.header()
         if stepped:
             self.next_target.publish(messages.point_stamped(self.centre(reply["next"]), head))
@@ -81,6 +83,16 @@ class ExplorerNode(Node):
             self.publish_state(reply, head)
         elif "reset" in reply:
             self.publish_cleared()
+
+    def await_listener(self, most: float = 1.0) -> None:
+        """A probe can arrive before this node has matched its sender's subscriptions (each
+        side discovers the other on its own): with nobody matched yet on ``reply`` and
+        ``next_target``, wait up to ``most`` seconds for a listener, so the answer is not sent
+        into the void."""
+        end = time.monotonic() + most
+        while (self.reply.get_subscription_count() == 0
+               and self.next_target.get_subscription_count() == 0 and time.monotonic() < end):
+            time.sleep(0.005)
 
     def centre(self, cell: list[int]) -> np.ndarray:
         return (np.asarray(cell, float) + 0.5) * self.cell
