@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -32,6 +33,12 @@ ROS_ENV = {"ROS_DOMAIN_ID": DOMAIN, "ROS_LOCALHOST_ONLY": "1",
 os.environ.update(ROS_ENV)
 
 import rclpy  # noqa: E402  (bayesprog[ros], which the test extras bring)
+
+with warnings.catch_warnings():
+    # the message type support loads lark, which imports the deprecated sre_parse (pytest runs
+    # with warnings as errors): load it once, quietly
+    warnings.simplefilter("ignore", DeprecationWarning)
+    import rosidl_generator_py  # noqa: F401
 from geometry_msgs.msg import PointStamped  # noqa: E402
 from nav_msgs.msg import OccupancyGrid, Path as PathMsg  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
