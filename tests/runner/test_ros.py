@@ -157,9 +157,25 @@ class Client:
         rclpy.shutdown(context=self.context)
 
 
+_STARTED: list[subprocess.Popen] = []
+
+
 def start(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([BAYESPROG, *args], cwd=ROOT, env={**os.environ, **ROS_ENV},
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen([BAYESPROG, *args], cwd=ROOT, env={**os.environ, **ROS_ENV},
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _STARTED.append(process)
+    return process
+
+
+@pytest.fixture(autouse=True)
+def _no_node_left():
+    """Whatever a test started ends with it, even when the test fails half-way."""
+    yield
+    while _STARTED:
+        process = _STARTED.pop()
+        if process.poll() is None:
+            process.kill()
+        process.communicate()
 
 
 def stop(process: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, float, str]:
@@ -607,3 +623,67 @@ def test_in_a_volume_the_fields_are_point_clouds():
     assert points[0, 3] == round(100 * reply["probed"]["task_material"])
     inhibition = np.frombuffer(bytes(client.got["inhibition"][-1].data), np.float32)
     assert len(inhibition) // 4 == int(np.prod(volume.shape))  # known everywhere
+
+
+# --- the documentation's bridge and RViz view --------------------------------------------------
+
+
+def test_the_documented_bridge_turns_a_drivers_presses_into_probes(paper):
+    """docs/examples/ros_bridge.py between the explorer and a driver (played here): the hand is
+    sent to the start cell, each press becomes a probe, each next cell a goal."""
+    from std_msgs.msg import Float64MultiArray
+
+    namespace = f"/h{random.SystemRandom().randrange(10**6)}"
+    start("explore", str(PAPER), "--ros", "--namespace", namespace, "--task", "T2")
+    client = Client(namespace, name="driver")
+    goals: list = []
+    client.node.create_subscription(PointStamped, "/hand/goal", goals.append, 10)
+    features = client.node.create_publisher(Float64MultiArray, "/hand/features", 10)
+    try:
+        client.handshake()
+        bridge = subprocess.Popen([sys.executable, str(ROOT / "docs/examples/ros_bridge.py"),
+                                   "--cell", str(paper.cell), "--start", "15", "9",
+                                   "--namespace", namespace], cwd=ROOT,
+                                  env={**os.environ, **ROS_ENV}, stderr=subprocess.PIPE,
+                                  text=True)
+        _STARTED.append(bridge)
+        presses = 8
+        for k in range(presses):
+            client.spin(lambda k=k: len(goals) > k and features.get_subscription_count() > 0,
+                        timeout=60)
+            goal = goals[k].point
+            cell = (int(goal.x / paper.cell), int(goal.y / paper.cell))
+            e, c = READINGS[paper.materials[paper.material_map[cell]]]
+            features.publish(Float64MultiArray(data=[e, c]))
+        client.spin(lambda: len(client.got["reply"]) == presses)
+    finally:
+        client.close()
+    replies = [json.loads(m.data) for m in client.got["reply"]]
+    assert [r["k"] for r in replies] == list(range(presses))
+    assert replies[0]["probed"]["cell"] == [15, 9]
+    # every goal after the first is the cell the explorer named
+    for reply, goal in zip(replies, goals[1:], strict=False):
+        assert [goal.point.x, goal.point.y] == pytest.approx(
+            [(i + 0.5) * paper.cell for i in reply["next"]])
+    assert stop(bridge)[0] == 0
+
+
+def test_the_shipped_rviz_view_shows_the_contracts_topics():
+    import yaml
+
+    view = yaml.safe_load((ROOT / "runner" / "ros" / "bayesprog.rviz").read_text())
+    displays = {d["Topic"]["Value"]: d for d in view["Visualization Manager"]["Displays"]
+                if "Topic" in d}
+    assert view["Visualization Manager"]["Global Options"]["Fixed Frame"] == "workspace"
+    kinds = {"belief": "Map", "posterior": "Map", "saliency": "Map", "uncertainty": "Map",
+             "inhibition": "Map", "path": "Path", "shape": "MarkerArray",
+             "next_target": "PointStamped"}
+    for topic, kind in kinds.items():
+        display = displays[f"/bayesprog/{topic}"]
+        assert display["Class"] == f"rviz_default_plugins/{kind}"
+        assert display["Topic"]["Reliability Policy"] == "Reliable"
+        latched = topic not in ("next_target",)
+        assert (display["Topic"]["Durability Policy"] == "Transient Local") == latched, topic
+    shown = {t for t, d in displays.items() if d["Enabled"]}
+    assert {"/bayesprog/belief", "/bayesprog/posterior", "/bayesprog/path",
+            "/bayesprog/shape"} <= shown
