@@ -7,8 +7,8 @@ It assumes a driver that
     [texture, compliance], on the scale pi_per was written or learned for).
 
 Put your driver's topics and types in their place. The bridge sends the hand to the start cell,
-and from then on turns every press into one probe line for the explorer and every
-``next_target`` into a goal for the hand:
+once the explorer has answered its reset, and from then on turns every press into one probe
+line for the explorer and every ``next_target`` into a goal for the hand:
 
     python docs/examples/ros_bridge.py --cell 0.01 --start 5 7 [--namespace /bayesprog]
 """
@@ -36,13 +36,23 @@ class Bridge(Node):
         self.probe = self.create_publisher(String, f"{namespace}/probe", 10)
         self.create_subscription(Float64MultiArray, "/hand/features", self.on_features, 10)
         self.create_subscription(PointStamped, f"{namespace}/next_target", self.on_target, 10)
+        self.create_subscription(String, f"{namespace}/reply", self.on_reply, 10)
         self.started = False
-        self.create_timer(0.5, self.send_start)
+        self.timer = self.create_timer(0.5, self.reset)
 
-    def send_start(self) -> None:
-        """The first goal, once the driver listens."""
-        if not self.started and self.goal.get_subscription_count() > 0:
+    def reset(self) -> None:
+        """Start a new exploration: sent each half second until the explorer answers (a message
+        sent before the explorer has matched this node is not delivered)."""
+        if self.goal.get_subscription_count() > 0:  # the driver listens
+            self.probe.publish(String(data=json.dumps({"reset": {}})))
+
+    def on_reply(self, msg: String) -> None:
+        reply = json.loads(msg.data)
+        if "error" in reply:
+            self.get_logger().error(f"the explorer refused a probe: {reply['error']}")
+        elif reply.get("reset") and not self.started:  # the first goal: the start cell
             self.started = True
+            self.timer.cancel()
             self.send_goal()
 
     def send_goal(self) -> None:

@@ -56,7 +56,7 @@ class ExplorerNode(Node):
         self.path = self.create_publisher(Path, "path", LATCHED)
         self.shape_markers = self.create_publisher(MarkerArray, "shape", LATCHED)
         self.create_subscription(String, "probe", self.on_probe, PROBES)
-        self._path = Path()
+        self._path = messages.GrowingPath()
         self.answered = 0
         self.publish_cleared()
 
@@ -111,9 +111,8 @@ class ExplorerNode(Node):
         for name, publisher in self.fields.items():
             publisher.publish(messages.field(values[name], self.shape, self.cell, self.centres,
                                              head))
-        self._path.header = head
-        self._path.poses.append(messages.pose(self.centre(reply["probed"]["cell"]), head))
-        self.path.publish(self._path)
+        self._path.append(self.centre(reply["probed"]["cell"]), head)
+        self.path.publish(self._path.serialized(head))
         self.shape_markers.publish(self.markers(reply["shape"]["posterior"], head))
 
     def publish_cleared(self) -> None:
@@ -122,8 +121,8 @@ class ExplorerNode(Node):
         unknown = np.full(len(self.centres), -1, np.int8)
         for publisher in self.fields.values():
             publisher.publish(messages.field(unknown, self.shape, self.cell, self.centres, head))
-        self._path = Path(header=head)
-        self.path.publish(self._path)
+        self._path.clear()
+        self.path.publish(self._path.serialized(head))
         self.shape_markers.publish(messages.clear_markers(head))
 
     def markers(self, posterior: dict[str, float] | None, head: messages.Header) -> MarkerArray:
