@@ -119,9 +119,11 @@ class Explorer:
         self.timings: dict[str, float] = defaultdict(float)
 
     # state --------------------------------------------------------------------------------------
-    def reset(self, start: Sequence[int] | np.ndarray, seed: int | Sequence[int] = 0) -> None:
+    def reset(self, start: Sequence[int] | np.ndarray,
+              seed: int | Sequence[int | tuple[int, ...]] = 0) -> None:
         """Start new runs: ``start`` is a cell (ix, iy(, iz)) or one per run [runs, dims];
-        ``seed`` one integer (run r then uses seed ``(seed, r)``) or one seed per run."""
+        ``seed`` one integer (run r then uses seed ``(seed, r)``) or one seed per run (an
+        integer or a tuple of them, as numpy's generators take)."""
         start = np.asarray(start, dtype=int)
         if start.ndim not in (1, 2) or start.shape[-1] != self.dims:
             raise bayesprog.QuestionError(f"expected a start cell of {self.dims} coordinates, or "

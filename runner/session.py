@@ -93,7 +93,7 @@ class Session:
         self.explorer = explorer
         self.seed = seed
         #: the decisions' seeds of the current exploration (an experiment run's when reset so)
-        self._seeds: int | list[tuple[int, int, int]] = seed
+        self._seeds: int | list[tuple[int, ...]] = seed
         self.line_no = 0
         #: the number of the next step (probes answered since the start or the last reset)
         self.k = 0
@@ -132,6 +132,7 @@ class Session:
         if d.shape_ready is None or not d.shape_ready[0]:
             return None
         answer = self.shape_program.ask("shape", {"L": d.shape_error[0]})
+        assert isinstance(answer, bayesprog.Posterior)  # pi_obj's question "shape" is P(R | L)
         states = answer.states[answer.variables[0]]
         probabilities = [float(x) for x in answer.probabilities]
         return dict(zip(states, probabilities, strict=True))

@@ -18,6 +18,27 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import rclpy  # bayesprog[ros], which the test extras bring
+from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import OccupancyGrid
+from nav_msgs.msg import Path as PathMsg
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
+from visualization_msgs.msg import Marker, MarkerArray
+
+from runner.experiment import decision_seed, simulate, start_cells
+from runner.explorer import Explorer
+from runner.scenario import load_scenario
+from runner.session import Session
+
+with warnings.catch_warnings():
+    # the message type support loads lark, which imports the deprecated sre_parse (pytest runs
+    # with warnings as errors): load it once, quietly
+    warnings.simplefilter("ignore", DeprecationWarning)
+    import rosidl_generator_py  # noqa: F401
 
 ROOT = Path(__file__).parents[2]
 PAPER = ROOT / "models" / "scenarios" / "paper.yaml"
@@ -31,27 +52,6 @@ DOMAIN = str(random.SystemRandom().randint(1, 100))
 ROS_ENV = {"ROS_DOMAIN_ID": DOMAIN, "ROS_LOCALHOST_ONLY": "1",
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 os.environ.update(ROS_ENV)
-
-import rclpy  # noqa: E402  (bayesprog[ros], which the test extras bring)
-
-with warnings.catch_warnings():
-    # the message type support loads lark, which imports the deprecated sre_parse (pytest runs
-    # with warnings as errors): load it once, quietly
-    warnings.simplefilter("ignore", DeprecationWarning)
-    import rosidl_generator_py  # noqa: F401
-from geometry_msgs.msg import PointStamped  # noqa: E402
-from nav_msgs.msg import OccupancyGrid, Path as PathMsg  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy)  # noqa: E402
-from rclpy.signals import SignalHandlerOptions  # noqa: E402
-from sensor_msgs.msg import PointCloud2  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
-from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
-
-from runner.experiment import decision_seed, simulate, start_cells  # noqa: E402
-from runner.explorer import Explorer  # noqa: E402
-from runner.scenario import load_scenario  # noqa: E402
-from runner.session import Session  # noqa: E402
 
 RESET = '{"reset": {}}'
 LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -653,7 +653,7 @@ def test_the_documented_bridge_turns_a_drivers_presses_into_probes(paper):
                         timeout=60)
             if k == 0:  # the bridge has just come up: let it match our publisher too
                 settle = time.monotonic() + 0.5
-                client.spin(lambda: time.monotonic() > settle)
+                client.spin(lambda settle=settle: time.monotonic() > settle)
             goal = goals[k].point
             cell = (int(goal.x / paper.cell), int(goal.y / paper.cell))
             e, c = READINGS[paper.materials[paper.material_map[cell]]]
