@@ -595,8 +595,12 @@ def _plugin_commands(sub: argparse._SubParsersAction) -> None:
             print(f"bayesprog: runner {ep.name!r} not loaded: {exc}", file=sys.stderr)
             continue
         add = getattr(plugin, "add_commands", None)
-        if add is not None:
+        if add is None:
+            continue
+        try:
             add(sub)
+        except argparse.ArgumentError as exc:  # e.g. a command the framework has already
+            print(f"bayesprog: runner {ep.name!r}: {exc}", file=sys.stderr)
 
 
 def _version() -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import threading
@@ -22,16 +23,30 @@ def _ros() -> Iterator[threading.Event]:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
+    _check_domain()
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set())
                 for sig in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # rclpy's RCLError and kin: the middleware refused to start
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        raise BayesprogError(f"cannot start ROS 2: {exc}") from None
     try:
         yield stop
     finally:
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _check_domain() -> None:
+    """ROS_DOMAIN_ID, when set, must name a domain DDS can map to ports (0 to 232)."""
+    value = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if value and not (value.isdigit() and int(value) <= 232):
+        raise BayesprogError(f"ROS_DOMAIN_ID={value!r}: expected an integer from 0 to 232 "
+                             "(0 to 101 is safe on Linux)")
 
 
 def _node(make: Callable[[], Any]) -> Any:

@@ -269,6 +269,16 @@ def test_bad_options_are_user_errors(command, expected):
     assert "Traceback" not in out.stderr
 
 
+@pytest.mark.parametrize("domain", ["abc", "999"])
+def test_a_domain_dds_cannot_use_is_a_user_error(domain):
+    out = subprocess.run([BAYESPROG, "explore", str(PAPER), "--ros"], capture_output=True,
+                         text=True, cwd=ROOT, timeout=120,
+                         env={**os.environ, **ROS_ENV, "ROS_DOMAIN_ID": domain})
+    assert out.returncode == 2
+    assert out.stderr.strip() == (f"bayesprog: ROS_DOMAIN_ID={domain!r}: expected an integer "
+                                  "from 0 to 232 (0 to 101 is safe on Linux)")
+
+
 # --- the contract, item by item ---------------------------------------------------------------
 
 
