@@ -35,9 +35,10 @@ from bayesprog.files import atomic_write
 from bayesprog.forms import get_form
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
-from bayesprog.language.check import InputDecl, Term, check_document, question_problem
-from bayesprog.language.document import Document, FitRecord, validate_located
+from bayesprog.language.check import check_document, question_problem
+from bayesprog.language.document import Document, validate_located
 from bayesprog.language.loader import Located, load_yaml
+from bayesprog.model import FitRecord, InputDecl, Term
 from bayesprog.variables import Variable
 
 if TYPE_CHECKING:  # imported when a program is learned, not when bayesprog is

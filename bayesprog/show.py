@@ -9,7 +9,7 @@ import numpy as np
 from bayesprog.forms import FormulaParam, InputRef, ParamValue
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
-from bayesprog.language.check import Term
+from bayesprog.model import Term
 from bayesprog.program import Program
 from bayesprog.variables import Continuous, Discrete, Variable
 

@@ -19,6 +19,7 @@ PACKAGE = Path(__file__).parents[1] / "bayesprog"
 LAYERS = [
     {"errors", "variables", "expressions", "formula", "files", "rich", "limits"},
     {"forms"},
+    {"model"},
     {"language"},
     {"inference"},
     {"learning"},
@@ -93,6 +94,17 @@ def test_bayesprog_never_imports_runner():
     g = graph()
     offenders = [(a, b) for a, b in g.edges if b.startswith("runner")]
     assert not offenders, offenders
+
+
+def test_inference_and_learning_never_import_the_language():
+    """The engine and the estimators work on the program's data types (bayesprog.model), not on
+    the YAML reader that builds them."""
+    g = graph()
+    offenders = [(a, b) for a, b in g.edges
+                 if a.split(".")[1:2] in (["inference"], ["learning"])
+                 and b.startswith("bayesprog.language")]
+    assert not offenders, offenders
+    assert g.has_edge("bayesprog.inference.factors", "bayesprog.model")  # (the test sees them)
 
 
 @pytest.mark.parametrize("module", sorted(graph().nodes - {"bayesprog"}))

@@ -16,7 +16,7 @@ from bayesprog.inference.core import Factor
 from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family
-from bayesprog.language.check import Term
+from bayesprog.model import Term
 from bayesprog.variables import Continuous, discrete
 
 

@@ -24,7 +24,7 @@ from bayesprog.inference.factors import (
 )
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family, requisite
-from bayesprog.language.check import Term
+from bayesprog.model import Term
 
 #: (searched, observed discrete, observed continuous, inputs, soft evidence): names only
 LayoutKey = tuple[tuple[str, ...], ...]

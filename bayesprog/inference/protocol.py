@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from bayesprog.inference.core import InferenceCache
-from bayesprog.language.check import InputDecl, Term
+from bayesprog.model import InputDecl, Term
 from bayesprog.variables import Variable
 
 

@@ -29,8 +29,8 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import Factor, _bound_param, term_factor
 from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.language.check import Term
 from bayesprog.limits import check_size
+from bayesprog.model import Term
 from bayesprog.variables import Continuous, Discrete
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,6 @@ import numpy as np
 from bayesprog.errors import Diagnostic, short_repr
 from bayesprog.expressions import Expression, ExpressionError, parse_expression
 from bayesprog.forms import (
-    Form,
     FormulaParam,
     InputRef,
     Param,
@@ -31,59 +30,8 @@ from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.document import Document, InputSpec, LearnSpec
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
+from bayesprog.model import InputDecl, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable, binned_variable, grid_variable
-
-
-@dataclass(frozen=True)
-class InputDecl:
-    """A declared runtime input: ``axes`` over discrete variables, then fixed or free dims."""
-
-    name: str
-    axes: tuple[str, ...]
-    event: tuple[int | str, ...]
-    description: str = ""
-
-    @property
-    def ndim(self) -> int:
-        return len(self.axes) + len(self.event)
-
-
-@dataclass(frozen=True)
-class LearnOptions:
-    """How a term is learned from data: Dirichlet pseudo-counts (tables), the candidate numbers
-    of components (gmm, chosen by BIC when several), and parameters pooled across parent
-    states."""
-
-    pseudo_counts: ParamValue | None = None
-    components: tuple[int, ...] = ()
-    shared: tuple[str, ...] = ()
-
-
-@dataclass
-class Term:
-    """A checked term of the decomposition (or a soft-evidence likelihood when ``soft``)."""
-
-    expression: Expression
-    child: Variable
-    parents: tuple[Variable, ...]
-    form: Form
-    params: dict[str, ParamValue | InputRef | FormulaParam]
-    position: tuple[str, int, int] = ("<python>", 0, 0)
-    soft: bool = False
-    extra: dict[str, Any] = field(default_factory=dict)
-    description: str = ""
-    #: how the term is learned from data; None keeps it as written (``learn: false``)
-    learn: LearnOptions | None = field(default_factory=LearnOptions)
-
-    @property
-    def axes(self) -> tuple[str, ...]:
-        """The term's discrete variables, child first when it is discrete."""
-        own = (self.child.name,) if self.child.is_discrete else ()
-        return own + tuple(p.name for p in self.parents if p.is_discrete)
-
-    @property
-    def label(self) -> str:
-        return f"soft evidence on {self.child.name}" if self.soft else str(self.expression)
 
 
 @dataclass

@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from bayesprog.errors import Diagnostic, SpecError, short_repr
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.limits import limit
+from bayesprog.model import FitRecord
 
 FORMAT_VERSION = 1
 M = TypeVar("M", bound=BaseModel)
@@ -187,22 +188,6 @@ class TermSpec(_WithParameters):
     learn: bool | LearnSpec = Field(
         True, description="false keeps the term as written when the program is learned; a "
         "mapping gives learning options")
-
-
-class FitRecord(_Strict):
-    """The provenance of one fit, written into the fitted file; its statistics let a later fit
-    continue with more data."""
-
-    data: str = Field(description="the data file's name")
-    sha256: str = Field(description="SHA-256 of the data file's bytes")
-    rows: int = Field(description="rows in the data file")
-    rows_used: int = Field(description="rows with a value for at least one learned term")
-    log_likelihood: float = Field(description="log-likelihood of the rows used, fitted program")
-    method: str = Field(description="maximum likelihood, or EM when values are missing")
-    iterations: int = 1
-    terms: list[str] = Field(default_factory=list, description="the terms learned")
-    statistics: dict[str, dict[str, Any]] = Field(
-        default_factory=dict, description="per learned term, its sufficient statistics")
 
 
 class SoftEvidenceSpec(_WithParameters):

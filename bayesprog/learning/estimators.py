@@ -16,7 +16,7 @@ import numpy as np
 from scipy.special import betaln, digamma, polygamma
 
 from bayesprog.forms import ParamValue
-from bayesprog.language.check import LearnOptions, Term
+from bayesprog.model import LearnOptions, Term
 from bayesprog.variables import Discrete
 
 Stats = dict[str, np.ndarray]

@@ -26,8 +26,6 @@ from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
 from bayesprog.inference.formulas import formula_value, log_factor
-from bayesprog.language.check import LearnOptions, Term
-from bayesprog.language.document import FitRecord
 from bayesprog.learning.data import Data, DataError, load_data
 from bayesprog.learning.estimators import (
     Estimator,
@@ -38,6 +36,7 @@ from bayesprog.learning.estimators import (
     estimator_for,
     parent_cards,
 )
+from bayesprog.model import FitRecord, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable
 
 #: Most entries of one chunk's joint table over the missing variables (rows x joint states).

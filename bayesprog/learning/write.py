@@ -18,7 +18,7 @@ from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
 from bayesprog.expressions import canonical, parse_expression
 from bayesprog.forms import ParamValue
-from bayesprog.language.document import FitRecord
+from bayesprog.model import FitRecord
 from bayesprog.variables import Discrete, Variable
 
 #: significant digits of learned parameters in the file (probabilities then sum to one

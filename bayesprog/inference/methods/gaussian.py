@@ -29,7 +29,7 @@ from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.methods.contraction import contract_factors
 from bayesprog.inference.plan import QuestionPlan
-from bayesprog.language.check import Term
+from bayesprog.model import Term
 
 _LOG_2PI = float(np.log(2 * np.pi))
 

@@ -29,7 +29,7 @@ from bayesprog.inference.density import QUANTILES, Density
 from bayesprog.inference.methods.base import Cost, Method, register_method
 from bayesprog.inference.methods.contraction import contract_question
 from bayesprog.inference.plan import QuestionPlan
-from bayesprog.language.check import InputDecl, Term
+from bayesprog.model import InputDecl, Term
 from bayesprog.variables import Continuous, Variable, binned_variable
 
 #: Bins per unknown real variable of the coarser of the two answers.

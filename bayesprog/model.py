@@ -1,0 +1,88 @@
+"""The program's data types: what a checked program is made of, below both the language that
+reads it from YAML (:mod:`bayesprog.language`) and the inference and learning that use it.
+
+A :class:`Term` is one factor of the decomposition (its variables, form and parameters), an
+:class:`InputDecl` a runtime input a question binds, :class:`LearnOptions` how a term is learned
+from data and :class:`FitRecord` the provenance of a fit, as written into a fitted file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from bayesprog.expressions import Expression
+from bayesprog.forms import Form, FormulaParam, InputRef, ParamValue
+from bayesprog.variables import Variable
+
+
+@dataclass(frozen=True)
+class InputDecl:
+    """A declared runtime input: ``axes`` over discrete variables, then fixed or free dims."""
+
+    name: str
+    axes: tuple[str, ...]
+    event: tuple[int | str, ...]
+    description: str = ""
+
+    @property
+    def ndim(self) -> int:
+        return len(self.axes) + len(self.event)
+
+
+@dataclass(frozen=True)
+class LearnOptions:
+    """How a term is learned from data: Dirichlet pseudo-counts (tables), the candidate numbers
+    of components (gmm, chosen by BIC when several), and parameters pooled across parent
+    states."""
+
+    pseudo_counts: ParamValue | None = None
+    components: tuple[int, ...] = ()
+    shared: tuple[str, ...] = ()
+
+
+@dataclass
+class Term:
+    """A checked term of the decomposition (or a soft-evidence likelihood when ``soft``)."""
+
+    expression: Expression
+    child: Variable
+    parents: tuple[Variable, ...]
+    form: Form
+    params: dict[str, ParamValue | InputRef | FormulaParam]
+    position: tuple[str, int, int] = ("<python>", 0, 0)
+    soft: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+    #: how the term is learned from data; None keeps it as written (``learn: false``)
+    learn: LearnOptions | None = field(default_factory=LearnOptions)
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """The term's discrete variables, child first when it is discrete."""
+        own = (self.child.name,) if self.child.is_discrete else ()
+        return own + tuple(p.name for p in self.parents if p.is_discrete)
+
+    @property
+    def label(self) -> str:
+        return f"soft evidence on {self.child.name}" if self.soft else str(self.expression)
+
+
+class FitRecord(BaseModel):
+    """The provenance of one fit, written into the fitted file; its statistics let a later fit
+    continue with more data."""
+
+    model_config = ConfigDict(extra="forbid", strict=False)
+
+    data: str = Field(description="the data file's name")
+    sha256: str = Field(description="SHA-256 of the data file's bytes")
+    rows: int = Field(description="rows in the data file")
+    rows_used: int = Field(description="rows with a value for at least one learned term")
+    log_likelihood: float = Field(description="log-likelihood of the rows used, fitted program")
+    method: str = Field(description="maximum likelihood, or EM when values are missing")
+    iterations: int = 1
+    terms: list[str] = Field(default_factory=list, description="the terms learned")
+    statistics: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="per learned term, its sufficient statistics")
