@@ -82,13 +82,16 @@ def _scenario_path(target: Path) -> Path:
 
 def explore(target: Path, options: dict) -> int:
     """Serve the step interface on standard input/output, or as a ROS 2 node (``ros``)."""
-    from runner.explorer import Explorer
-    from runner.scenario import load_scenario
-
     if options.get("ros"):
+        from runner.ros.run import catch_signals
+
+        catch_signals()  # a node stopped while it loads still ends cleanly
         from runner.ros import require
 
         require()  # before the scenario is loaded: a missing extra is said at once
+    from runner.explorer import Explorer
+    from runner.scenario import load_scenario
+
     scenario = load_scenario(_scenario_path(target))
     task = options.get("task") or next(iter(scenario.spec.tasks))
     for term in options.get("ablate") or ():
@@ -112,6 +115,9 @@ def explore(target: Path, options: dict) -> int:
 
 def robot(target: Path, options: dict) -> int:
     """A simulated robot node that drives ``bayesprog explore --ros`` (see runner.ros)."""
+    from runner.ros.run import catch_signals
+
+    catch_signals()
     from runner.ros import require
     from runner.scenario import load_scenario
 
@@ -124,8 +130,8 @@ def robot(target: Path, options: dict) -> int:
     from runner.ros.robot_node import RobotOptions
     from runner.ros.run import robot as run_robot
 
-    robot_options = RobotOptions(task=task, steps=options["steps"], seed=options.get("seed"),
-                                 run=options.get("run"), timeout=options["timeout"])
+    robot_options = RobotOptions(task=task, steps=options["steps"], seed=options.get("seed", 0),
+                                 run=options.get("run", 0), timeout=options["timeout"])
     return run_robot(scenario, robot_options, namespace=options.get("namespace") or "/bayesprog",
                      as_json=bool(options.get("json")))
 
@@ -141,12 +147,11 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--task", help="task of the scenario, for Gamma (default: its first)")
     p.add_argument("--steps", type=int, default=100, metavar="N",
                    help="probes to make, the start cell's included (default: %(default)s)")
-    p.add_argument("--seed", type=int, metavar="S",
-                   help="draw the start cell and the readings as an experiment of this seed does "
-                   "(default: 0)")
-    p.add_argument("--run", type=int, metavar="R",
-                   help="... as its run R does, and have the explorer decide as in that run "
-                   "(default: 0)")
+    p.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="be run R of an experiment of this seed: its start cell, its readings, "
+                   "and the explorer's decisions (default: %(default)s)")
+    p.add_argument("--run", type=int, default=0, metavar="R",
+                   help="the run (default: %(default)s)")
     p.add_argument("--namespace", default="/bayesprog", metavar="NS",
                    help="the explorer's namespace (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=60.0, metavar="SECONDS",

@@ -11,6 +11,7 @@ once the explorer has answered its reset, and from then on turns every press int
 line for the explorer and every ``next_target`` into a goal for the hand:
 
     python docs/examples/ros_bridge.py --cell 0.01 --start 5 7 [--namespace /bayesprog]
+        [--frame workspace]
 """
 
 from __future__ import annotations
@@ -27,9 +28,9 @@ from std_msgs.msg import Float64MultiArray, String
 
 
 class Bridge(Node):
-    def __init__(self, cell: float, start: list[int], namespace: str):
+    def __init__(self, cell: float, start: list[int], namespace: str, frame: str):
         super().__init__("hand_bridge")
-        self.cell_size = cell
+        self.cell_size, self.frame = cell, frame
         self.cell = start  # the cell the hand is sent to, and presses next
         self.dims = len(start)  # 2 on a surface of cells, 3 in a volume
         self.goal = self.create_publisher(PointStamped, "/hand/goal", 10)
@@ -48,8 +49,10 @@ class Bridge(Node):
 
     def on_reply(self, msg: String) -> None:
         reply = json.loads(msg.data)
-        if "error" in reply:
+        if "error" in reply:  # e.g. a reading out of range: press the same cell again
             self.get_logger().error(f"the explorer refused a probe: {reply['error']}")
+            if self.started:
+                self.send_goal()
         elif reply.get("reset") and not self.started:  # the first goal: the start cell
             self.started = True
             self.timer.cancel()
@@ -57,7 +60,7 @@ class Bridge(Node):
 
     def send_goal(self) -> None:
         goal = PointStamped()
-        goal.header.frame_id = "workspace"
+        goal.header.frame_id = self.frame
         goal.header.stamp = self.get_clock().now().to_msg()
         centre = [(i + 0.5) * self.cell_size for i in self.cell] + [0.0]
         goal.point.x, goal.point.y, goal.point.z = centre[:3]
@@ -79,9 +82,10 @@ def main() -> None:
     parser.add_argument("--cell", type=float, required=True, help="cell size, metres")
     parser.add_argument("--start", type=int, nargs="+", required=True, help="ix iy [iz]")
     parser.add_argument("--namespace", default="/bayesprog")
+    parser.add_argument("--frame", default="workspace", help="the explorer's --frame")
     args = parser.parse_args()
     rclpy.init()
-    node = Bridge(args.cell, args.start, args.namespace.rstrip("/"))
+    node = Bridge(args.cell, args.start, args.namespace.rstrip("/"), args.frame)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):

@@ -8,9 +8,11 @@ shape. The topics, types and QoS are the contract of ``docs/robot.md``.
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 import traceback
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PointStamped
@@ -43,8 +45,9 @@ FIELDS = ("belief", "posterior", "saliency", "uncertainty", "inhibition")
 class ExplorerNode(Node):
     """Answers probes for one exploration; ``frame`` names the workspace's frame."""
 
-    def __init__(self, session: Session, namespace: str = "/bayesprog", frame: str = "workspace"):
-        super().__init__("bayesprog_explorer", namespace=namespace)
+    def __init__(self, session: Session, namespace: str = "/bayesprog", frame: str = "workspace",
+                 **node_options: Any):
+        super().__init__("bayesprog_explorer", namespace=namespace, **node_options)
         self.session = session
         self.frame = frame
         scenario = session.explorer.scenario
@@ -55,7 +58,8 @@ class ExplorerNode(Node):
         self.fields = {name: self.create_publisher(field_type, name, LATCHED) for name in FIELDS}
         self.path = self.create_publisher(Path, "path", LATCHED)
         self.shape_markers = self.create_publisher(MarkerArray, "shape", LATCHED)
-        self.create_subscription(String, "probe", self.on_probe, PROBES)
+        self.probes = self.create_subscription(String, "probe", self.on_probe, PROBES)
+        self._senders = 0  # publishers on probe when a listener was last awaited
         self._path = messages.GrowingPath()
         self.answered = 0
         self.publish_cleared()
@@ -77,21 +81,29 @@ class ExplorerNode(Node):
         head = self.header()
         if stepped:
             self.next_target.publish(messages.point_stamped(self.centre(reply["next"]), head))
-        self.reply.publish(String(data=_json(reply)))
-        if stepped:
-            self.answered += 1
-            self.publish_state(reply, head)
-        elif "reset" in reply:
-            self.publish_cleared()
+        self.reply.publish(String(data=json.dumps(reply)))
+        try:
+            if stepped:
+                self.answered += 1
+                self.publish_state(reply, head)
+            elif "reset" in reply:
+                self.publish_cleared()
+        except Exception:  # a fault of ours in what RViz shows: logged, and the node goes on
+            traceback.print_exc(file=sys.stderr)
 
     def await_listener(self, most: float = 1.0) -> None:
         """A probe can arrive before this node has matched its sender's subscriptions (each
-        side discovers the other on its own): with nobody matched yet on ``reply`` and
-        ``next_target``, wait up to ``most`` seconds for a listener, so the answer is not sent
-        into the void."""
+        side discovers the other on its own): when a new sender has appeared and nobody is
+        matched yet on ``reply`` or on ``next_target``, wait up to ``most`` seconds for both,
+        so the answer is not sent into the void. Once per new sender: a sender that listens to
+        neither pays it once."""
+        senders = self.probes.get_publisher_count()
+        if senders == self._senders:
+            return
+        self._senders = senders
         end = time.monotonic() + most
-        while (self.reply.get_subscription_count() == 0
-               and self.next_target.get_subscription_count() == 0 and time.monotonic() < end):
+        while ((self.reply.get_subscription_count() == 0
+                or self.next_target.get_subscription_count() == 0) and time.monotonic() < end):
             time.sleep(0.005)
 
     def centre(self, cell: list[int]) -> np.ndarray:
@@ -140,8 +152,3 @@ class ExplorerNode(Node):
         return messages.shape_markers(reg.points[0, t], name, posterior[name], self.cell, head,
                                       closed=False)
 
-
-def _json(reply: dict) -> str:
-    import json
-
-    return json.dumps(reply)

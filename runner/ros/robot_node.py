@@ -28,8 +28,9 @@ from runner.scenario import Scenario
 class RobotOptions:
     task: str
     steps: int = 100
-    seed: int | None = None
-    run: int | None = None
+    #: the robot is run ``run`` of an experiment of ``seed``: start cell, readings, decisions
+    seed: int = 0
+    run: int = 0
     #: seconds to wait for the explorer to appear, and for each of its answers
     timeout: float = 60.0
 
@@ -40,6 +41,8 @@ class Outcome:
 
     cells: list[int] = field(default_factory=list)
     error: str | None = None
+    #: the error is that no explorer was found (the user's to fix: start one)
+    no_explorer: bool = False
 
 
 class RobotNode(Node):
@@ -48,7 +51,7 @@ class RobotNode(Node):
     def __init__(self, scenario: Scenario, options: RobotOptions, namespace: str = "/bayesprog"):
         super().__init__("bayesprog_robot", namespace=namespace)
         self.scenario, self.options = scenario, options
-        seed, run = options.seed or 0, options.run or 0
+        seed, run = options.seed, options.run
         self.sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)])
         self.start = start_cell(scenario.shape, seed, run)
         self.gamma = BorderDistance(scenario.centres, scenario.border(options.task), 1)
@@ -58,18 +61,15 @@ class RobotNode(Node):
         self.create_subscription(String, "reply", self.on_reply, STREAM)
         self._reset_sent: float | None = None
         self._ready = False  # the explorer answered the reset
+        self._answered = True  # the explorer has taken our last probe
         self._waiting_since = time.monotonic()
         self._created = time.monotonic()
         self.done = False
 
     # the loop ---------------------------------------------------------------------------------
     def reset_line(self) -> str:
-        opts: dict[str, int] = {}
-        if self.options.seed is not None:
-            opts["seed"] = self.options.seed
-        if self.options.run is not None:
-            opts["run"] = self.options.run
-        return json.dumps({"reset": opts})
+        """A new session that decides as the robot's run of an experiment does."""
+        return json.dumps({"reset": {"seed": self.options.seed, "run": self.options.run}})
 
     def advance(self) -> None:
         """Called between spins: find the explorer, reset it, watch the time."""
@@ -85,6 +85,7 @@ class RobotNode(Node):
                     self.fail(f"no explorer answers on {self.probe.topic_name} after "
                               f"{self.options.timeout:g} s: start bayesprog explore SCENARIO "
                               "--ros first (same namespace and ROS_DOMAIN_ID)")
+                    self.outcome.no_explorer = True
                 return
             if self._reset_sent is None or now - self._reset_sent > 1.0:
                 self.send(self.reset_line())  # again each second until it is answered
@@ -101,15 +102,24 @@ class RobotNode(Node):
                       f"{len(self.outcome.cells)})")
 
     def on_reply(self, msg: String) -> None:
+        """The explorer's answers, read for our reset and for a refusal of our probe; replies
+        to lines of anyone else in the namespace are none of the robot's business."""
         try:
             reply = json.loads(msg.data)
         except ValueError:
             return
-        if "error" in reply and not self.done:
+        if not isinstance(reply, dict) or self.done:
+            return
+        if not self._ready:
+            if reply.get("reset") is True and reply.get("seed") == self.options.seed \
+                    and reply.get("run") == self.options.run:
+                self._ready = True
+                self.probe_cell(self.start)
+            return
+        if "k" in reply and reply["k"] == len(self.outcome.cells) - 1:
+            self._answered = True  # our last probe was taken
+        elif "error" in reply and not self._answered:
             self.fail(f"the explorer refused a probe: {reply['error']}")
-        elif reply.get("reset") is True and not self._ready:
-            self._ready = True
-            self.probe_cell(self.start)
 
     def on_next_target(self, msg: PointStamped) -> None:
         if not self._ready or self.done:
@@ -130,6 +140,7 @@ class RobotNode(Node):
         texture, compliance = self.sensor.probe(np.array([flat]))
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
+        self._answered = False
         self.send(json.dumps({"cell": [int(i) for i in cell], "texture": float(texture[0]),
                               "compliance": float(compliance[0])}))
         self._waiting_since = time.monotonic()

@@ -14,37 +14,40 @@ from typing import Any
 from bayesprog.errors import BayesprogError
 from runner.ros import require
 
+#: set by SIGINT or SIGTERM once :func:`catch_signals` has run: the node then ends cleanly
+STOP = threading.Event()
+
+
+def catch_signals() -> None:
+    """From now on SIGINT and SIGTERM ask the node to stop (the spin loop ends at its next turn,
+    a tenth of a second), even while it is still starting: called first thing by ``--ros``."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: STOP.set())
+
 
 @contextmanager
 def _ros() -> Iterator[threading.Event]:
-    """rclpy started with our own SIGINT and SIGTERM handlers: they set the event, and the
-    spin loop ends at its next turn (a tenth of a second), so a node stops cleanly."""
+    """rclpy started without its own signal handlers (ours set :data:`STOP`)."""
     require()
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     _check_domain()
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set())
-                for sig in (signal.SIGINT, signal.SIGTERM)}
+    catch_signals()
     try:
         rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # rclpy's RCLError and kin: the middleware refused to start
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         raise BayesprogError(f"cannot start ROS 2: {exc}") from None
     try:
-        yield stop
+        yield STOP
     finally:
         rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _check_domain() -> None:
     """ROS_DOMAIN_ID, when set, must name a domain DDS can map to ports (0 to 232)."""
     value = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if value and not (value.isdigit() and int(value) <= 232):
+    if value and not (value.isascii() and value.isdigit() and int(value) <= 232):
         raise BayesprogError(f"ROS_DOMAIN_ID={value!r}: expected an integer from 0 to 232 "
                              "(0 to 101 is safe on Linux)")
 
@@ -103,9 +106,10 @@ def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) ->
         outcome, summary = node.outcome, node.summary()
     if outcome.error is not None:
         print(f"{name}: {outcome.error}", file=sys.stderr)
-        return 1
+        return 2 if outcome.no_explorer else 1
     if as_json:
-        print(json.dumps(summary))
+        print(json.dumps({k: (None if isinstance(v, float) and v != v else v)  # NaN: null
+                          for k, v in summary.items()}))
     else:
         what = f"{summary['probes']} probe(s)"
         if stop.is_set():

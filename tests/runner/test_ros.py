@@ -29,7 +29,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from runner.experiment import decision_seed, simulate, start_cells
+from runner.experiment import simulate, start_cells
 from runner.explorer import Explorer
 from runner.scenario import load_scenario
 from runner.session import Session
@@ -305,10 +305,20 @@ def test_topics_types_node_and_qos(explorer_node):
             if i.node_name == "bayesprog_explorer"]
     assert len(subs) == 1 and subs[0].topic_type == "std_msgs/msg/String"
     assert subs[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
-    # the queues' depths are not sent over the wire: read them where they are set
-    from runner.ros import explorer_node as module
+    # the queues' depths are not sent over the wire: read them off a node made here
+    from runner.ros.explorer_node import ExplorerNode
 
-    assert min(module.STREAM.depth, module.PROBES.depth, module.LATCHED.depth) >= 10
+    here = ExplorerNode(Session(Explorer(load_scenario(PAPER), "T2")), namespace="/depths",
+                        context=client.context)
+    try:
+        endpoints = [here.reply, here.next_target, here.path, here.shape_markers, here.probes,
+                     *here.fields.values()]
+        assert len(endpoints) == 10
+        for endpoint in endpoints:
+            qos = endpoint.qos_profile
+            assert qos.depth >= 10 and qos.reliability == ReliabilityPolicy.RELIABLE
+    finally:
+        here.destroy_node()
 
 
 def test_a_probe_gets_the_stdio_reply_the_next_cell_and_the_maps(explorer_node, paper):
@@ -524,20 +534,21 @@ def test_the_robot_prints_gamma_and_path_length(explorer_node, paper):
                           "12", "--namespace", client.ns], capture_output=True, text=True,
                          cwd=ROOT, timeout=120, env={**os.environ, **ROS_ENV})
     assert out.returncode == 0, out.stderr
-    # seed 0, run 0 by default: as that run of a simulation
+    # seed 0, run 0 by default: that run of a simulation, decisions included
     sim = simulate(paper, "T2", "full", start_cells(paper.shape, 1, 0), np.arange(1), 0, 12)
     gamma = sim["gamma"][0, -1]
     assert f"Gamma (eq. 16) {gamma:.4f} m" in out.stdout
     travelled = np.linalg.norm(np.diff(paper.centres[sim["paths"][0]], axis=0), axis=1).sum()
     assert f"path length {travelled:.3f} m" in out.stdout
-    assert decision_seed(0, 0) == (0, 0, 0)
+    replies = [json.loads(m.data) for m in client.got["reply"]]
+    assert {"reset": True, "seed": 0, "run": 0} in replies  # the robot asked for that run
 
 
 def test_a_robot_without_an_explorer_gives_up_after_its_timeout():
     out = subprocess.run([BAYESPROG, "robot", str(PAPER), "--ros", "--task", "T2",
                           "--namespace", "/nobody_here", "--timeout", "2"], capture_output=True,
                          text=True, cwd=ROOT, timeout=120, env={**os.environ, **ROS_ENV})
-    assert out.returncode == 1
+    assert out.returncode == 2
     assert "no explorer answers on /nobody_here/probe" in out.stderr
     assert "Traceback" not in out.stderr
 
@@ -571,6 +582,18 @@ def test_two_explorers_in_two_namespaces_do_not_mix(paper):
             client.close()
         for process in processes.values():
             assert stop(process)[0] == 0
+
+
+@pytest.mark.parametrize("command", [["explore", str(PAPER), "--ros", "--task", "T2"],
+                                     ["robot", str(PAPER), "--ros", "--task", "T2"]],
+                         ids=["explore", "robot"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_node_stopped_while_it_starts_ends_cleanly(command, sig):
+    process = start(*command, "--namespace", f"/w{random.SystemRandom().randrange(10**6)}")
+    time.sleep(0.6)  # importing and loading the scenario
+    status, took, err = stop(process, sig)
+    assert (status, "Traceback" in err) == (0, False), err
+    assert took < 5
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
@@ -658,18 +681,23 @@ def test_the_documented_bridge_turns_a_drivers_presses_into_probes(paper):
                                   text=True)
         _STARTED.append(bridge)
         presses = 8
+
+        def steps() -> list[dict]:
+            replies = (json.loads(m.data) for m in client.got["reply"])
+            return [r for r in replies if "next" in r]
+
         for k in range(presses):
             client.spin(lambda k=k: len(goals) > k and features.get_subscription_count() > 0,
                         timeout=60)
-            if k == 0:  # the bridge has just come up: let it match our publisher too
-                settle = time.monotonic() + 0.5
-                client.spin(lambda settle=settle: time.monotonic() > settle)
             goal = goals[k].point
             cell = (int(goal.x / paper.cell), int(goal.y / paper.cell))
             e, c = READINGS[paper.materials[paper.material_map[cell]]]
             features.publish(Float64MultiArray(data=[e, c]))
-        steps = lambda: [r for r in map(json.loads, (m.data for m in client.got["reply"]))  # noqa: E731
-                         if "next" in r]
+            while k == 0 and not steps():  # the bridge has just come up: until it hears us
+                end = time.monotonic() + 2
+                client.spin(lambda end=end: steps() or time.monotonic() > end)
+                if not steps():
+                    features.publish(Float64MultiArray(data=[e, c]))
         client.spin(lambda: len(steps()) == presses)
     finally:
         client.close()
