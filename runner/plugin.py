@@ -89,6 +89,7 @@ def explore(target: Path, options: dict) -> int:
         from runner.ros import require
 
         require()  # before the scenario is loaded: a missing extra is said at once
+        print(f"bayesprog_explorer: loading {target}", file=sys.stderr, flush=True)
     from runner.explorer import Explorer
     from runner.scenario import load_scenario
 
@@ -122,6 +123,7 @@ def robot(target: Path, options: dict) -> int:
     from runner.scenario import load_scenario
 
     require()
+    print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
     scenario = load_scenario(_scenario_path(target))
     task = options.get("task") or next(iter(scenario.spec.tasks))
     if task not in scenario.spec.tasks:
