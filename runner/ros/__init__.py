@@ -13,6 +13,8 @@ imports them before a node is started, and :func:`require` says how to install t
 
 from __future__ import annotations
 
+import os
+
 from bayesprog.errors import BayesprogError
 
 #: The messages the nodes use, by ROS 2 package.
@@ -21,7 +23,8 @@ PACKAGES = ("rclpy", "std_msgs", "geometry_msgs", "nav_msgs", "visualization_msg
 
 
 def require() -> None:
-    """Import rclpy and the messages, or say in one line how to install them."""
+    """Import rclpy and the messages, or say in one line how to install them; check the
+    domain the nodes would use."""
     import importlib
 
     for name in PACKAGES:
@@ -30,3 +33,12 @@ def require() -> None:
         except (ImportError, OSError):
             raise BayesprogError(f"--ros needs ROS 2's Python client ({name} is not installed): "
                                  'install it with pip install "bayesprog[ros]"') from None
+    _check_domain()
+
+
+def _check_domain() -> None:
+    """ROS_DOMAIN_ID, when set, must name a domain DDS can map to ports (0 to 232)."""
+    value = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if value and not (value.isascii() and value.isdigit() and int(value) <= 232):
+        raise BayesprogError(f"ROS_DOMAIN_ID={value!r}: expected an integer from 0 to 232 "
+                             "(0 to 101 is safe on Linux)")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 import threading
@@ -32,7 +31,6 @@ def _ros() -> Iterator[threading.Event]:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    _check_domain()
     catch_signals()
     try:
         rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
@@ -42,14 +40,6 @@ def _ros() -> Iterator[threading.Event]:
         yield STOP
     finally:
         rclpy.try_shutdown()
-
-
-def _check_domain() -> None:
-    """ROS_DOMAIN_ID, when set, must name a domain DDS can map to ports (0 to 232)."""
-    value = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if value and not (value.isascii() and value.isdigit() and int(value) <= 232):
-        raise BayesprogError(f"ROS_DOMAIN_ID={value!r}: expected an integer from 0 to 232 "
-                             "(0 to 101 is safe on Linux)")
 
 
 def _node(make: Callable[[], Any]) -> Any:
