@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 from scipy.special import xlog1py, xlogy
 
@@ -38,12 +40,13 @@ def _box_sum(a: np.ndarray, axes: list[int], weights: tuple[float, float, float]
     three neighbours; those axes lose their padding."""
     for axis in axes:
         n = a.shape[axis] - 2
-        a = sum(w * a[_slices(a.ndim, axis, slice(k, k + n))]
-                for k, w in enumerate(weights) if w)
+        a = cast(np.ndarray, sum(w * a[_slices(a.ndim, axis, slice(k, k + n))]
+                                 for k, w in enumerate(weights) if w))
     return a
 
 
-def _line_means(values: np.ndarray, weights: np.ndarray, axis: int, dims: int):
+def _line_means(values: np.ndarray, weights: np.ndarray, axis: int, dims: int
+                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per cell, the (1, 2, 1)-weighted mean of ``values`` over the weighted cells of each of
     the three lines (offsets -1, 0, +1 along ``axis``) of its 3^dims neighbourhood, and whether
     that line has any weight. Cells outside the grid have no weight."""

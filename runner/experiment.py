@@ -184,7 +184,7 @@ def simulate(
         out_gamma[:, k] = gamma.probe(cells)
         if k + 1 < iterations:
             cells = explorer.step(cells, texture, compliance)
-            d = explorer.last
+            d = explorer.decision
             cues["inhibition"][:, k + 1] = d.inhibition[rows, cells]
             cues["saliency"][:, k + 1] = d.saliency[rows, cells]
             cues["uncertainty"][:, k + 1] = d.uncertainty[rows, cells]
@@ -313,6 +313,7 @@ def run_experiment(
                        enabled=progress, leave=True)
     path = str(experiment.path.resolve())
     digest = store.hash
+    assert digest is not None  # set by store.open
     try:
         if scheduler is not None:
             _run_dask(scheduler, path, digest, todo, store, bar)

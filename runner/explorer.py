@@ -118,6 +118,13 @@ class Explorer:
         #: seconds spent per phase since construction (perception, cues, shape, decision)
         self.timings: dict[str, float] = defaultdict(float)
 
+    @property
+    def decision(self) -> Decision:
+        """The last decision: what stood behind the cells chosen at the last step."""
+        if self.last is None:
+            raise bayesprog.QuestionError("no decision yet: step the explorer first")
+        return self.last
+
     # state --------------------------------------------------------------------------------------
     def reset(self, start: Sequence[int] | np.ndarray,
               seed: int | Sequence[int | tuple[int, ...]] = 0) -> None:
@@ -191,6 +198,7 @@ class Explorer:
         prior = self.posterior[rows, cells]
         answer = self.perception.ask("P(M | E, C)", {"E": texture, "C": compliance},
                                      soft={"M": prior})
+        assert isinstance(answer, bayesprog.Posterior)
         self.posterior[rows, cells] = answer.probabilities
         self.uncertainty[rows, cells] = uncertainty(answer.probabilities)
         target = answer.probabilities[:, self.target_material] >= 0.5
@@ -243,7 +251,8 @@ class Explorer:
         dims = len(shape)
         at = np.unravel_index(np.asarray(cells), shape)
         steps = np.arange(-2, 3)
-        index, valid = [np.arange(self.runs).reshape((-1,) + (1,) * dims)], True
+        index = [np.arange(self.runs).reshape((-1,) + (1,) * dims)]
+        valid: np.ndarray | bool = True
         for axis, (a, n) in enumerate(zip(at, shape, strict=True)):
             along = (a[:, None] + steps).reshape((-1,) + tuple(5 if b == axis else 1
                                                              for b in range(dims)))
@@ -327,6 +336,7 @@ class Explorer:
                 program = self.target_no_shape
             answer = program.ask("next_target", rows, inputs=inputs,
                                  rng=[self.rngs[r] for r in group])
+            assert isinstance(answer, bayesprog.MapResult)
             nxt[group] = answer.indices[:, 0]
             probabilities[group] = answer.posterior.probabilities
         self.last = Decision(len(self.path), i, s, u, None if reg is None else reg.error,

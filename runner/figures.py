@@ -133,7 +133,7 @@ def draw_border(ax: Any, scenario: View, task: str, colour: str = BORDER,
                 width: float = 1.0) -> None:
     from matplotlib.collections import LineCollection
 
-    ax.add_collection(LineCollection(border_segments(scenario, task), colors=colour,
+    ax.add_collection(LineCollection(list(border_segments(scenario, task)), colors=colour,
                                      linewidths=width, label=f"{task} border"))
 
 

@@ -11,8 +11,9 @@ import multiprocessing
 import os
 import warnings
 from collections import defaultdict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -20,6 +21,7 @@ from scipy import stats
 from bayesprog.errors import BayesprogError
 from runner import figures
 from runner.experiment import (
+    Experiment,
     ExperimentSpec,
     load_results,
     mean_sem,
@@ -150,8 +152,9 @@ def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: 
                                 label="start cells"))
         figures.draw_materials(ax, view, extra=extra)
         figures.draw_border(ax, view, task, colour="black", width=1.2)
-        ax.set_title(f"{task}: ground truth" + ("" if view is scenario else
-                                                f",\n{view.label}"), fontsize=8)
+        ax.set_title(f"{task}: ground truth" + (f",\n{view.label}"
+                                                if isinstance(view, figures.Plane) else ""),
+                     fontsize=8)
         for c, conf in enumerate(spec.configurations, 1):
             paths = results[f"{task}/{conf}"]["paths"]
             counts = visits(paths, len(scenario.centres)) / paths.shape[0]
@@ -202,7 +205,8 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
     fig.savefig(out, dpi=110)
 
 
-def replay(experiment, task: str, configuration: str, run: int, steps: int):
+def replay(experiment: Experiment, task: str, configuration: str, run: int, steps: int
+           ) -> Iterator[dict[str, Any]]:
     """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
     from runner.experiment import decision_seed, make_sensor, reading_seed
 
@@ -217,7 +221,7 @@ def replay(experiment, task: str, configuration: str, run: int, steps: int):
         texture, compliance = sensor.probe(cells)
         explorer.perceive(cells, texture, compliance)
         decision_cells = explorer.decide()
-        d = explorer.last
+        d = explorer.decision
         evidence = {"T": task, "I": d.inhibition, "S": d.saliency, "U": d.uncertainty}
         if d.templates is not None and d.shape_ready is not None and d.shape_ready[0]:
             inputs = {"templates": d.templates, "errors": d.shape_error}
@@ -372,7 +376,7 @@ def decision_slice(scenario: Scenario, frames: list[dict]) -> int | None:
 VIDEO_DPI = 80
 
 
-def plot_decision(experiment, task: str, configuration: str, run: int, step: int,
+def plot_decision(experiment: Experiment, task: str, configuration: str, run: int, step: int,
                   out_png: Path, out_video: Path | None, steps: int) -> None:
     """Fig. 11 at ``step`` (PNG), and (MP4) every step of the run (``VIDEO_DPI``)."""
     bar = progress_bar(steps, "Fig. 11 replay")
@@ -454,8 +458,9 @@ def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str
         if key == "S":
             agree = all(changes[t] > 0 and ps[t] < ALPHA and _s_the_worst(by[(t, conf)])
                         for t in tasks)
-            worst = [max((c for c in spec.configurations if c != "full"),
-                         key=lambda c, t=t: by[(t, c)]["auc_mean"]) for t in tasks]
+            ablations = [c for c in spec.configurations if c != "full"]
+            worst = [ablations[int(np.argmax([by[(t, c)]["auc_mean"] for c in ablations]))]
+                     for t in tasks]
             measured += f"; the worst ablation per task: {', '.join(worst)}"
             ahead = []
             for t in tasks:
@@ -671,8 +676,10 @@ def _json_safe(rows: list[dict]) -> list[dict]:
             for r in rows]
 
 
-def _markdown(spec, rows, found, borders, step, task, digest, run=0, extra=(),
-              animation: str | None = None, shown: str = "full", volume: bool = False) -> str:
+def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str, str]],
+              borders: dict[str, int], step: int, task: str, digest: str, run: int = 0,
+              extra: Sequence[str] = (), animation: str | None = None, shown: str = "full",
+              volume: bool = False) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "

@@ -185,8 +185,8 @@ def confusion(perception: Program, model: SensorModel, per_material: int, seed: 
     """Single-probe confusion of ``perception`` on held-out probes of ``model``: row = true
     material, column = the MAP material, each row sums to one."""
     data = model.record(per_material, seed, extra_noise)
-    post = perception.ask("P(M | E, C)", {"E": np.asarray(data["E"]),
-                                          "C": np.asarray(data["C"])}).probabilities
+    post = perception.posterior("P(M | E, C)", {"E": np.asarray(data["E"]),
+                                                "C": np.asarray(data["C"])}).probabilities
     truth = np.repeat(np.arange(len(model.materials)), per_material)
     k = len(model.materials)
     out = np.zeros((k, k))

@@ -22,6 +22,7 @@ trapped by a start, but it is only as fine as its refinement.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -268,7 +269,7 @@ def match3d(
                         points=registered, angle=out_rot, shift=out_shift)
 
 
-def _icp_poses(tree, surface: np.ndarray, path: np.ndarray, weight: np.ndarray,
+def _icp_poses(tree: Any, surface: np.ndarray, path: np.ndarray, weight: np.ndarray,
                run_of: np.ndarray, rot: np.ndarray, shift: np.ndarray, iterations: int) -> None:
     """ICP from every pose (``rot`` [P, 3, 3], ``shift`` [P, 3], refined in place) on its run's
     path (``run_of`` [P]). A pose whose pairs did not change since its last step is at its fixed
@@ -288,7 +289,8 @@ def _icp_poses(tree, surface: np.ndarray, path: np.ndarray, weight: np.ndarray,
         before[active] = index
 
 
-def _mean_distance(tree, path, weight, counts, run_of, rot, shift) -> np.ndarray:
+def _mean_distance(tree: Any, path: np.ndarray, weight: np.ndarray, counts: np.ndarray,
+                   run_of: np.ndarray, rot: np.ndarray, shift: np.ndarray) -> np.ndarray:
     """Mean distance of each pose's used path points to the surface sample, [P]."""
     local = _local(path[run_of], rot, shift)
     distance, _ = tree.query(local.reshape(-1, 3))
@@ -387,7 +389,7 @@ class ShapeTracker:
             # a fit clearly worse than the run's last one (x `worse`, + `slack` metres): search
             limit = state.distance[warm_runs] * self.worse + self.slack
             worse = (reg.distance > limit).any(axis=1)
-            self._store(warm_runs[~worse], reg, ~worse)
+            self._store(warm_runs[~worse], reg, np.asarray(~worse))
             todo_full = np.concatenate([todo[full], warm_runs[worse]])
             if worse.any():
                 # start the search from the warm result too
@@ -404,7 +406,8 @@ class ShapeTracker:
         fitted[todo] = True
         return Registration(**{name: getattr(state, name).copy() for name in _FIELDS})
 
-    def _match(self, path, counts, runs, *, rotations, iterations, warm=True) -> Registration:
+    def _match(self, path: np.ndarray, counts: np.ndarray, runs: np.ndarray, *, rotations: int,
+               iterations: int, warm: bool = True) -> Registration:
         top = int(counts[runs].max())
         assert self.state is not None
         start = (self.state.angle[runs], self.state.shift[runs]) if warm else None

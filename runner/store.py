@@ -15,6 +15,7 @@ import json
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -163,8 +164,10 @@ class ResultStore:
 
     def save(self, unit: Unit, result: dict[str, np.ndarray]) -> None:
         buffer = io.BytesIO()
-        stamp = {} if self.hash is None else {"config": np.asarray(self.hash)}
-        np.savez(buffer, runs=np.asarray(unit.runs), **stamp, **result)
+        arrays: dict[str, Any] = {"runs": np.asarray(unit.runs)}
+        if self.hash is not None:
+            arrays["config"] = np.asarray(self.hash)
+        np.savez(buffer, **(arrays | result))
         atomic_write(self.path(unit), buffer.getvalue())
 
     def load(self, task: str, configuration: str, units: list[Unit]) -> dict[str, np.ndarray]:

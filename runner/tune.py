@@ -144,7 +144,7 @@ def load_search(path: str | Path) -> Search:
         if name not in known:
             diags.append(located.diagnostic(("tune", "parameters", i), f"unknown parameter "
                                             f"{name!r}: expected one of {', '.join(known)}"))
-        elif name in spec.tune.parameters[:i]:
+        elif name in (spec.tune.parameters or [])[:i]:
             diags.append(located.diagnostic(("tune", "parameters", i), f"{name} is named "
                                             "twice"))
     # what one evaluation holds (Gamma and the path of every run of every pair), estimated
@@ -169,7 +169,7 @@ def _check_terms(scenario: Scenario) -> None:
     """Every searched term is in the scenario's pi_tar with the searched parameters."""
     labels = _terms(scenario)
     for p in PARAMETERS:
-        term = labels.get(canonical(p.term))
+        term = labels.get(canonical(p.term) or p.term)
         if term is None or p.key not in term.params:
             raise BayesprogError(f"{scenario.program_path('target')}: the search sets "
                                  f"parameter {p.key!r} of {p.term}, which this program (used "
@@ -188,11 +188,12 @@ def file_values(scenario: Scenario) -> dict[str, float]:
     out = {}
     terms = _terms(scenario)
     for p in PARAMETERS:
-        value = np.asarray(terms[canonical(p.term)].params[p.key].array, float)
-        if value.size != 1 or not np.all(value == value.flat[0]):
+        value = np.asarray(terms[canonical(p.term) or p.term].params[p.key].array,
+                           dtype=float).ravel()
+        if value.size != 1 or not np.all(value == value[0]):
             raise BayesprogError(f"{scenario.program_path('target')}: {p.term} {p.key} is "
                                  "given per state; the search sets one number")
-        out[p.name] = p.from_file(float(value.flat[0]))
+        out[p.name] = p.from_file(float(value[0]))
     return out
 
 
@@ -432,12 +433,12 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
         if validation is None or validation.get("trial") != index:
             valid_pairs = search.pairs("validation")
             runs, vseed = search.tune.validation_runs, seed + 1
-            hand = evaluator(valid_pairs, None, runs, search.iterations, vseed)
-            tuned = evaluator(valid_pairs, paper | best.params, runs, search.iterations,
-                              vseed)
+            hand_runs = evaluator(valid_pairs, None, runs, search.iterations, vseed)
+            tuned_runs = evaluator(valid_pairs, paper | best.params, runs, search.iterations,
+                                   vseed)
             validation = {"trial": index, "pairs": [
                 _compare(s, t, h, u, objective)
-                for (s, t), h, u in zip(valid_pairs, hand, tuned, strict=True)]}
+                for (s, t), h, u in zip(valid_pairs, hand_runs, tuned_runs, strict=True)]}
             study.set_user_attr("validation", validation)
     finally:
         evaluator.close()
@@ -695,7 +696,7 @@ def plot_visits(search: Search, result: dict, path: Path) -> None:
     validation scenario, side by side on one colour scale per scenario."""
     from runner import figures
 
-    rows = {}
+    rows: dict[str, dict] = {}
     for row in result["validation"]:
         rows.setdefault(row["scenario"], row)
     scenarios = {s.name: s for s in search.validation}
