@@ -1,5 +1,6 @@
-"""The ``bayesprog`` command line: validate, show, graph, query, schema; run and explore are
-served by runner plugins found through the ``bayesprog.runners`` entry point group.
+"""The ``bayesprog`` command line: validate, show, graph, query, sample, learn, import, export,
+schema. An application adds its own commands: every runner plugin found through the
+``bayesprog.runners`` entry point group is asked for them (its ``add_commands(subparsers)``).
 
 User errors print ``bayesprog: ...`` (or ``FILE:LINE:COL: ...`` lines) on stderr and exit with
 status 2, never with a traceback.
@@ -263,99 +264,6 @@ def cmd_learn(args: argparse.Namespace) -> int:
     return 0
 
 
-def _runner(name: str | None) -> Any:
-    """The runner plugin ``name`` (entry point group ``bayesprog.runners``)."""
-    from importlib.metadata import entry_points
-
-    found = {ep.name: ep for ep in entry_points(group="bayesprog.runners")}
-    if not found:
-        raise _UserError("no runner is installed (entry point group 'bayesprog.runners')")
-    if name is None:
-        name = "haptic" if "haptic" in found else sorted(found)[0]
-    if name not in found:
-        raise _UserError(f"unknown runner {name!r}: expected one of {', '.join(sorted(found))}")
-    return found[name].load()
-
-
-def _experiment_runner(path: str) -> str | None:
-    from bayesprog.language.loader import load_yaml
-
-    try:
-        located, _ = load_yaml(Path(path).read_text(encoding="utf-8"), path)
-    except FileNotFoundError:
-        raise _UserError(f"cannot read {path}: no such file") from None
-    except UnicodeDecodeError:
-        raise _UserError(f"cannot read {path}: expected UTF-8 text (an experiment file)") \
-            from None
-    except IsADirectoryError:
-        raise _UserError(f"cannot read {path}: it is a directory; expected an experiment "
-                         "file") from None
-    from bayesprog.language.loader import wrong_kind
-
-    hint = wrong_kind(path, "experiment", "run takes an experiment file, for instance "
-                      "models/experiments/quick.yaml")
-    if hint:
-        raise _UserError(hint)
-    data = located.data
-    return data.get("runner") if isinstance(data, dict) else None
-
-
-def cmd_run(args: argparse.Namespace) -> int:
-    if args.workers < 1:
-        raise _UserError(f"--workers: expected at least 1, found {args.workers}")
-    runner = _runner(_experiment_runner(args.experiment))
-    options = {"quiet": args.quiet, "workers": args.workers, "scheduler": args.scheduler,
-               "no_report": args.no_report, "no_gif": args.no_animation, "compare": args.compare}
-    return int(runner.run(Path(args.experiment), Path(args.out), options))
-
-
-def cmd_tune(args: argparse.Namespace) -> int:
-    if args.workers < 1:
-        raise _UserError(f"--workers: expected at least 1, found {args.workers}")
-    if args.trials is not None and args.trials < 1:
-        raise _UserError(f"--trials: expected at least 1, found {args.trials}")
-    runner = _runner(_experiment_runner(args.experiment))
-    if not hasattr(runner, "tune"):
-        raise _UserError(f"{args.experiment}: its runner has no parameter search")
-    options = {"quiet": args.quiet, "workers": args.workers, "trials": args.trials}
-    return int(runner.tune(Path(args.experiment), Path(args.out), options))
-
-
-def _output_runner(out: str) -> Any:
-    """The runner plugin that wrote the experiment output folder ``out``."""
-    manifest = Path(out) / "experiment.json"
-    try:
-        name = json.loads(manifest.read_text(encoding="utf-8"))["experiment"].get("runner")
-    except (FileNotFoundError, NotADirectoryError):
-        raise _UserError(f"{out}: no experiment.json: not an experiment's output folder") \
-            from None
-    except (ValueError, KeyError, AttributeError, TypeError):
-        raise _UserError(f"{manifest}: not a readable experiment manifest") from None
-    return _runner(name)
-
-
-def cmd_report(args: argparse.Namespace) -> int:
-    return int(_output_runner(args.out).report(Path(args.out), {"no_gif": args.no_animation,
-                                                                "compare": args.compare}))
-
-
-def cmd_results(args: argparse.Namespace) -> int:
-    runner = _output_runner(args.out)
-    if not hasattr(runner, "results"):
-        raise _UserError(f"{args.out}: its runner writes no results table")
-    return int(runner.results(Path(args.out), {"output": args.output}))
-
-
-def cmd_explore(args: argparse.Namespace) -> int:
-    if args.stdio == args.ros:
-        raise _UserError("explore needs one of --stdio (JSON lines on standard input and "
-                         "output) or --ros (a ROS 2 node)")
-    runner = _runner(args.runner)
-    options = {"task": args.task, "seed": _check_seed(args.seed), "ablate": args.ablate,
-               "ros": args.ros, "namespace": args.namespace, "frame": args.frame}
-    return int(runner.explore(Path(args.target), options))
-
-
 def cmd_import(args: argparse.Namespace) -> int:
     from bayesprog.io import import_network
 
@@ -504,76 +412,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help="write the program with this term uniform; repeatable (default: none)")
     p.set_defaults(func=cmd_export)
-
-    p = sub.add_parser("run", help="run an experiment file (a runner plugin does the work)")
-    p.add_argument("experiment", metavar="EXPERIMENT.yaml", help="an experiment file")
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="folder for results and the report; an interrupted run resumes there")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar (default: a bar on a terminal)")
-    p.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="local processes (default: %(default)s)")
-    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                   help="an existing Dask scheduler, instead of local processes (install "
-                   "bayesprog[dask]; default: none)")
-    p.add_argument("--no-report", action="store_true",
-                   help="do not build the report (default: build it)")
-    p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
-                   help="report without the animation of Fig. 11, an MP4 video (default: with)")
-    p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
-                   "findings are set beside these in the report (default: none)")
-    p.set_defaults(func=cmd_run)
-
-    p = sub.add_parser("tune", help="search the cue profiles of an experiment's tune: section "
-                       "and compare them with the hand-chosen ones")
-    p.add_argument("experiment", metavar="EXPERIMENT.yaml",
-                   help="an experiment file with a tune: section")
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="folder for the search's journal and results; an interrupted search "
-                   "resumes there")
-    p.add_argument("--trials", type=int, metavar="N",
-                   help="candidates to evaluate (default: the file's tune.trials); more than "
-                   "before continues the search")
-    p.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="local processes (default: %(default)s)")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar (default: a bar on a terminal)")
-    p.set_defaults(func=cmd_tune)
-
-    p = sub.add_parser("report", help="rebuild an experiment's report from its stored results")
-    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
-    p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
-                   help="report without the animation of Fig. 11, an MP4 video (default: with)")
-    p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
-                   "findings are set beside these in the report (default: none)")
-    p.set_defaults(func=cmd_report)
-
-    p = sub.add_parser("results", help="write an experiment's stored runs as one tidy table")
-    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
-    p.add_argument("-o", "--output", required=True, metavar="RUNS.parquet|.csv",
-                   help="the table: one row per task, configuration, run and step, with the "
-                   "probed cell, Gamma and the cues at that cell; its format from the extension")
-    p.set_defaults(func=cmd_results)
-
-    p = sub.add_parser("explore", help="drive an exploration step by step (JSON lines)")
-    p.add_argument("target", metavar="SCENARIO_OR_MODELS",
-                   help="a scenario file, or a models folder (its scenarios/paper.yaml)")
-    p.add_argument("--stdio", action="store_true",
-                   help="JSON lines on stdin/stdout (this or --ros)")
-    p.add_argument("--ros", action="store_true",
-                   help="a ROS 2 node that takes the same lines on a topic (install "
-                   "bayesprog[ros]; this or --stdio)")
-    p.add_argument("--namespace", default="/bayesprog", metavar="NS",
-                   help="with --ros: the node's namespace (default: %(default)s)")
-    p.add_argument("--frame", default="workspace", metavar="ID",
-                   help="with --ros: the frame of what it publishes (default: %(default)s)")
-    p.add_argument("--task", help="task of the scenario (default: its first)")
-    p.add_argument("--seed", type=int, default=0,
-                   help="seed of the decisions' tie breaking (default: %(default)s)")
-    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
-                   help="decide with this term of pi_tar uniform; repeatable (default: none)")
-    p.add_argument("--runner", help="runner plugin (default: haptic)")
-    p.set_defaults(func=cmd_explore)
 
     p = sub.add_parser("schema", help="print the JSON Schema of program files")
     p.add_argument("-o", "--output", metavar="FILE",

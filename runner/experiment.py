@@ -18,10 +18,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import Program
-from bayesprog.errors import BayesprogError, SpecError
-from bayesprog.language.document import load_document
-from bayesprog.limits import SizeError, check_size
+from bayesprog import BayesprogError, Program, SizeError, SpecError, check_size, load_document
 from runner.explorer import CONFIGURATIONS, Explorer, state_entries
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario

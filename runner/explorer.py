@@ -18,8 +18,7 @@ import numpy as np
 from scipy import ndimage
 
 import bayesprog
-from bayesprog import Program
-from bayesprog.limits import check_size
+from bayesprog import Program, check_size
 from runner._kernels import perceived_sobel_2d_around
 from runner.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario

@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from bayesprog.errors import BayesprogError
+from bayesprog import BayesprogError
 from runner.experiment import Experiment, ExperimentSpec, load_experiment, stored_experiment
 from runner.explorer import CONFIGURATIONS
 from runner.report import DecisionFigure, build_report, decision_slice, findings, replay

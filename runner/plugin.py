@@ -1,70 +1,163 @@
-"""The haptic runner as a plugin of the ``bayesprog`` command line (entry point ``haptic`` of
-the group ``bayesprog.runners``): ``bayesprog run EXPERIMENT --out DIR``, ``bayesprog report
-DIR``, ``bayesprog tune EXPERIMENT --out DIR``, ``bayesprog explore SCENARIO --stdio`` (or
-``--ros``), and its own command ``bayesprog robot SCENARIO --ros`` (:func:`add_commands`)."""
+"""The haptic runner's commands on the ``bayesprog`` command line (entry point ``haptic`` of
+the group ``bayesprog.runners``): :func:`add_commands` registers ``run``, ``tune``,
+``report``, ``results``, ``explore`` and ``robot``, with their help; each command reads its
+arguments into a typed options object and calls the function of the same name here.
+
+The framework's command line knows none of them: it asks every installed runner plugin for
+its commands.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
-from bayesprog.errors import BayesprogError
+from bayesprog import BayesprogError, wrong_kind
+
+RUNNER = "haptic"
 
 
-def run(experiment: Path, out: Path, options: dict) -> int:
+@dataclass(frozen=True)
+class RunOptions:
+    workers: int = 1
+    #: a Dask scheduler's address, instead of local processes
+    scheduler: str | None = None
+    quiet: bool = False
+    report: bool = True
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    #: the animation of Fig. 11 (an MP4 video)
+    animation: bool = True
+    #: another experiment's output folder, its findings set beside these
+    compare: Path | None = None
+
+
+@dataclass(frozen=True)
+class TuneOptions:
+    workers: int = 1
+    trials: int | None = None
+    quiet: bool = False
+
+
+@dataclass(frozen=True)
+class ExploreOptions:
+    task: str | None = None
+    seed: int = 0
+    ablate: tuple[str, ...] = ()
+    #: a ROS 2 node instead of JSON lines on standard input and output
+    ros: bool = False
+    namespace: str = "/bayesprog"
+    frame: str = "workspace"
+
+
+@dataclass(frozen=True)
+class RobotCommand:
+    task: str | None = None
+    steps: int = 100
+    seed: int = 0
+    run: int = 0
+    namespace: str = "/bayesprog"
+    timeout: float = 60.0
+    json: bool = False
+
+
+def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
+        report_options: ReportOptions = ReportOptions()) -> int:
     """Run an experiment file (resuming what ``out`` already holds), then write its report."""
     from runner.experiment import load_experiment, run_experiment
 
-    exp = load_experiment(experiment)
+    exp = load_experiment(_experiment_file(experiment))
     try:
-        run_experiment(exp, out, workers=options.get("workers", 1),
-                       scheduler=options.get("scheduler"),
-                       progress=False if options.get("quiet") else None)
+        run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
+                       progress=False if options.quiet else None)
     except KeyboardInterrupt:
         print(f"interrupted: the finished chunks are kept in {out}; run the same command "
               "again to resume", file=sys.stderr)
         return 130
-    if not options.get("no_report"):
-        return report(out, options)
+    if options.report:
+        return report(out, report_options)
     print(f"results written to {out}")
     return 0
 
 
-def tune(experiment: Path, out: Path, options: dict) -> int:
+def tune(experiment: Path, out: Path, options: TuneOptions = TuneOptions()) -> int:
     """Search the cue profiles named in the experiment's ``tune:`` section (see
     :mod:`runner.tune`)."""
     from runner.tune import tune as run_tune
 
-    return run_tune(experiment, out, options)
+    return run_tune(_experiment_file(experiment), out, trials=options.trials,
+                    workers=options.workers, quiet=options.quiet)
 
 
-def report(out: Path, options: dict) -> int:
+def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
     """Rebuild ``out/report`` from the stored results."""
     from runner.report import build_report
 
-    compare = options.get("compare")
-    folder = build_report(out, animation=not options.get("no_gif", False),
-                          compare=Path(compare) if compare else None)
+    _output_folder(out)
+    folder = build_report(out, animation=options.animation, compare=options.compare)
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 
 
-def results(out: Path, options: dict) -> int:
+def results(out: Path, table: Path) -> int:
     """Write the stored runs of ``out`` as one tidy table (Parquet or CSV)."""
     from runner.tables import write_runs
 
+    _output_folder(out)
     try:
-        path, rows = write_runs(out, options["output"])
+        path, rows = write_runs(out, table)
     except OSError as exc:
-        raise BayesprogError(f"cannot write {options['output']}: {exc.strerror or exc}") from None
+        raise BayesprogError(f"cannot write {table}: {exc.strerror or exc}") from None
     print(f"{path}: {rows} rows (task, configuration, run, step, probed cell, Gamma, cues)")
     return 0
 
 
-def _scenario_path(target: Path) -> Path:
-    from bayesprog.language.loader import wrong_kind
+def _experiment_file(path: Path) -> Path:
+    """``path`` as an experiment file of this runner, or a clear error."""
+    from bayesprog import load_yaml
 
+    try:
+        located, _ = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    except FileNotFoundError:
+        raise BayesprogError(f"cannot read {path}: no such file") from None
+    except UnicodeDecodeError:
+        raise BayesprogError(f"cannot read {path}: expected UTF-8 text (an experiment file)") \
+            from None
+    except IsADirectoryError:
+        raise BayesprogError(f"cannot read {path}: it is a directory; expected an experiment "
+                             "file") from None
+    hint = wrong_kind(path, "experiment", "run takes an experiment file, for instance "
+                      "models/experiments/quick.yaml")
+    if hint:
+        raise BayesprogError(hint)
+    data = located.data
+    name = data.get("runner") if isinstance(data, dict) else None
+    if name not in (None, RUNNER):
+        raise BayesprogError(f"{path}: its runner is {name!r}; this command is the {RUNNER!r} "
+                             "runner's")
+    return path
+
+
+def _output_folder(out: Path) -> None:
+    """``out`` holds an experiment's results written by this runner, or a clear error."""
+    manifest = out / "experiment.json"
+    try:
+        name = json.loads(manifest.read_text(encoding="utf-8"))["experiment"].get("runner")
+    except (FileNotFoundError, NotADirectoryError):
+        raise BayesprogError(f"{out}: no experiment.json: not an experiment's output folder") \
+            from None
+    except (ValueError, KeyError, AttributeError, TypeError):
+        raise BayesprogError(f"{manifest}: not a readable experiment manifest") from None
+    if name not in (None, RUNNER):
+        raise BayesprogError(f"{out}: written by the runner {name!r}, not {RUNNER!r}")
+
+
+def _scenario_path(target: Path) -> Path:
     if not target.exists():
         raise BayesprogError(f"cannot read {target}: no such file or folder")
     if target.is_file():
@@ -80,9 +173,9 @@ def _scenario_path(target: Path) -> Path:
     return target
 
 
-def explore(target: Path, options: dict) -> int:
+def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
     """Serve the step interface on standard input/output, or as a ROS 2 node (``ros``)."""
-    if options.get("ros"):
+    if options.ros:
         from runner.ros.run import catch_signals
 
         catch_signals()  # a node stopped while it loads still ends cleanly
@@ -94,27 +187,26 @@ def explore(target: Path, options: dict) -> int:
     from runner.scenario import load_scenario
 
     scenario = load_scenario(_scenario_path(target))
-    task = options.get("task") or next(iter(scenario.spec.tasks))
-    for term in options.get("ablate") or ():
+    task = options.task or next(iter(scenario.spec.tasks))
+    for term in options.ablate:
         try:
             scenario.target.ablate(term)
         except BayesprogError as exc:
             raise BayesprogError(f"--ablate {term!r}: {exc}") from None
-    explorer = Explorer(scenario, task, ablate=options.get("ablate") or ())
-    if options.get("ros"):
+    explorer = Explorer(scenario, task, ablate=options.ablate)
+    if options.ros:
         from runner.ros.run import explore as explore_ros
         from runner.session import Session
 
-        return explore_ros(Session(explorer, seed=options.get("seed", 0)),
-                           namespace=options.get("namespace") or "/bayesprog",
-                           frame=options.get("frame") or "workspace")
+        return explore_ros(Session(explorer, seed=options.seed), namespace=options.namespace,
+                           frame=options.frame)
     from runner.stdio import serve
 
-    serve(explorer, sys.stdin, sys.stdout, seed=options.get("seed", 0))
+    serve(explorer, sys.stdin, sys.stdout, seed=options.seed)
     return 0
 
 
-def robot(target: Path, options: dict) -> int:
+def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     """A simulated robot node that drives ``bayesprog explore --ros`` (see runner.ros)."""
     from runner.ros.run import catch_signals
 
@@ -125,21 +217,143 @@ def robot(target: Path, options: dict) -> int:
     require()
     print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
     scenario = load_scenario(_scenario_path(target))
-    task = options.get("task") or next(iter(scenario.spec.tasks))
+    task = options.task or next(iter(scenario.spec.tasks))
     if task not in scenario.spec.tasks:
         raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
                              f"{', '.join(scenario.spec.tasks)}")
     from runner.ros.robot_node import RobotOptions
     from runner.ros.run import robot as run_robot
 
-    robot_options = RobotOptions(task=task, steps=options["steps"], seed=options.get("seed", 0),
-                                 run=options.get("run", 0), timeout=options["timeout"])
-    return run_robot(scenario, robot_options, namespace=options.get("namespace") or "/bayesprog",
-                     as_json=bool(options.get("json")))
+    robot_options = RobotOptions(task=task, steps=options.steps, seed=options.seed,
+                                 run=options.run, timeout=options.timeout)
+    return run_robot(scenario, robot_options, namespace=options.namespace, as_json=options.json)
+
+
+# the command line ---------------------------------------------------------------------------
+def _at_least(flag: str, value: int | None, least: int) -> None:
+    if value is not None and value < least:
+        raise BayesprogError(f"{flag}: expected at least {least}, found {value}")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    _at_least("--workers", args.workers, 1)
+    return run(Path(args.experiment), Path(args.out),
+               RunOptions(workers=args.workers, scheduler=args.scheduler, quiet=args.quiet,
+                          report=not args.no_report),
+               ReportOptions(animation=not args.no_animation,
+                             compare=Path(args.compare) if args.compare else None))
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    _at_least("--workers", args.workers, 1)
+    _at_least("--trials", args.trials, 1)
+    return tune(Path(args.experiment), Path(args.out),
+                TuneOptions(workers=args.workers, trials=args.trials, quiet=args.quiet))
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    return report(Path(args.out), ReportOptions(
+        animation=not args.no_animation, compare=Path(args.compare) if args.compare else None))
+
+
+def _cmd_results(args: argparse.Namespace) -> int:
+    return results(Path(args.out), Path(args.output))
+
+
+def _cmd_explore(args: argparse.Namespace) -> int:
+    if args.stdio == args.ros:
+        raise BayesprogError("explore needs one of --stdio (JSON lines on standard input and "
+                             "output) or --ros (a ROS 2 node)")
+    _at_least("--seed", args.seed, 0)
+    return explore(Path(args.target), ExploreOptions(
+        task=args.task, seed=args.seed, ablate=tuple(args.ablate), ros=args.ros,
+        namespace=args.namespace, frame=args.frame))
+
+
+def _cmd_robot(args: argparse.Namespace) -> int:
+    if not args.ros:
+        raise BayesprogError("robot needs --ros (it talks to `bayesprog explore --ros` over "
+                             "ROS 2)")
+    _at_least("--steps", args.steps, 1)
+    _at_least("--seed", args.seed, 0)
+    _at_least("--run", args.run, 0)
+    if not args.timeout > 0:
+        raise BayesprogError(f"--timeout: expected a positive number of seconds, found "
+                             f"{args.timeout}")
+    return robot(Path(args.target), RobotCommand(
+        task=args.task, steps=args.steps, seed=args.seed, run=args.run,
+        namespace=args.namespace, timeout=args.timeout, json=args.json))
 
 
 def add_commands(commands: argparse._SubParsersAction) -> None:
-    """The runner's own commands beside the framework's: ``bayesprog robot``."""
+    """Register the runner's commands, with their help, on the ``bayesprog`` command line."""
+    p = commands.add_parser("run", help="run a haptic-exploration experiment file and write "
+                            "its report (Fig. 9, 10, 11 of the paper, the findings)")
+    p.add_argument("experiment", metavar="EXPERIMENT.yaml", help="an experiment file")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for results and the report; an interrupted run resumes there")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (default: a bar on a terminal)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local processes (default: %(default)s)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="an existing Dask scheduler, instead of local processes (install "
+                   "bayesprog[dask]; default: none)")
+    p.add_argument("--no-report", action="store_true",
+                   help="do not build the report (default: build it)")
+    _report_arguments(p)
+    p.set_defaults(func=_cmd_run)
+
+    p = commands.add_parser("tune", help="search the cue profiles of an experiment's tune: "
+                            "section and compare them with the hand-chosen ones")
+    p.add_argument("experiment", metavar="EXPERIMENT.yaml",
+                   help="an experiment file with a tune: section")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the search's journal and results; an interrupted search "
+                   "resumes there")
+    p.add_argument("--trials", type=int, metavar="N",
+                   help="candidates to evaluate (default: the file's tune.trials); more than "
+                   "before continues the search")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local processes (default: %(default)s)")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (default: a bar on a terminal)")
+    p.set_defaults(func=_cmd_tune)
+
+    p = commands.add_parser("report", help="rebuild an experiment's report from its stored "
+                            "results")
+    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
+    _report_arguments(p)
+    p.set_defaults(func=_cmd_report)
+
+    p = commands.add_parser("results", help="write an experiment's stored runs as one tidy "
+                            "table")
+    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
+    p.add_argument("-o", "--output", required=True, metavar="RUNS.parquet|.csv",
+                   help="the table: one row per task, configuration, run and step, with the "
+                   "probed cell, Gamma and the cues at that cell; its format from the extension")
+    p.set_defaults(func=_cmd_results)
+
+    p = commands.add_parser("explore", help="drive an exploration step by step (JSON lines, "
+                            "or a ROS 2 node)")
+    p.add_argument("target", metavar="SCENARIO_OR_MODELS",
+                   help="a scenario file, or a models folder (its scenarios/paper.yaml)")
+    p.add_argument("--stdio", action="store_true",
+                   help="JSON lines on stdin/stdout (this or --ros)")
+    p.add_argument("--ros", action="store_true",
+                   help="a ROS 2 node that takes the same lines on a topic (install "
+                   "bayesprog[ros]; this or --stdio)")
+    p.add_argument("--task", help="task of the scenario (default: its first)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the decisions' tie breaking (default: %(default)s)")
+    p.add_argument("--ablate", action="append", default=[], metavar="TERM",
+                   help="decide with this term of pi_tar uniform; repeatable (default: none)")
+    p.add_argument("--namespace", default="/bayesprog", metavar="NS",
+                   help="with --ros: the node's namespace (default: %(default)s)")
+    p.add_argument("--frame", default="workspace", metavar="ID",
+                   help="with --ros: the frame of what it publishes (default: %(default)s)")
+    p.set_defaults(func=_cmd_explore)
+
     p = commands.add_parser("robot", help="a simulated robot that drives `explore --ros` over "
                             "ROS 2 (install bayesprog[ros])")
     p.add_argument("target", metavar="SCENARIO_OR_MODELS",
@@ -164,15 +378,8 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_robot)
 
 
-def _cmd_robot(args: argparse.Namespace) -> int:
-    if not args.ros:
-        raise BayesprogError("robot needs --ros (it talks to `bayesprog explore --ros` over "
-                             "ROS 2)")
-    for flag, value, least in (("--steps", args.steps, 1), ("--seed", args.seed, 0),
-                               ("--run", args.run, 0)):
-        if value is not None and value < least:
-            raise BayesprogError(f"{flag}: expected at least {least}, found {value}")
-    if not args.timeout > 0:
-        raise BayesprogError(f"--timeout: expected a positive number of seconds, found "
-                             f"{args.timeout}")
-    return robot(Path(args.target), vars(args))
+def _report_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-animation", "--no-gif", dest="no_animation", action="store_true",
+                   help="report without the animation of Fig. 11, an MP4 video (default: with)")
+    p.add_argument("--compare", metavar="DIR", help="another experiment's output folder: its "
+                   "findings are set beside these in the report (default: none)")

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from bayesprog.errors import BayesprogError
+from bayesprog import BayesprogError
 from runner import figures
 from runner.experiment import (
     Experiment,

@@ -24,9 +24,7 @@ from pydantic import (
 )
 
 import bayesprog
-from bayesprog.errors import SpecError
-from bayesprog.language.document import load_document
-from bayesprog.limits import limit
+from bayesprog import SpecError, limit, load_document
 from runner.sensor import SensorModel, load_sensor_model
 from runner.solids import (
     SOLID_KEYS,

@@ -9,9 +9,7 @@ from typing import Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import Program, SpecError
-from bayesprog.forms import ParamValue
-from bayesprog.language.document import load_document
+from bayesprog import ParamValue, Program, SpecError, load_document
 
 
 class HapticSensor(Protocol):
@@ -202,8 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import pandas as pd
 
-    from bayesprog.errors import BayesprogError
-    from bayesprog.files import atomic_write
+    from bayesprog import BayesprogError, atomic_write
 
     parser = argparse.ArgumentParser(prog="python -m runner.sensor",
                                      description="record probes of every material from a "

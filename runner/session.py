@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 import bayesprog
-from bayesprog.errors import BayesprogError, short_repr
+from bayesprog import BayesprogError, short_repr
 from runner.experiment import decision_seed
 from runner.explorer import Explorer
 

@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import BayesprogError
-from bayesprog.files import atomic_write
+from bayesprog import BayesprogError, atomic_write
 
 
 class StoreError(BayesprogError):

@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import BayesprogError
-from bayesprog.files import atomic_write
+from bayesprog import BayesprogError, atomic_write
 from runner.experiment import CUES, load_results, progress_bar, stored_experiment
 from runner.figures import centre_cm
 from runner.metrics import border_band

@@ -31,10 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import BayesprogError, SpecError
-from bayesprog.expressions import canonical
-from bayesprog.language.document import load_document
-from bayesprog.limits import SizeError, check_size
+from bayesprog import BayesprogError, SizeError, SpecError, canonical, check_size, load_document
 from runner.experiment import ExperimentSpec, TuneSpec, progress_bar, simulate, start_cells
 from runner.explorer import Explorer
 from runner.metrics import behaviour, moves, visits
@@ -551,7 +548,7 @@ def write_outputs(search: Search, out: Path, result: dict) -> None:
 def tuned_program(search: Search, result: dict, out: Path) -> str:
     """The training scenarios' pi_tar file with the tuned parameters written in place (its
     comments and layout kept, its sub-programs named from ``out``)."""
-    from bayesprog.learning.write import render_values
+    from bayesprog import render_values
 
     path = search.training[0].program_path("target")
     values = {p["name"]: p["tuned"] for p in result["parameters"]}
@@ -720,17 +717,17 @@ def plot_visits(search: Search, result: dict, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
-def tune(experiment: Path, out: Path, options: Mapping[str, Any]) -> int:
+def tune(experiment: Path, out: Path, trials: int | None = None, workers: int = 1,
+         quiet: bool = False) -> int:
     """The command: run or resume the search, write its outputs, print where."""
     search = load_search(experiment)
-    trials = options.get("trials")
     if trials is not None and trials < 1:
         raise BayesprogError(f"--trials: expected at least 1, found {trials}")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", category=UserWarning)  # optuna's experimental notes
-            result = run_search(search, out, trials=trials, workers=options.get("workers", 1),
-                                progress=False if options.get("quiet") else None)
+            result = run_search(search, out, trials=trials, workers=workers,
+                                progress=False if quiet else None)
     except KeyboardInterrupt:
         print(f"interrupted: the finished trials are kept in {out / JOURNAL}; run the same "
               "command again to resume", file=sys.stderr)

@@ -113,3 +113,38 @@ def test_each_module_imports_only_its_layer_and_below(module):
     mine = layer_of(module)
     above = [t for t in g.successors(module) if t != "bayesprog" and layer_of(t) > mine]
     assert not above, f"{module} (layer {mine}) imports upper layers: {above}"
+
+
+def test_the_runner_uses_only_the_public_api():
+    """The haptic application imports bayesprog's top-level names only (bayesprog.__all__), so
+    the framework's modules can move without breaking it."""
+    import bayesprog
+
+    runner = PACKAGE.parent / "runner"
+    offenders = []
+    for path in runner.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("bayesprog"):
+                if node.module != "bayesprog":
+                    offenders.append(f"{path.name}: from {node.module} import ...")
+                else:
+                    offenders += [f"{path.name}: {a.name} is not in bayesprog.__all__"
+                                  for a in node.names if a.name not in bayesprog.__all__]
+            elif isinstance(node, ast.Import):
+                offenders += [f"{path.name}: import {a.name}" for a in node.names
+                              if a.name.startswith("bayesprog.")]
+    assert not offenders, offenders
+
+
+def test_the_framework_names_no_application():
+    """Nothing in bayesprog/ speaks of the haptic application: its commands, figures and
+    metrics are the runner plugin's."""
+    import re
+
+    words = re.compile(r"\bhaptic|\bGamma\b|\bFig\. ?\d|\bpi_(tar|per|obj)\b|\bexplore\b",
+                       re.IGNORECASE)
+    found = [f"{path.relative_to(PACKAGE.parent)}:{i}: {line.strip()}"
+             for path in PACKAGE.rglob("*.py")
+             for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if words.search(line)]
+    assert not found, found

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 
-from bayesprog.errors import BayesprogError
+from bayesprog import BayesprogError
 
 #: The messages the nodes use, by ROS 2 package.
 PACKAGES = ("rclpy", "std_msgs", "geometry_msgs", "nav_msgs", "visualization_msgs",

@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from bayesprog.errors import BayesprogError
+from bayesprog import BayesprogError
 from runner.ros import require
 
 #: set by SIGINT or SIGTERM once :func:`catch_signals` has run: the node then ends cleanly
