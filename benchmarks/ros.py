@@ -40,7 +40,7 @@ class Robot:
     """The scenario's simulated sensor, probing wherever it is sent (seed 0, run 0)."""
 
     def __init__(self, scenario_path: Path):
-        from runner.experiment import make_sensor, reading_seed, start_cell
+        from runner.loop import make_sensor, reading_seed, start_cell
         from runner.scenario import load_scenario
 
         self.scenario = load_scenario(scenario_path)

@@ -18,11 +18,19 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import BayesprogError, Program, SizeError, SpecError, check_size, load_document
+from bayesprog import BayesprogError, SizeError, SpecError, check_size, load_document
 from runner.explorer import CONFIGURATIONS, Explorer, state_entries
+from runner.loop import (  # noqa: F401  (re-exported: the runs' seeds and start cells)
+    decision_seed,
+    make_sensor,
+    reading_seed,
+    start_cell,
+    start_cells,
+    start_runs,
+    steps,
+)
 from runner.metrics import BorderDistance
 from runner.scenario import Scenario, load_scenario
-from runner.sensor import HapticSensor, ModelSensor, SyntheticSensor
 from runner.store import ResultStore, Unit, config_hash
 
 
@@ -81,33 +89,6 @@ class Experiment:
         return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
 
 
-def start_cell(shape: tuple[int, ...], seed: int, run: int) -> np.ndarray:
-    """The start cell [dims] of run ``run`` of an experiment of ``seed`` on a grid of ``shape``:
-    drawn from (seed, run) alone, so a run starts where it does whatever the number of runs
-    (and a simulated robot, ``bayesprog robot --seed S --run R``, starts there too).
-
-    >>> start_cell((30, 60), seed=2024, run=3).tolist() == start_cells((30, 60), 8, 2024)[3].tolist()
-    True
-    """
-    rng = np.random.default_rng([seed, 0xC0FFEE, run])
-    return np.array([rng.integers(0, n) for n in shape], dtype=np.int64)
-
-
-def decision_seed(seed: int, run: int) -> tuple[int, int, int]:
-    """The seed of the decisions' tie breaking of run ``run`` of an experiment of ``seed``."""
-    return (seed, run, 0)
-
-
-def reading_seed(seed: int, run: int) -> tuple[int, int, int]:
-    """The seed of the simulated sensor's readings of run ``run`` of an experiment of ``seed``."""
-    return (seed, run, 1)
-
-
-def start_cells(shape: tuple[int, ...], runs: int, seed: int) -> np.ndarray:
-    """``runs`` start cells [runs, dims] on a grid of ``shape``, run r's from (seed, r)."""
-    return np.stack([start_cell(shape, seed, r) for r in range(runs)]).reshape(runs, len(shape))
-
-
 def load_experiment(path: str | Path) -> Experiment:
     path = Path(path)
     located, spec = load_document(path, ExperimentSpec)
@@ -141,16 +122,6 @@ def load_experiment(path: str | Path) -> Experiment:
     return Experiment(spec, path, scenario)
 
 
-def make_sensor(scenario: Scenario, perception: Program,
-                seeds: list) -> HapticSensor:
-    """The simulated sensor of a scenario: its sensor model when it names one (so perception
-    is misspecified, as on a robot), else the perception program's own Normals."""
-    noise = scenario.spec.sensor.extra_noise
-    if scenario.sensor_model is not None:
-        return ModelSensor(scenario.material_map, scenario.sensor_model, seeds, noise)
-    return SyntheticSensor(scenario.material_map, perception, seeds, noise)
-
-
 def simulate(
     scenario: Scenario,
     task: str,
@@ -164,9 +135,7 @@ def simulate(
     """Run the loop for the given runs in lockstep. Returns gamma [runs, K] and paths [runs, K]."""
     runs = len(run_ids)
     explorer = explorer or Explorer(scenario, task, ablate=CONFIGURATIONS[configuration], runs=runs)
-    explorer.reset(starts, seed=[decision_seed(seed, int(r)) for r in run_ids])
-    sensor = make_sensor(scenario, explorer.perception,
-                         [reading_seed(seed, int(r)) for r in run_ids])
+    sensor = start_runs(explorer, starts, seed, run_ids)
     gamma = BorderDistance(scenario.centres, scenario.border(task), runs)
     out_gamma = np.empty((runs, iterations))
     out_paths = np.empty((runs, iterations), dtype=np.int64)
@@ -174,20 +143,16 @@ def simulate(
     # for the start cell)
     cues = {name: np.full((runs, iterations), np.nan) for name in CUES}
     rows = np.arange(runs)
-    cells = explorer.expected
-    for k in range(iterations):
-        texture, compliance = sensor.probe(cells)
-        out_paths[:, k] = cells
-        out_gamma[:, k] = gamma.probe(cells)
-        if k + 1 < iterations:
-            cells = explorer.step(cells, texture, compliance)
-            d = explorer.decision
+    for step in steps(explorer, sensor, iterations):
+        k = step.k
+        out_paths[:, k] = step.cells
+        out_gamma[:, k] = gamma.probe(step.cells)
+        if step.next is not None:
+            d, cells = explorer.decision, step.next
             cues["inhibition"][:, k + 1] = d.inhibition[rows, cells]
             cues["saliency"][:, k + 1] = d.saliency[rows, cells]
             cues["uncertainty"][:, k + 1] = d.uncertainty[rows, cells]
             cues["target_probability"][:, k + 1] = explorer.target_probabilities[rows, cells]
-        else:
-            explorer.perceive(cells, texture, compliance)
     return {"gamma": out_gamma, "paths": out_paths, **cues}
 
 

@@ -208,19 +208,17 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
 def replay(experiment: Experiment, task: str, configuration: str, run: int, steps: int
            ) -> Iterator[dict[str, Any]]:
     """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
-    from runner.experiment import decision_seed, make_sensor, reading_seed
+    from runner.loop import start_runs
+    from runner.loop import steps as loop_steps
 
     spec = experiment.spec
     scenario = experiment.scenario
     explorer = Explorer(scenario, task, ablate=CONFIGURATIONS[configuration])
-    explorer.reset(experiment.start_cells()[run : run + 1], seed=[decision_seed(spec.seed, run)])
-    sensor = make_sensor(scenario, explorer.perception, [reading_seed(spec.seed, run)])
+    sensor = start_runs(explorer, experiment.start_cells()[run : run + 1], spec.seed, [run])
     shape_only = explorer.target.ablate("P(I | O)", "P(S | O, T)", "P(U | O)")
-    cells = explorer.expected
-    for _ in range(steps):
-        texture, compliance = sensor.probe(cells)
-        explorer.perceive(cells, texture, compliance)
-        decision_cells = explorer.decide()
+    for step in loop_steps(explorer, sensor, steps, decide_last=True):
+        assert step.next is not None
+        cells, decision_cells = step.cells, step.next
         d = explorer.decision
         evidence = {"T": task, "I": d.inhibition, "S": d.saliency, "U": d.uncertainty}
         if d.templates is not None and d.shape_ready is not None and d.shape_ready[0]:
@@ -234,7 +232,6 @@ def replay(experiment: Experiment, task: str, configuration: str, run: int, step
         yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0], "belief": belief,
                "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
                "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}
-        cells = decision_cells
 
 
 class DecisionFigure:

@@ -31,8 +31,8 @@ import numpy as np
 
 import bayesprog
 from bayesprog import BayesprogError, short_repr
-from runner.experiment import decision_seed
 from runner.explorer import Explorer
+from runner.loop import decision_seed
 
 #: The longest line read (characters); a longer one is answered with an error.
 MAX_LINE = 1 << 20

@@ -1,0 +1,96 @@
+"""The step loop of an exploration with a simulated sensor, written once.
+
+Probe the cells, perceive the readings, decide the next cells (:meth:`Explorer.step`): the
+experiment (:func:`runner.experiment.simulate`), the report's replay of a run and the notebook's
+step view (:func:`runner.report.replay`), and the parameter search (through ``simulate``) all
+iterate :func:`steps`; a robot driving the explorer line by line over stdio or ROS 2
+(:class:`runner.session.Session`) makes the same :meth:`Explorer.step` per probe. What makes a
+run the run it is, its start cell and the seeds of its readings and decisions, is here too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from bayesprog import Program
+from runner.explorer import Explorer
+from runner.scenario import Scenario
+from runner.sensor import HapticSensor, ProgramNormals, SimulatedSensor
+
+
+def start_cell(shape: tuple[int, ...], seed: int, run: int) -> np.ndarray:
+    """The start cell [dims] of run ``run`` of an experiment of ``seed`` on a grid of ``shape``:
+    drawn from (seed, run) alone, so a run starts where it does whatever the number of runs
+    (and a simulated robot, ``bayesprog robot --seed S --run R``, starts there too).
+
+    >>> start_cell((30, 60), seed=2024, run=3).tolist() == start_cells((30, 60), 8, 2024)[3].tolist()
+    True
+    """
+    rng = np.random.default_rng([seed, 0xC0FFEE, run])
+    return np.array([rng.integers(0, n) for n in shape], dtype=np.int64)
+
+
+def decision_seed(seed: int, run: int) -> tuple[int, int, int]:
+    """The seed of the decisions' tie breaking of run ``run`` of an experiment of ``seed``."""
+    return (seed, run, 0)
+
+
+def reading_seed(seed: int, run: int) -> tuple[int, int, int]:
+    """The seed of the simulated sensor's readings of run ``run`` of an experiment of ``seed``."""
+    return (seed, run, 1)
+
+
+def start_cells(shape: tuple[int, ...], runs: int, seed: int) -> np.ndarray:
+    """``runs`` start cells [runs, dims] on a grid of ``shape``, run r's from (seed, r)."""
+    return np.stack([start_cell(shape, seed, r) for r in range(runs)]).reshape(runs, len(shape))
+
+
+def make_sensor(scenario: Scenario, perception: Program,
+                seeds: list) -> HapticSensor:
+    """The simulated sensor of a scenario: its sensor model when it names one (so perception
+    is misspecified, as on a robot), else the perception program's own Normals."""
+    noise = scenario.spec.sensor.extra_noise
+    model = ProgramNormals(perception) if scenario.sensor_model is None else scenario.sensor_model
+    return SimulatedSensor(scenario.material_map, model, seeds, noise)
+
+
+def start_runs(explorer: Explorer, starts: np.ndarray, seed: int,
+               run_ids: Sequence[int] | np.ndarray) -> HapticSensor:
+    """Start runs ``run_ids`` of an experiment of ``seed`` from ``starts`` [runs, dims]: the
+    explorer reset with their decisions' seeds, and the simulated sensor with their readings'."""
+    explorer.reset(starts, seed=[decision_seed(seed, int(r)) for r in run_ids])
+    return make_sensor(explorer.scenario, explorer.perception,
+                       [reading_seed(seed, int(r)) for r in run_ids])
+
+
+@dataclass
+class Step:
+    """One step of every run: the cells probed [runs] (flat) and their readings, and the cells
+    decided next (None after the last probe of a loop that does not decide there)."""
+
+    k: int
+    cells: np.ndarray
+    texture: np.ndarray
+    compliance: np.ndarray
+    next: np.ndarray | None
+
+
+def steps(explorer: Explorer, sensor: HapticSensor, iterations: int,
+          decide_last: bool = False) -> Iterator[Step]:
+    """``iterations`` steps from the explorer's start cells: probe, perceive, decide (the last
+    step decides only when ``decide_last``). The explorer's decision is read while a step is
+    held (``explorer.decision``)."""
+    cells = explorer.expected
+    for k in range(iterations):
+        texture, compliance = sensor.probe(cells)
+        if k + 1 < iterations or decide_last:
+            nxt: np.ndarray | None = explorer.step(cells, texture, compliance)
+        else:
+            explorer.perceive(cells, texture, compliance)
+            nxt = None
+        yield Step(k, cells, texture, compliance, nxt)
+        if nxt is not None:
+            cells = nxt
