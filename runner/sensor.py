@@ -1,4 +1,5 @@
-"""Haptic sensors: the interface the explorer reads, and a synthetic sensor for simulation."""
+"""Haptic sensors: the interface the explorer reads, and the simulated sensor: one class,
+drawing from a sensor model or from the perception program's own Normals."""
 
 from __future__ import annotations
 
@@ -37,30 +38,6 @@ def material_normals(perception: Program) -> dict[str, tuple[np.ndarray, np.ndar
             values.append(np.broadcast_to(p.array, (card,)).astype(float))
         out[feature] = (values[0], values[1])
     return out
-
-
-class SyntheticSensor:
-    """Draws (texture, compliance) from the true material's Normals, plus optional white noise.
-
-    Each run has its own generator, so a run's readings do not depend on the other runs.
-    """
-
-    def __init__(self, material_map: np.ndarray, perception: Program, seeds: Sequence[int | np.random.SeedSequence],
-                 extra_noise: float = 0.0):
-        self.materials = material_map.ravel()
-        self.normals = material_normals(perception)
-        self.extra_noise = extra_noise
-        self.rngs = [np.random.default_rng(s) for s in seeds]
-
-    def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        m = self.materials[np.asarray(cells)]
-        out = []
-        for feature in ("E", "C"):
-            mean, sigma = self.normals[feature]
-            z = np.array([rng.standard_normal(2) for rng in self.rngs])
-            noise = z[:, 1] * self.extra_noise
-            out.append(mean[m] + sigma[m] * z[:, 0] + noise)
-        return out[0], out[1]
 
 
 # A haptic sensor model that is not pi_per ---------------------------------------------------------
@@ -108,6 +85,16 @@ class SensorModel:
         skew = np.stack([column("texture", "skew"), column("compliance", "skew")], 1)
         self.delta = skew / np.sqrt(1 + skew**2)
         self.rho = np.array([r.correlation for r in rows])
+
+    #: standard normals a simulated probe draws: four for the features, two for the noise
+    normals_per_probe = 6
+
+    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """``materials`` [n], ``z`` [n, 6] -> (texture [n], compliance [n]), white noise of sd
+        ``extra_noise`` added from ``z[:, 4:]``."""
+        texture, compliance = self.draw(materials, z[:, :4])
+        return texture + extra_noise * z[:, 4], compliance + extra_noise * z[:, 5]
 
     def draw(self, materials: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``materials`` [n] indices, ``z`` [n, 4] standard normals -> (texture, compliance)."""
@@ -161,21 +148,44 @@ def load_sensor_model(path: str | Path, materials: Sequence[str] | None = None) 
     return SensorModel(spec, materials, path)
 
 
-class ModelSensor:
-    """Simulated probes drawn from a sensor model (never from the perception program), plus
-    optional white noise; each run has its own generator."""
+class ProgramNormals:
+    """The perception program's own Normals, as a simulated sensor draws from them: per probe
+    four standard normals, ``[z_E, noise_E, z_C, noise_C]`` (the draw order of the paper's
+    experiments, kept so that they repeat)."""
 
-    def __init__(self, material_map: np.ndarray, model: SensorModel,
-                 seeds: Sequence[int | np.random.SeedSequence], extra_noise: float = 0.0):
+    normals_per_probe = 4
+
+    def __init__(self, perception: Program):
+        self.normals = material_normals(perception)
+
+    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """``materials`` [n], ``z`` [n, 4] -> (texture [n], compliance [n])."""
+        out = []
+        for feature, column in (("E", 0), ("C", 2)):
+            mean, sigma = self.normals[feature]
+            noise = z[:, column + 1] * extra_noise
+            out.append(mean[materials] + sigma[materials] * z[:, column] + noise)
+        return out[0], out[1]
+
+
+class SimulatedSensor:
+    """Simulated probes: (texture, compliance) of the true material of each probed cell, drawn
+    from ``model`` (a :class:`SensorModel`, or the perception program's :class:`ProgramNormals`),
+    plus optional white noise. Each run has its own generator, so a run's readings do not
+    depend on the other runs."""
+
+    def __init__(self, material_map: np.ndarray, model: SensorModel | ProgramNormals,
+                 seeds: Sequence[int | tuple[int, ...] | np.random.SeedSequence],
+                 extra_noise: float = 0.0):
         self.materials = material_map.ravel()
         self.model = model
         self.extra_noise = extra_noise
         self.rngs = [np.random.default_rng(s) for s in seeds]
 
     def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        z = np.array([rng.standard_normal(6) for rng in self.rngs])
-        texture, compliance = self.model.draw(self.materials[np.asarray(cells)], z[:, :4])
-        return texture + self.extra_noise * z[:, 4], compliance + self.extra_noise * z[:, 5]
+        z = np.array([rng.standard_normal(self.model.normals_per_probe) for rng in self.rngs])
+        return self.model.readings(self.materials[np.asarray(cells)], z, self.extra_noise)
 
 
 def confusion(perception: Program, model: SensorModel, per_material: int, seed: int,

@@ -15,7 +15,7 @@ from bayesprog.cli import main
 from runner.experiment import load_experiment, load_results, make_sensor, run_experiment
 from runner.report import build_report, replay
 from runner.scenario import load_scenario
-from runner.sensor import ModelSensor, confusion, load_sensor_model
+from runner.sensor import SensorModel, SimulatedSensor, confusion, load_sensor_model
 from runner.sensor import main as record_main
 from runner.store import ResultStore
 
@@ -61,7 +61,7 @@ def test_the_simulator_draws_from_the_sensor_model_never_from_pi_per():
     hand = bayesprog.load(MODELS / "pi_per.yaml")
     a = make_sensor(scenario, scenario.perception, seeds)
     b = make_sensor(scenario, hand, seeds)
-    assert isinstance(a, ModelSensor)
+    assert isinstance(a, SimulatedSensor) and isinstance(a.model, SensorModel)
     np.testing.assert_array_equal(a.probe(cells), b.probe(cells))
     model = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml", MATERIALS)
     z = np.array([np.random.default_rng(s).standard_normal(6) for s in seeds])
