@@ -14,6 +14,8 @@
 [[0.998, 0.002], [0.002, 0.998]]
 """
 
+from typing import Any
+
 from bayesprog.display import show_inference
 from bayesprog.errors import (
     BayesprogError,
@@ -30,12 +32,21 @@ from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
 from bayesprog.language.document import load_document
 from bayesprog.language.loader import Located, load_yaml, wrong_kind
-from bayesprog.learning.write import render_values
 from bayesprog.limits import SizeError, check_size, limit
 from bayesprog.model import Term
 from bayesprog.program import Program, load, loads
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    # the learning layer (and ruamel.yaml) is loaded when it is first used, never at import
+    if name == "render_values":
+        from bayesprog.learning.write import render_values
+
+        return render_values
+    raise AttributeError(f"module 'bayesprog' has no attribute {name!r}")
+
 
 __all__ = [
     # programs, questions and their answers
