@@ -3,7 +3,8 @@ reads it from YAML (:mod:`bayesprog.language`) and the inference and learning th
 
 A :class:`Term` is one factor of the decomposition (its variables, form and parameters), an
 :class:`InputDecl` a runtime input a question binds, :class:`LearnOptions` how a term is learned
-from data and :class:`FitRecord` the provenance of a fit, as written into a fitted file.
+from data (defined beside the forms' estimators, which read it) and :class:`FitRecord` the
+provenance of a fit, as written into a fitted file.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from bayesprog.expressions import Expression
 from bayesprog.forms import Form, FormulaParam, InputRef, ParamValue
+from bayesprog.forms.estimators import LearnOptions
 from bayesprog.variables import Variable
 
 
@@ -30,17 +32,6 @@ class InputDecl:
     @property
     def ndim(self) -> int:
         return len(self.axes) + len(self.event)
-
-
-@dataclass(frozen=True)
-class LearnOptions:
-    """How a term is learned from data: Dirichlet pseudo-counts (tables), the candidate numbers
-    of components (gmm, chosen by BIC when several), and parameters pooled across parent
-    states."""
-
-    pseudo_counts: ParamValue | None = None
-    components: tuple[int, ...] = ()
-    shared: tuple[str, ...] = ()
 
 
 @dataclass

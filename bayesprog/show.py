@@ -69,10 +69,10 @@ def _array(arr: np.ndarray) -> str:
 def _form(program: Program, term: Term) -> str:
     if str(term.expression) in program.ablated:
         return "Uniform  (ablated)"
-    if term.form.name == "program":
+    if term.form.subprogram:
         return f"Program {term.extra['source']}: {term.extra['question']}"
     params = ", ".join(f"{k} = {_param(program, v)}" for k, v in term.params.items())
-    name = term.form.name.capitalize() if term.form.name != "gmm" else "GMM"
+    name = term.form.display_name
     return f"{name}({params})" if params else name
 
 

@@ -148,3 +148,32 @@ def test_the_framework_names_no_application():
              for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
              if words.search(line)]
     assert not found, found
+
+
+def _is_form_name(node: ast.AST) -> bool:
+    """``form.name`` or ``anything.form.name``."""
+    return (isinstance(node, ast.Attribute) and node.attr == "name"
+            and ((isinstance(node.value, ast.Attribute) and node.value.attr == "form")
+                 or (isinstance(node.value, ast.Name) and node.value.id == "form")))
+
+
+def test_no_code_outside_the_forms_compares_a_forms_name():
+    """What a form can do (an estimator, an affine mean, soft evidence, a sub-program) is
+    declared by its class; the engine, the learning, the checker and the display ask for it,
+    never for a name: a new form is one class."""
+    from bayesprog.forms import available_forms
+
+    names = set(available_forms())
+    found = []
+    for path in PACKAGE.rglob("*.py"):
+        if "forms" in path.relative_to(PACKAGE).parts[:1]:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Compare):
+                continue
+            operands = [node.left, *node.comparators]
+            literals = {c.value for o in operands for c in ast.walk(o)
+                        if isinstance(c, ast.Constant) and isinstance(c.value, str)}
+            if any(_is_form_name(o) for o in operands) or literals & names:
+                found.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}")
+    assert not found, found

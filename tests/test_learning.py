@@ -384,7 +384,7 @@ def test_bad_learn_options_are_refused_at_their_place():
     with pytest.raises(bayesprog.SpecError) as err:
         bayesprog.loads(text, "sensor.yaml")
     lines = str(err.value).splitlines()
-    assert any(line.startswith("sensor.yaml:15:") and "pseudo_counts are for forms table" in line
+    assert any(line.startswith("sensor.yaml:15:") and "pseudo_counts are for forms categorical and table" in line
                for line in lines)
     assert any("shared names 'sd'" in line for line in lines)
 

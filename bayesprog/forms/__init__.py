@@ -1,5 +1,6 @@
 """Parametric forms: a registry of small classes, each declaring its parameters as data."""
 
+from bayesprog.forms import lognormal as _lognormal  # noqa: F401  (registers lognormal)
 from bayesprog.forms import standard as _standard  # noqa: F401  (registers the standard forms)
 from bayesprog.forms import subprogram as _subprogram  # noqa: F401  (registers the program form)
 from bayesprog.forms.base import (

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -144,6 +144,93 @@ class TermContext:
         return self.value.aligned(self.axes, 0)
 
 
+# What an estimator needs (the estimators themselves: bayesprog.forms.estimators) ------------
+Stats = dict[str, np.ndarray]
+Params = dict[str, ParamValue]
+
+
+class Term(Protocol):
+    """What an estimator reads of the term it learns (a :class:`bayesprog.model.Term`): its
+    child, its parents, their discrete axes and its label for messages."""
+
+    @property
+    def child(self) -> Variable: ...
+
+    @property
+    def parents(self) -> tuple[Variable, ...]: ...
+
+    @property
+    def axes(self) -> tuple[str, ...]: ...
+
+    @property
+    def label(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class LearnOptions:
+    """How a term is learned from data: Dirichlet pseudo-counts (tables), the candidate numbers
+    of components (gmm, chosen by BIC when several), and parameters pooled across parent
+    states. Which of them a form takes is its estimator's :attr:`Estimator.options`."""
+
+    pseudo_counts: ParamValue | None = None
+    components: tuple[int, ...] = ()
+    shared: tuple[str, ...] = ()
+
+
+class Estimator:
+    """How one form is learned. ``learned`` names the parameters it sets, ``options`` the
+    ``learn:`` options it takes (:class:`LearnOptions`), ``mixture`` whether it learns a
+    mixture (whose EM iterates even on complete data, and whose number of components a fit
+    may choose)."""
+
+    learned: tuple[str, ...] = ()
+    options: frozenset[str] = frozenset()
+    mixture: bool = False
+
+    def components(self, term: Term, params: Params) -> int:
+        """The number of mixture components the parameters hold (1: no mixture)."""
+        return 1
+
+    def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
+        """Statistics of a continuous child: ``x`` [n] values, ``weights`` [n, *parent cards]."""
+        raise NotImplementedError
+
+    def counts(self, term: Term, counts: np.ndarray) -> Stats:
+        """Statistics of a discrete child from expected counts over ``term.axes``."""
+        raise NotImplementedError
+
+    def merge(self, a: Stats, b: Stats) -> Stats:
+        return {k: a[k] + b[k] for k in a}
+
+    def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
+        raise NotImplementedError
+
+    def free_parameters(self, term: Term, params: Params, options: LearnOptions) -> int:
+        raise NotImplementedError
+
+    def log_prior(self, term: Term, params: Params, options: LearnOptions) -> float:
+        """The log prior density EM climbs with the likelihood (pseudo-counts), up to a constant."""
+        return 0.0
+
+    def check_statistics(self, stats: Stats, expected: Stats) -> str | None:
+        """Why ``stats`` (read from a fitted file) cannot be added to ``expected``, or None."""
+        if set(stats) != set(expected):
+            return (f"statistics {sorted(stats)} where this form keeps {sorted(expected)}")
+        for key, value in stats.items():
+            if value.shape != expected[key].shape:
+                return f"{key!r} has shape {value.shape}, expected {expected[key].shape}"
+            if not np.all(np.isfinite(value)):
+                return f"{key!r} holds a value that is not finite"
+            if key in ("count", "counts", "sum_squared_deviations") and np.any(value < 0):
+                return f"{key!r} holds a negative value"
+        return None
+
+    def initial(self, term: Term, x: np.ndarray, weights: np.ndarray, components: int,
+                params: Params) -> Params:
+        """Starting parameters when the file's cannot serve (gmm with another K)."""
+        return params
+
+
 class Form:
     """Base class of parametric forms. Subclasses declare ``name``, ``params`` and ``log_factor``.
 
@@ -156,6 +243,34 @@ class Form:
     child_kinds: ClassVar[tuple[str, ...]] = ("discrete", "continuous")
     normalized: ClassVar[bool] = True
     doc: ClassVar[str] = ""
+
+    # What the form can do, declared as data: the engine, the learning and the display ask
+    # these, never the form's name.
+    #: how the notation writes it (``P(X | Y) = Normal(...)``); empty: the name capitalised
+    title: ClassVar[str] = ""
+    #: the parameter that is the child's mean, when the child is that mean plus Gaussian noise
+    #: of standard deviation ``scale_param`` (or exactly that mean, ``scale_param`` None): the
+    #: conditional linear-Gaussian algebra and the substitution of a deterministic term use it
+    mean_param: ClassVar[str | None] = None
+    scale_param: ClassVar[str | None] = None
+    #: a likelihood over a discrete variable's states may be given in this form (soft evidence)
+    soft_evidence: ClassVar[bool] = False
+    #: the term is another program's answer (loaded with the program, shown by its question)
+    subprogram: ClassVar[bool] = False
+
+    @property
+    def display_name(self) -> str:
+        return self.title or self.name.capitalize()
+
+    @property
+    def deterministic(self) -> bool:
+        """The child is exactly ``mean_param`` (no noise): it is known once its parents are."""
+        return self.mean_param is not None and self.scale_param is None
+
+    def estimator(self, child: Variable) -> Estimator | None:
+        """How terms of this form over ``child`` are learned from data (see
+        :mod:`bayesprog.forms.estimators`), or None when there is nothing to learn."""
+        return None
 
     def is_normalized(self, child: Variable) -> bool:
         """Whether this term sums (integrates) to one over ``child`` for every parent state."""

@@ -19,6 +19,13 @@ from bayesprog.forms.base import (
     simplex,
     unit_interval,
 )
+from bayesprog.forms.estimators import (
+    BetaEstimator,
+    Estimator,
+    GmmEstimator,
+    NormalEstimator,
+    TableEstimator,
+)
 from bayesprog.variables import Continuous, Discrete, Variable
 
 _LOG_2PI = float(np.log(2 * np.pi))
@@ -41,6 +48,11 @@ class Categorical(Form):
         ),
     )
 
+    soft_evidence = True
+
+    def estimator(self, child: Variable) -> Estimator | None:
+        return TableEstimator(self.params[0].name) if child.is_discrete else None
+
     def event_shape(self, param: Param, child: Variable) -> tuple[int, ...] | None:
         return (child.card,) if isinstance(child, Discrete) else None
 
@@ -55,6 +67,7 @@ class Table(Categorical):
     """A conditional probability table: one row over the child's states per parent configuration."""
 
     name = "table"
+    soft_evidence = False
     params = (
         Param(
             "table",
@@ -109,6 +122,10 @@ class Normal(Form):
         Param("mean", real, doc="mean, a literal or a table keyed by parent states"),
         Param("sigma", positive, doc="standard deviation, > 0"),
     )
+    mean_param, scale_param = "mean", "sigma"
+
+    def estimator(self, child: Variable) -> Estimator | None:
+        return NormalEstimator()
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         x, mu, sigma = ctx.child_value(), ctx.param("mean"), ctx.param("sigma")
@@ -133,6 +150,9 @@ class Beta(Form):
         Param("a", positive, doc="first shape parameter (alpha), > 0"),
         Param("b", positive, doc="second shape parameter (beta), > 0"),
     )
+
+    def estimator(self, child: Variable) -> Estimator | None:
+        return BetaEstimator()
 
     def check(self, child: Variable, parents: tuple[Variable, ...]) -> list[str]:
         problems = super().check(child, parents)
@@ -194,6 +214,10 @@ class GaussianMixture(Form):
         Param("weights", simplex, event_ndim=1, default="equal", doc="component weights [K]"),
         Param("floor", unit_interval, default=0.0, doc="weight of a uniform component"),
     )
+    title = "GMM"
+
+    def estimator(self, child: Variable) -> Estimator | None:
+        return GmmEstimator() if not child.is_discrete else None
 
     def is_normalized(self, child: Variable) -> bool:
         return not child.is_discrete  # a density over a real child; a potential over a grid
@@ -357,6 +381,7 @@ class Dirac(Form):
     name = "dirac"
     child_kinds = ("continuous",)
     params = (Param("value", real, doc="the value, a number or a formula of the parents"),)
+    mean_param = "value"  # and no noise: deterministic
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         raise ValueError(f"{ctx.child.name} is deterministic (form dirac): give evidence on "

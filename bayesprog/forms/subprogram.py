@@ -38,6 +38,8 @@ class ProgramForm(Form):
 
     name = "program"
     child_kinds = ("discrete",)
+    soft_evidence = True
+    subprogram = True
 
     def resolve(self, term: Any, raw: dict[str, Any], checker: Any, path: tuple) -> int:
         before = len(checker.problems)

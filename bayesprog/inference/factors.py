@@ -56,7 +56,7 @@ def is_static(term: Term) -> bool:
     discrete = {p.name for p in term.parents if p.is_discrete}
     return (
         term.child.is_discrete
-        and term.form.name != "program"
+        and not term.form.subprogram
         and not any(isinstance(v, InputRef) or (isinstance(v, FormulaParam) and any(
             name not in discrete for name in v.names))  # a real parent, or an input
             for v in term.params.values())

@@ -18,6 +18,7 @@ import numpy as np
 from bayesprog.errors import Diagnostic, short_repr
 from bayesprog.expressions import Expression, ExpressionError, parse_expression
 from bayesprog.forms import (
+    Form,
     FormulaParam,
     InputRef,
     Param,
@@ -164,9 +165,11 @@ class _Checker:
                     self.error(path + ("variable",), f"soft evidence needs a discrete "
                                f"variable, found continuous {soft.variable!r}")
                     continue
-                if term.form.name not in ("categorical", "program"):
-                    self.error(path + ("form",), "soft evidence takes form 'categorical' or "
-                               f"'program', found {term.form.name!r}")
+                if not term.form.soft_evidence:
+                    takes = " or ".join(repr(n) for n in available_forms()
+                                        if _form_named(n).soft_evidence)
+                    self.error(path + ("form",), f"soft evidence takes form {takes}, found "
+                               f"{term.form.name!r}")
                     continue
                 term.soft = True
                 term.description = soft.description
@@ -181,11 +184,14 @@ class _Checker:
         if spec is True:
             return LearnOptions()
         form, what = term.form.name, f"term {term.label}: learn"
+        estimator = term.form.estimator(term.child)
+        takes = estimator.options if estimator is not None else frozenset()
         pseudo = None
         if spec.pseudo_counts is not None:
-            if form not in ("table", "categorical"):
+            if "pseudo_counts" not in takes:
                 self.error(path + ("pseudo_counts",), f"{what}: pseudo_counts are for forms "
-                           f"table and categorical, found form {form!r}", at_key=True)
+                           f"{_forms_taking('pseudo_counts')}, found form {form!r}",
+                           at_key=True)
             elif isinstance(spec.pseudo_counts, (int, float)) and not isinstance(
                     spec.pseudo_counts, bool):
                 if not np.isfinite(spec.pseudo_counts) or spec.pseudo_counts < 0:
@@ -208,16 +214,17 @@ class _Checker:
         if spec.components is not None:
             components = ((spec.components,) if isinstance(spec.components, int)
                           else tuple(spec.components))
-            if form != "gmm" or term.child.is_discrete:
-                self.error(path + ("components",), f"{what}: components are for form gmm over "
-                           f"a continuous variable, found form {form!r}", at_key=True)
+            if "components" not in takes:
+                self.error(path + ("components",), f"{what}: components are for form "
+                           f"{_forms_taking('components')} over a continuous variable, found "
+                           f"form {form!r}", at_key=True)
             elif not components or min(components) < 1:
                 self.error(path + ("components",), f"{what}: expected numbers of components "
                            f">= 1, found {list(components)}")
         names = [p.name for p in term.form.params]
-        if spec.shared and form not in ("normal", "gmm"):
-            self.error(path + ("shared",), f"{what}: shared is for forms normal and gmm, found "
-                       f"form {form!r}", at_key=True)
+        if spec.shared and "shared" not in takes:
+            self.error(path + ("shared",), f"{what}: shared is for forms "
+                       f"{_forms_taking('shared')}, found form {form!r}", at_key=True)
             return LearnOptions(pseudo, components, ())
         for name in spec.shared:
             if name not in names:
@@ -734,3 +741,21 @@ def check_document(located: Located, doc: Document, base_dir: Path,
     ablate = c.check_ablate(terms)
     time = c.check_time(terms, questions)
     return Checked(c.variables, c.inputs, terms, questions, ablate, c.problems, time)
+
+
+def _form_named(name: str) -> Form:
+    form = get_form(name)
+    assert form is not None, name
+    return form
+
+
+def _forms_taking(option: str) -> str:
+    """The forms whose estimator takes the ``learn:`` option, as a message lists them (over a
+    variable of the kind each learns)."""
+    from bayesprog.variables import Continuous, Discrete
+
+    probes = (Discrete("X", ("a", "b")), Continuous("X", -np.inf, np.inf))
+    names = [name for name in available_forms()
+             if any((e := _form_named(name).estimator(v)) is not None and option in e.options
+                    for v in probes)]
+    return " and ".join(names) if len(names) <= 2 else ", ".join(names[:-1]) + " and " + names[-1]

@@ -37,7 +37,7 @@ def json_schema() -> dict[str, Any]:
                      else f"{p.doc} ({p.constraint})".strip()}
             for p in form.params
         }
-        if name == "program":
+        if form.subprogram:
             props = {
                 "program": {"type": "string", "description": "path of the sub-program file"},
                 "question": {"type": "string", "description": "question name or P(X | ...)"},

@@ -23,19 +23,17 @@ import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, is_binned
-from bayesprog.inference.binding import Bound
-from bayesprog.inference.factors import observed_part
-from bayesprog.inference.formulas import formula_value, log_factor
-from bayesprog.learning.data import Data, DataError, load_data
-from bayesprog.learning.estimators import (
+from bayesprog.forms.estimators import (
     Estimator,
     FitProblem,
     Params,
     Stats,
-    components_of,
-    estimator_for,
     parent_cards,
 )
+from bayesprog.inference.binding import Bound
+from bayesprog.inference.factors import observed_part
+from bayesprog.inference.formulas import formula_value, log_factor
+from bayesprog.learning.data import Data, DataError, load_data
 from bayesprog.model import FitRecord, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable
 
@@ -103,7 +101,7 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
     for item in todo:
         label = item.term.label
         candidates = item.options.components
-        if item.term.form.name == "gmm" and item.prior is not None and "count" in item.prior:
+        if item.estimator.mixture and item.prior is not None and "count" in item.prior:
             candidates = (item.prior["count"].shape[-1],)  # continue with the fitted mixture
         if not candidates:
             continue
@@ -180,7 +178,7 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
             raise DataError(f"term {term.label}: {term.child.name} is discretised, and the "
                             "parameters of its density are not learned from its bins: freeze "
                             "the term (learn: false, or --freeze)")
-        estimator = estimator_for(term)
+        estimator = term.form.estimator(term.child)
         if estimator is None:
             raise DataError(f"term {term.label} (form {term.form.name}) cannot be learned from "
                             "data: freeze it (learn: false) or with --freeze")
@@ -228,7 +226,7 @@ class _Em:
                     "them, or freeze the terms that tie them to the data")
             terms = [t for t in model if t.child.name in needed or t.child.name in seen]
             self.groups.append(_Group(rows, hidden, cards, terms))
-        learns_mixture = any(i.term.form.name == "gmm" for i in todo)
+        learns_mixture = any(i.estimator.mixture for i in todo)
         self.iterative = learns_mixture or any(g.hidden for g in self.groups)
 
     def _needed(self, seen: set[str]) -> set[str]:
@@ -249,8 +247,8 @@ class _Em:
 
     def start(self, item: _Learned, k: int, params: Params) -> Params:
         """Starting values of a mixture with ``k`` components: the file's when it has ``k``."""
-        if "means" in params and isinstance(params["means"], ParamValue) and \
-                components_of(params, item.term) == k:
+        if item.estimator.components(item.term, params) == k and item.estimator.mixture \
+                and all(isinstance(params.get(n), ParamValue) for n in item.estimator.learned):
             return params
         x = self.data.continuous.get(item.term.child.name)
         if x is None:
@@ -356,8 +354,9 @@ class _Em:
         widest = 1
         for term in self.model:
             width = math.prod(v.card for v in term.parents if isinstance(v, Discrete))
-            if term.form.name == "gmm" and "means" in params[term.label]:
-                width *= components_of(params[term.label], term)
+            estimator = term.form.estimator(term.child)
+            if estimator is not None:
+                width *= estimator.components(term, params[term.label])
             widest = max(widest, width)
         return widest
 

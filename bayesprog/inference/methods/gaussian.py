@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import FormulaParam, InputRef, ParamValue
+from bayesprog.forms import FormulaParam, InputRef, ParamValue, available_forms, get_form
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
 from bayesprog.inference.density import Density
@@ -76,19 +76,21 @@ def _block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
             return [], (f"{t.label} has a discrete child of the unknown real "
                         f"{', '.join(p.name for p in t.parents if p.name in latent)}")
     for t in chosen:
-        if t.form.name not in ("normal", "dirac"):
-            return [], (f"{t.label} is a {t.form.name} term (expected normal or dirac for "
-                        "exact Gaussian answers)")
+        if t.form.mean_param is None:
+            gaussian = " or ".join(n for n in available_forms()
+                                   if getattr(get_form(n), "mean_param", None))
+            return [], (f"{t.label} is a {t.form.name} term (expected {gaussian} for exact "
+                        "Gaussian answers)")
         if getattr(t.child, "index", None) is not None:
             return [], f"{t.label}: {t.child.name} is a field"
-        if t.form.name == "dirac" and t.child.name in plan.bound.continuous:
-            return [], (f"{t.child.name} is deterministic (form dirac): give evidence on its "
+        if t.form.deterministic and t.child.name in plan.bound.continuous:
+            return [], (f"{t.child.name} is deterministic (form {t.form.name}): give evidence on its "
                         "parents, or on a noisy sensor of it, not on it")
         for key, param in t.params.items():
             if not isinstance(param, FormulaParam):
                 continue
             real = [n for n in param.names if n in names]
-            if key != ("mean" if t.form.name == "normal" else "value") and real:
+            if key != t.form.mean_param and real:
                 return [], f"{t.label}: its {key} depends on {', '.join(real)}"
             for formula in param.formulas.flat:
                 if not formula.affine_in(names):
@@ -153,7 +155,8 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
         return target
 
     for i, t in enumerate(block):
-        key = "mean" if t.form.name == "normal" else "value"
+        key = t.form.mean_param
+        assert key is not None  # (checked by _block)
         param = t.params[key]
         if isinstance(param, FormulaParam):
             what = f"term {t.label}"
@@ -177,15 +180,17 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
         else:
             value = _bound_param(t, key, param, bound) if isinstance(param, InputRef) else param
             intercept = put(intercept, (i,), grid(value))
-        if t.form.name == "normal":
-            sigma = t.params["sigma"]
+        scale = t.form.scale_param
+        if scale is not None:
+            sigma = t.params[scale]
             if isinstance(sigma, InputRef):
-                sigma = _bound_param(t, "sigma", sigma, bound)
+                sigma = _bound_param(t, scale, sigma, bound)
             elif isinstance(sigma, FormulaParam):
                 sigma = formula_value(program.variables, sigma, bound, f"term {t.label}")
             s = grid(sigma)
             if np.any(~(s > 0)):
-                raise QuestionError(f"term {t.label}: sigma must be > 0, got {float(s.min()):g}")
+                raise QuestionError(f"term {t.label}: {scale} must be > 0, got "
+                                    f"{float(s.min()):g}")
             variance = put(variance, (i,), s**2)
     # x = M (b + e): the joint Gaussian of the block for each configuration
     solve = np.linalg.inv(np.eye(n) - coefficient)  # [r, k, n, n]

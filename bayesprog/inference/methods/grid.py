@@ -161,9 +161,10 @@ def _derived_plan(plan: QuestionPlan, bins: int) -> QuestionPlan:
 
 def _substitutable(term: Term) -> bool:
     """A deterministic term with one formula (not a table by discrete parents)."""
-    value = term.params.get("value")
-    return term.form.name == "dirac" and (
-        not isinstance(value, FormulaParam) or not value.axes)
+    if not term.form.deterministic or term.form.mean_param is None:
+        return False
+    value = term.params.get(term.form.mean_param)
+    return not isinstance(value, FormulaParam) or not value.axes
 
 
 def _substituted(term: Term, dirac: Term, program: Any) -> Term:
@@ -171,7 +172,8 @@ def _substituted(term: Term, dirac: Term, program: Any) -> Term:
     name = dirac.child.name
     if name not in (p.name for p in term.parents):
         return term
-    value = dirac.params["value"]
+    assert dirac.form.mean_param is not None
+    value = dirac.params[dirac.form.mean_param]
     text = (str(value.formulas.flat[0]) if isinstance(value, FormulaParam)
             else f"{float(np.asarray(value.array)):r}")  # type: ignore[union-attr]
     params = dict(term.params)

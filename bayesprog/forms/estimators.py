@@ -1,6 +1,8 @@
 """Estimators: a form's expected sufficient statistics, and its parameters from them.
 
-The E-step of :mod:`bayesprog.learning.fit` hands each learned term what the data say about
+Each form declares its estimator (:meth:`bayesprog.forms.Form.estimator`), so adding a form
+that can be learned is one class here and one there. The E-step of
+:mod:`bayesprog.learning.fit` hands each learned term what the data say about
 its family: expected counts over the term's discrete variables (a discrete child), or, for a
 continuous child, the child's values with one weight per row and parent configuration. An
 estimator turns that into statistics that add up over data sets (so a fit can continue with
@@ -15,12 +17,10 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.special import betaln, digamma, polygamma
 
-from bayesprog.forms import ParamValue
-from bayesprog.model import LearnOptions, Term
+from bayesprog.forms.base import Estimator, LearnOptions, Params, ParamValue, Stats, Term
 from bayesprog.variables import Discrete
 
-Stats = dict[str, np.ndarray]
-Params = dict[str, ParamValue]
+__all__ = ["Estimator", "FitProblem", "LearnOptions", "Params", "Stats", "Term"]  # and below
 
 
 class FitProblem(Exception):
@@ -55,54 +55,11 @@ def _configs(term: Term, mask: np.ndarray) -> str:
     return "; ".join(shown) + more
 
 
-class Estimator:
-    """How one form is learned. ``learned`` names the parameters it sets."""
-
-    learned: tuple[str, ...] = ()
-
-    def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
-        """Statistics of a continuous child: ``x`` [n] values, ``weights`` [n, *parent cards]."""
-        raise NotImplementedError
-
-    def counts(self, term: Term, counts: np.ndarray) -> Stats:
-        """Statistics of a discrete child from expected counts over ``term.axes``."""
-        raise NotImplementedError
-
-    def merge(self, a: Stats, b: Stats) -> Stats:
-        return {k: a[k] + b[k] for k in a}
-
-    def estimate(self, term: Term, stats: Stats, options: LearnOptions, params: Params) -> Params:
-        raise NotImplementedError
-
-    def free_parameters(self, term: Term, params: Params, options: LearnOptions) -> int:
-        raise NotImplementedError
-
-    def log_prior(self, term: Term, params: Params, options: LearnOptions) -> float:
-        """The log prior density EM climbs with the likelihood (pseudo-counts), up to a constant."""
-        return 0.0
-
-    def check_statistics(self, stats: Stats, expected: Stats) -> str | None:
-        """Why ``stats`` (read from a fitted file) cannot be added to ``expected``, or None."""
-        if set(stats) != set(expected):
-            return (f"statistics {sorted(stats)} where this form keeps {sorted(expected)}")
-        for key, value in stats.items():
-            if value.shape != expected[key].shape:
-                return f"{key!r} has shape {value.shape}, expected {expected[key].shape}"
-            if not np.all(np.isfinite(value)):
-                return f"{key!r} holds a value that is not finite"
-            if key in ("count", "counts", "sum_squared_deviations") and np.any(value < 0):
-                return f"{key!r} holds a negative value"
-        return None
-
-    def initial(self, term: Term, x: np.ndarray, weights: np.ndarray, components: int,
-                params: Params) -> Params:
-        """Starting parameters when the file's cannot serve (gmm with another K)."""
-        return params
-
-
 class TableEstimator(Estimator):
     """Tables and categoricals: the posterior mean under Dirichlet pseudo-counts (maximum
     likelihood without them)."""
+
+    options = frozenset({"pseudo_counts"})
 
     def __init__(self, name: str):
         self.learned = (name,)
@@ -188,6 +145,7 @@ class NormalEstimator(_MomentEstimator):
     """Maximum likelihood per parent configuration (``shared`` pools mean or sigma)."""
 
     learned = ("mean", "sigma")
+    options = frozenset({"shared"})
 
     def statistics(self, term: Term, x: np.ndarray, weights: np.ndarray, params: Params) -> Stats:
         return _moment_stats(x, weights, weights.shape[1:])
@@ -320,6 +278,11 @@ class GmmEstimator(_MomentEstimator):
     hidden variable. One sigma per parent configuration (the form's components share it)."""
 
     learned = ("means", "sigma", "weights")
+    options = frozenset({"components", "shared"})
+    mixture = True
+
+    def components(self, term: Term, params: Params) -> int:
+        return components_of(params, term) if "means" in params else 1
 
     def _arrays(self, term: Term, params: Params) -> tuple[np.ndarray, ...]:
         means = full(term, params["means"], 1)
@@ -405,20 +368,6 @@ class GmmEstimator(_MomentEstimator):
         out["sigma"] = ParamValue(axes, sigma.reshape(shape))
         out["weights"] = ParamValue(axes, np.full(shape + (components,), 1.0 / components))
         return out
-
-
-def estimator_for(term: Term) -> Estimator | None:
-    """The estimator of a term's form, or None when the form has nothing to learn here."""
-    name = term.form.name
-    if name in ("table", "categorical") and term.child.is_discrete:
-        return TableEstimator(term.form.params[0].name)
-    if name == "normal":
-        return NormalEstimator()
-    if name == "beta":
-        return BetaEstimator()
-    if name == "gmm" and not term.child.is_discrete:
-        return GmmEstimator()
-    return None
 
 
 def components_of(params: Mapping[str, ParamValue], term: Term) -> int:
