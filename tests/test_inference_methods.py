@@ -104,7 +104,7 @@ def test_cost_model_compiles_the_table_once_it_pays():
     table = costs["table"]
     assert table.setup > per_call
     used = [program.ask("P(A | C)", {"C": 0}).method]
-    first = plan.layout.spent  # the first question's elimination
+    first = plan.layout.schedule.spent  # the first question's elimination
     assert 0 < first < table.setup
     expected = switch(first, per_call, table)
     used += [program.ask("P(A | C)", {"C": k % 2}).method for k in range(1, expected + 5)]
@@ -415,7 +415,7 @@ def test_quick_estimates_choose_as_the_full_ones_do(monkeypatch):
     per_call = costs["contraction"].operations + costs["contraction"].fixed
     table = costs["table"]
     program.ask("P(X9_9 | X9_0, X0_9, X4_4)", {"X9_0": 0, "X0_9": 0, "X4_4": 0})
-    at = switch(plan.layout.spent, per_call, table)
+    at = switch(plan.layout.schedule.spent, per_call, table)
     assert at < 12
     quick_table = {m.name: c for m, c in ranked(plan, quick=True)}["table"]
     assert quick_table.floor and quick_table.setup < table.setup  # a bound, below the cost
@@ -445,7 +445,7 @@ def random_factors(rng: np.random.Generator, names: str, count: int
 def test_eliminate_equals_one_einsum_over_every_factor(seed):
     """Variable elimination in greedy order against numpy's einsum of all the factors at once
     (the joint, then summed), for outputs of zero to two variables."""
-    from bayesprog.inference.contract import eliminate
+    from bayesprog.inference.contraction import eliminate
 
     rng = np.random.default_rng(seed)
     names = "ABCDEFG"
@@ -475,10 +475,10 @@ def test_first_question_is_answered_without_a_plan_then_planned():
     program, tables = chain(3)
     first = program.ask("P(A | C)", {"C": 1})
     layout = next(iter(program.inference_cache.layouts.values()))
-    assert layout.asked and not layout.rankings and not layout.prepared
+    assert layout.schedule.asked and not layout.schedule.rankings and not layout.prepared
     assert not program.inference_cache.plans._paths  # no contraction path searched
     second = program.ask("P(A | C)", {"C": 1})
-    assert layout.rankings and layout.prepared
+    assert layout.schedule.rankings and layout.prepared
     for answer in (first, second):
         np.testing.assert_allclose(answer.probabilities, brute(tables["joint"], "A", {"C": 1}),
                                    rtol=1e-12)

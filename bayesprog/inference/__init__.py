@@ -8,8 +8,9 @@ ranking is kept per layout of the question: same variables known, any batch size
 answers, or hands over to the next when some rows are beyond it. MAP questions then choose the
 argmax of that posterior (:func:`~bayesprog.inference.answers.choose_map`).
 
-Methods live in :mod:`bayesprog.inference.methods`, one module each: ``table`` (a compiled
-joint table, exact) and ``contraction`` (scaled tensor contraction, exact).
+Methods live in :mod:`bayesprog.inference.methods`, one module each, registered there: the
+dispatcher knows them only through the registry. What it keeps per layout of question is one
+:class:`~bayesprog.inference.schedule.Schedule`.
 """
 
 from __future__ import annotations
@@ -36,8 +37,12 @@ from bayesprog.inference.methods import (
     registered_methods,
     registry_version,
 )
-from bayesprog.inference.methods.base import PER_CALL, PER_FACTOR, own_methods_only
-from bayesprog.inference.methods.contraction import first_question
+from bayesprog.inference.methods.base import (
+    PER_CALL,
+    PER_FACTOR,
+    first_answerers,
+    own_methods_only,
+)
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size, limit
@@ -52,72 +57,106 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
                       method: str | None = None,
                       options: Mapping[str, Any] | None = None) -> Posterior | Density:
     """The posterior of ``question`` for bound evidence (a density when it searches real
-    variables): by ``method`` when it is named, else by the cheapest exact method that answers
-    (or, when none does, the cheapest approximate one that states its error). The first
-    question of a layout is answered by elimination without ranking the methods when it can
-    (:func:`~bayesprog.inference.methods.contraction.first_question`), unless a method from
-    outside the package is registered."""
+    variables): by ``method`` when it is named; else the layout's answer when it does not
+    depend on the evidence's values, its first question's answer with nothing planned, the
+    method settled for this batch size, or the cheapest that the ranking finds (exact, or
+    approximate with its error where no exact method applies)."""
     plan = QuestionPlan(program, question, bound, dict(options) if options else {})
-    layout = plan.layout
     if method is not None:
-        layout.asked = True  # its method prepares what the layout's later questions use
+        plan.layout.schedule.asked = True  # its method prepares what later questions use
         return _with_evidence(plan, _by(method, plan), registered_methods()[method].exact)
-    if layout.fixed is not None:  # the same answer whatever the evidence's values
-        row, normaliser, name = layout.fixed
-        if bound.size == 1:
-            rows, logs = row.copy(), np.array([normaliser])
-        else:
-            rows, logs = np.repeat(row, bound.size, axis=0), np.full(bound.size, normaliser)
-        return _with_evidence(plan, base.answer(plan, rows, logs, method=name))
-    if not layout.asked and own_methods_only():  # (a method of one's own is ranked at once)
-        layout.asked = True
-        direct = first_question(plan)
-        if direct is not None:  # answered without planning the layout: see first_question
-            rows, logs, operations = direct
-            # what it spent counts towards a compiled table's setup (ski rental, below)
-            layout.spent += operations + PER_CALL + PER_FACTOR * len(plan.terms)
-            if layout.constant:
-                layout.fixed = (rows.copy(), float(logs[0]), "contraction")
-            return _with_evidence(plan, base.answer(plan, rows, logs, method="contraction"))
+    for step in (_constant, _first, _settled):
+        answer = step(plan)
+        if answer is not None:
+            return answer
+    return _ranked(plan)
+
+
+def _constant(plan: QuestionPlan) -> Posterior | Density | None:
+    """The layout's one answer, when it is the same whatever the evidence's values."""
+    fixed, size = plan.layout.schedule.fixed, plan.bound.size
+    if fixed is None:
+        return None
+    row, normaliser, name = fixed
+    if size == 1:
+        rows, logs = row.copy(), np.array([normaliser])
+    else:
+        rows, logs = np.repeat(row, size, axis=0), np.full(size, normaliser)
+    return _with_evidence(plan, base.answer(plan, rows, logs, method=name))
+
+
+def _first(plan: QuestionPlan) -> Posterior | Density | None:
+    """A layout's first question, answered by a method that needs no plan for it (the
+    contraction's elimination), unless a method from outside the package is registered (the
+    cost model must weigh it from the first question on)."""
+    schedule = plan.layout.schedule
+    if schedule.asked or not own_methods_only():
+        return None
+    schedule.asked = True
+    for method in first_answerers():
+        direct = method.first_question(plan)
+        if direct is None:
+            continue
+        rows, logs, operations = direct
+        # what it spent counts towards a compiled table's setup (ski rental, _ranked)
+        schedule.spent += operations + PER_CALL + PER_FACTOR * len(plan.terms)
+        if plan.layout.constant:
+            schedule.fixed = (rows.copy(), float(logs[0]), method.name)
+        return _with_evidence(plan, base.answer(plan, rows, logs, method=method.name))
+    return None
+
+
+def _settled(plan: QuestionPlan) -> Posterior | Density | None:
+    """The answer of the method settled for this batch size, once no setup was left to
+    weigh."""
+    key = (registry_version(), plan.bound.size, limit("entries"))
+    settled = plan.layout.schedule.settled.get(key)
+    if settled is None:
+        return None
+    answer = settled.posterior(plan)
+    if answer is None:
+        return None
+    answer.method = answer.method or settled.name
+    return _with_evidence(plan, answer, settled.exact)
+
+
+def _ranked(plan: QuestionPlan) -> Posterior | Density:
+    """The cheapest method of the layout's ranking for this batch that answers."""
+    layout, schedule, bound = plan.layout, plan.layout.schedule, plan.bound
     size, version, cap = bound.size, registry_version(), limit("entries")
-    settled = layout.settled.get((version, size, cap))
-    if settled is not None:
-        found_answer = settled.posterior(plan)
-        if found_answer is not None:
-            found_answer.method = found_answer.method or settled.name
-            return _with_evidence(plan, found_answer, settled.exact)
     # the ranking depends on which variables are searched and known, not on their values, and
     # on the batch size only through its order of magnitude
-    found = layout.rankings.get((version, size.bit_length()))
+    found = schedule.rankings.get((version, size.bit_length()))
     if found is None:
         methods = ranked(plan, quick=True)
         if not methods:
             raise QuestionError(unanswerable(plan))
-        found = layout.rankings[(version, size.bit_length())] = (size, methods)
+        found = schedule.rankings[(version, size.bit_length())] = (size, methods)
     ranked_size, methods = found
     # a method with a setup (a table compiled once) is chosen once the questions of this
     # layout have spent as much on the others as the setup costs: never more than twice the
     # cost of the better choice in hindsight (ski rental)
-    spent = layout.spent
+    spent = schedule.spent
     fitting = _fitting(methods, ranked_size, size, cap, spent)
     floors = [c.setup for _, c in methods if c.floor]
     if floors and (not fitting or fitting[0][1].floor or spent >= min(floors)):
         # a quick estimate's bound could decide: the full estimates, once per ranking
         methods = refined(plan, methods)
-        layout.rankings[(version, size.bit_length())] = (ranked_size, methods)
+        schedule.rankings[(version, size.bit_length())] = (ranked_size, methods)
         fitting = _fitting(methods, ranked_size, size, cap, spent)
     if not fitting:
         method_, cost = methods[0]
         per_row = cost.memory / ranked_size
         if size > 1 and per_row <= cap and not plan.latent:
             # the batch does not fit at once, but its rows do: answered in slices
-            return _in_slices(program, question, bound, options, max(int(cap // per_row), 1))
+            return _in_slices(plan.program, plan.question, bound, plan.options,
+                              max(int(cap // per_row), 1))
         approximate = ", ".join(name for name, m in registered_methods().items()
                                 if not m.exact and m.estimate(plan) is not None)
         check_size(cost.memory / ranked_size * size,
-                   f"{question.expression} (by {method_.name}, the exact method that needs "
-                   "least)", hint=f"; or ask an approximate method ({approximate}): method=... "
-                   "in Python, --method on the command line" if approximate else "")
+                   f"{plan.question.expression} (by {method_.name}, the exact method that "
+                   "needs least)", hint=f"; or ask an approximate method ({approximate}): "
+                   "method=... in Python, --method on the command line" if approximate else "")
     for method_, cost in fitting:
         answer = method_.posterior(plan)
         if answer is not None:
@@ -125,14 +164,14 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
             if method_ is fitting[0][0] and spent >= max(c.setup for _, c in fitting):
                 # no setup left to weigh: this choice is the one for every later batch of
                 # this size
-                layout.settled[(version, size, cap)] = method_
-            layout.spent = (math.inf if cost.setup else
-                            spent + cost.operations / ranked_size * size + cost.fixed)
+                schedule.settled[(version, size, cap)] = method_
+            schedule.spent = (math.inf if cost.setup else
+                              spent + cost.operations / ranked_size * size + cost.fixed)
             if layout.constant and isinstance(answer, Posterior):
                 first = answer.probabilities.reshape((size,) + layout.cards)[:1].copy()
-                layout.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
+                schedule.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
             return _with_evidence(plan, answer, method_.exact)
-    raise RuntimeError(f"no inference method answered {question.expression}")  # contraction always does
+    raise RuntimeError(f"no inference method answered {plan.question.expression}")
 
 
 def _fitting(methods: list[tuple[Method, Cost]], ranked_size: int, size: int, cap: float,
@@ -201,7 +240,7 @@ def _by(name: str, plan: QuestionPlan) -> Posterior | Density:
     method = methods.get(name)
     if method is None:
         raise QuestionError(f"method {name!r}: expected one of {', '.join(methods)}")
-    estimates = plan.layout.estimates
+    estimates = plan.layout.schedule.estimates
     options = tuple(sorted((k, v) for k, v in plan.options.items() if k != "rng"))
     key = (name, options, registry_version(), plan.bound.size.bit_length())
     found = estimates.get(key)

@@ -24,6 +24,7 @@ from bayesprog.inference.factors import (
 )
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family, requisite
+from bayesprog.inference.schedule import Schedule
 from bayesprog.model import Term
 
 #: (searched, observed discrete, observed continuous, inputs, soft evidence): names only
@@ -68,21 +69,8 @@ class Layout:
     key: LayoutKey
     #: what the methods compile for this layout (a contraction's sliceable tables, ...)
     prepared: dict[str, Any] = field(default_factory=dict)
-    #: the methods that apply, cheapest first, with their estimates and the batch size they
-    #: were made for, by (registry version, order of magnitude of the batch)
-    rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)
-    #: operations spent so far on questions of this layout (inf once a method's setup is paid)
-    spent: float = 0.0
-    #: the method chosen for a batch size once no setup is left to weigh, by (registry
-    #: version, batch size, memory limit)
-    settled: dict[Any, Any] = field(default_factory=dict)
-    #: a named method's estimate, and the batch size it was made for
-    estimates: dict[Any, tuple[int, Any]] = field(default_factory=dict)
-    #: when the answer is :attr:`constant`: its one row of probabilities, the log of its
-    #: normaliser, and the method that made it
-    fixed: tuple[np.ndarray, float, str] | None = None
-    #: whether a question of this layout was asked (the first is answered without a plan)
-    asked: bool = False
+    #: how its questions are scheduled among the methods
+    schedule: Schedule = field(default_factory=Schedule)
 
     @property
     def searched(self) -> tuple[str, ...]:

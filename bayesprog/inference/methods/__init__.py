@@ -9,9 +9,12 @@ from bayesprog.inference.methods import table as _table  # noqa: F401  (register
 from bayesprog.inference.methods.base import (
     Cost,
     Method,
+    mark_builtin,
     register_method,
     registered_methods,
     registry_version,
 )
+
+mark_builtin()
 
 __all__ = ["Cost", "Method", "register_method", "registered_methods", "registry_version"]

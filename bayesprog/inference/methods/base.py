@@ -60,6 +60,8 @@ class Method:
     #: an approximate method the cost model may choose on its own when no exact method
     #: applies (its answers state their error)
     fallback: ClassVar[bool] = False
+    #: it answers some first questions of a layout with nothing planned (:meth:`first_question`)
+    answers_first: ClassVar[bool] = False
 
     def why_not(self, plan: QuestionPlan) -> str | None:
         """Why this method does not answer ``plan`` (None: it does, or has nothing to say)."""
@@ -74,6 +76,12 @@ class Method:
         never be paid), a quicker one with lower bounds marked ``floor``: the cost model asks
         for the full estimate only when the bound could make this method the choice."""
         return self.estimate(plan)
+
+    def first_question(self, plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """A layout's first question answered without planning the layout: the normalised
+        table ``[1] + cards``, the log normaliser ``[1]`` and the operations it took; None
+        when this question needs the planned path (the default)."""
+        return None
 
     def posterior(self, plan: QuestionPlan) -> Posterior | Density | None:
         """The answer (a density when the searched variables are real), or None when some rows
@@ -129,7 +137,22 @@ def registered_methods() -> dict[str, Method]:
     return dict(_METHODS)
 
 
+#: the package's own methods, marked once their modules have registered them
+_BUILTIN: set[type[Method]] = set()
+
+
+def mark_builtin() -> None:
+    """Mark the methods registered so far as the package's own (called once, when
+    :mod:`bayesprog.inference.methods` has imported its modules)."""
+    _BUILTIN.update(type(m) for m in _METHODS.values())
+
+
 def own_methods_only() -> bool:
     """Whether every registered method is one of this package's (no method registered from
     outside it, which the cost model must weigh from a layout's first question)."""
-    return all(type(m).__module__.startswith("bayesprog.") for m in _METHODS.values())
+    return all(type(m) in _BUILTIN for m in _METHODS.values())
+
+
+def first_answerers() -> list[Method]:
+    """The registered methods that answer a layout's first question with nothing planned."""
+    return [m for m in _METHODS.values() if m.answers_first]

@@ -22,12 +22,12 @@ import numpy as np
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, available_forms, get_form
 from bayesprog.inference.binding import Bound
+from bayesprog.inference.contraction import contract_factors
 from bayesprog.inference.core import Factor
 from bayesprog.inference.density import Density
 from bayesprog.inference.factors import _bound_param, question_factors, slice_factor
 from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
-from bayesprog.inference.methods.contraction import contract_factors
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.model import Term
 

@@ -24,10 +24,10 @@ import numpy as np
 from bayesprog.forms import FormulaParam
 from bayesprog.formula import substitute
 from bayesprog.inference.answers import Posterior
+from bayesprog.inference.contraction import contract_question
 from bayesprog.inference.core import InferenceCache
 from bayesprog.inference.density import QUANTILES, Density
 from bayesprog.inference.methods.base import Cost, Method, register_method
-from bayesprog.inference.methods.contraction import contract_question
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.model import InputDecl, Term
 from bayesprog.variables import Continuous, Variable, binned_variable

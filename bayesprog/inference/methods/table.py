@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.contract import TINY, contract
+from bayesprog.inference.contraction import TINY, contract
 from bayesprog.inference.core import Factor
 from bayesprog.inference.factors import is_static, static_table
 from bayesprog.inference.methods.base import (
