@@ -505,7 +505,7 @@ def test_first_question_is_answered_without_a_plan_then_planned():
 def test_first_question_gives_way_to_the_plan_when_large(monkeypatch):
     """Above FIRST_WORK entries the first question is planned (a path searched), and answers
     as the elimination would."""
-    from bayesprog.inference.methods import contraction
+    from bayesprog.inference import contraction
 
     question, evidence = "P(X9_9 | X9_0, X0_9, X4_4)", {"X9_0": 1, "X0_9": 0, "X4_4": 1}
     direct = grid(10, seed=4)
