@@ -62,21 +62,29 @@ def compute_posterior(program: ProgramLike, question: Question, bound: Bound,
     method settled for this batch size, or the cheapest that the ranking finds (exact, or
     approximate with its error where no exact method applies)."""
     plan = QuestionPlan(program, question, bound, dict(options) if options else {})
+    schedule = plan.layout.schedule
     if method is not None:
-        plan.layout.schedule.asked = True  # its method prepares what later questions use
+        schedule.asked = True  # its method prepares what the layout's later questions use
         return _with_evidence(plan, _by(method, plan), registered_methods()[method].exact)
-    for step in (_constant, _first, _settled):
-        answer = step(plan)
+    if schedule.fixed is not None:
+        return _constant(plan, schedule.fixed)
+    if not schedule.asked and own_methods_only():  # (a method of one's own is ranked at once)
+        answer = _first(plan)
         if answer is not None:
             return answer
+    settled = schedule.settled.get((registry_version(), bound.size, limit("entries")))
+    if settled is not None:  # no setup was left to weigh for this batch size
+        answer = settled.posterior(plan)
+        if answer is not None:
+            answer.method = answer.method or settled.name
+            return _with_evidence(plan, answer, settled.exact)
     return _ranked(plan)
 
 
-def _constant(plan: QuestionPlan) -> Posterior | Density | None:
+def _constant(plan: QuestionPlan, fixed: tuple[np.ndarray, float, str]
+              ) -> Posterior | Density:
     """The layout's one answer, when it is the same whatever the evidence's values."""
-    fixed, size = plan.layout.schedule.fixed, plan.bound.size
-    if fixed is None:
-        return None
+    size = plan.bound.size
     row, normaliser, name = fixed
     if size == 1:
         rows, logs = row.copy(), np.array([normaliser])
@@ -87,11 +95,9 @@ def _constant(plan: QuestionPlan) -> Posterior | Density | None:
 
 def _first(plan: QuestionPlan) -> Posterior | Density | None:
     """A layout's first question, answered by a method that needs no plan for it (the
-    contraction's elimination), unless a method from outside the package is registered (the
-    cost model must weigh it from the first question on)."""
+    contraction's elimination); asked only while every registered method is the package's
+    own (the cost model must weigh one from outside from the first question on)."""
     schedule = plan.layout.schedule
-    if schedule.asked or not own_methods_only():
-        return None
     schedule.asked = True
     for method in first_answerers():
         direct = method.first_question(plan)
@@ -104,20 +110,6 @@ def _first(plan: QuestionPlan) -> Posterior | Density | None:
             schedule.fixed = (rows.copy(), float(logs[0]), method.name)
         return _with_evidence(plan, base.answer(plan, rows, logs, method=method.name))
     return None
-
-
-def _settled(plan: QuestionPlan) -> Posterior | Density | None:
-    """The answer of the method settled for this batch size, once no setup was left to
-    weigh."""
-    key = (registry_version(), plan.bound.size, limit("entries"))
-    settled = plan.layout.schedule.settled.get(key)
-    if settled is None:
-        return None
-    answer = settled.posterior(plan)
-    if answer is None:
-        return None
-    answer.method = answer.method or settled.name
-    return _with_evidence(plan, answer, settled.exact)
 
 
 def _ranked(plan: QuestionPlan) -> Posterior | Density:
