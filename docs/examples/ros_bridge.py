@@ -38,7 +38,7 @@ class Bridge(Node):
         self.create_subscription(Float64MultiArray, "/hand/features", self.on_features, 10)
         self.create_subscription(PointStamped, f"{namespace}/next_target", self.on_target, 10)
         self.create_subscription(String, f"{namespace}/reply", self.on_reply, 10)
-        self.started = False
+        self.started, self.waiting = False, False
         self.timer = self.create_timer(0.5, self.reset)
 
     def reset(self) -> None:
@@ -46,10 +46,13 @@ class Bridge(Node):
         sent before the explorer has matched this node is not delivered)."""
         if self.goal.get_subscription_count() > 0:  # the driver listens
             self.probe.publish(String(data=json.dumps({"reset": {}})))
+        elif not self.waiting:
+            self.waiting = True
+            self.get_logger().info("waiting for a driver to subscribe to /hand/goal")
 
     def on_reply(self, msg: String) -> None:
         reply = json.loads(msg.data)
-        if "error" in reply:  # e.g. a reading out of range: press the same cell again
+        if "error" in reply:  # e.g. a reading that is not a number: press the same cell again
             self.get_logger().error(f"the explorer refused a probe: {reply['error']}")
             if self.started:
                 self.send_goal()
