@@ -9,16 +9,16 @@ numbers whatever the batching, and the configurations are compared on paired run
 from __future__ import annotations
 
 import functools
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from bayesprog import BayesprogError, SizeError, SpecError, check_size, load_document
+from runner.executors import progress_bar, run_dask, run_processes
 from runner.explorer import CONFIGURATIONS, Explorer, state_entries
 from runner.loop import (  # noqa: F401  (re-exported: the runs' seeds and start cells)
     decision_seed,
@@ -252,6 +252,18 @@ def compute_unit(experiment_path: str, unit: Unit, digest: str | None = None
                     np.asarray(unit.runs), spec.seed, spec.iterations)
 
 
+@dataclass(frozen=True)
+class _Job:
+    """One unit of the experiment at ``path`` (its configuration hash ``digest``), as the
+    executors call it: picklable, and reading :func:`compute_unit` when it runs."""
+
+    path: str
+    digest: str
+
+    def __call__(self, unit: Unit) -> dict[str, np.ndarray]:
+        return compute_unit(self.path, unit, self.digest)
+
+
 def run_experiment(
     experiment: Experiment,
     out: Path,
@@ -276,11 +288,12 @@ def run_experiment(
     path = str(experiment.path.resolve())
     digest = store.hash
     assert digest is not None  # set by store.open
+    job = _Job(path, digest)
     try:
         if scheduler is not None:
-            _run_dask(scheduler, path, digest, todo, store, bar)
+            run_dask(scheduler, job, todo, store, bar, MAX_WORKER_DEATHS, WORKER_TIMEOUT)
         elif workers > 1:
-            _run_processes(workers, path, digest, todo, store, bar)
+            run_processes(workers, job, todo, store, bar, MAX_WORKER_DEATHS)
         else:
             for unit in todo:
                 store.save(unit, compute_unit(path, unit, digest))
@@ -295,142 +308,6 @@ def run_experiment(
 MAX_WORKER_DEATHS = 3
 #: Seconds a Dask scheduler may go without any worker before the run stops.
 WORKER_TIMEOUT = 60.0
-
-
-def _run_processes(workers: int, path: str, digest: str, todo: list[Unit], store: ResultStore,
-                   bar: Any) -> None:
-    """The units on local processes; a pool whose worker dies is replaced and the units it had
-    not finished are computed again (numbers do not depend on which process computes them)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
-    # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked child
-    # must not inherit; each worker then uses one thread (no oversubscription)
-    context = multiprocessing.get_context("spawn")
-    left, deaths = list(todo), 0
-    while left:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(left)), mp_context=context,
-                                   initializer=_worker_init, initargs=(os.getpid(),))
-        futures = {pool.submit(compute_unit, path, u, digest): u for u in left}
-        broken = False
-        try:
-            for future in as_completed(futures):
-                if isinstance(future.exception(), BrokenProcessPool):
-                    broken = True
-                    break
-                store.save(futures[future], future.result())
-                left.remove(futures[future])
-                deaths = 0
-                bar.update(1)
-            if broken:  # keep what finished before the pool broke
-                for future, unit in futures.items():
-                    if unit in left and future.done() and future.exception() is None:
-                        store.save(unit, future.result())
-                        left.remove(unit)
-                        bar.update(1)
-        except BaseException:
-            # Ctrl-C or a failed chunk: what is saved stays; stop the workers at once
-            _stop(pool)
-            raise
-        if not broken:
-            pool.shutdown()
-            return
-        _stop(pool)
-        deaths += 1
-        if deaths > MAX_WORKER_DEATHS:
-            raise BayesprogError(f"worker processes died {deaths} times in a row (killed, or "
-                                 "out of memory?): the finished chunks are kept; run again to "
-                                 "resume")
-        print(f"a worker process died: {len(left)} chunk(s) left go to new workers",
-              file=sys.stderr)
-
-
-def _stop(pool: Any) -> None:
-    processes = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes:
-        process.terminate()
-
-
-def _worker_init(parent: int) -> None:
-    """A worker process: one compiled-kernel thread, Ctrl-C left to the parent, and an end of
-    its own when the parent is gone (killed: nothing else would stop it)."""
-    import signal
-    import threading
-    import time
-
-    import numba
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    numba.set_num_threads(1)
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
-
-
-def _run_dask(address: str, path: str, digest: str, todo: list[Unit], store: ResultStore,
-              bar: Any) -> None:
-    try:
-        from dask.distributed import Client, wait
-        from distributed.client import FutureCancelledError
-        from distributed.scheduler import KilledWorker
-    except ImportError:
-        raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
-    try:
-        client = Client(address, timeout="10s")
-    except (OSError, ValueError, TypeError) as exc:
-        raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
-            from None
-    import time
-
-    with client:
-        futures = {client.submit(compute_unit, path, u, digest, pure=False): u for u in todo}
-        pending, deaths, alone_since = set(futures), 0, None
-        while pending:
-            try:
-                done, still = wait(list(pending), timeout=1.0, return_when="FIRST_COMPLETED")
-                pending = set(still)
-            except TimeoutError:  # nothing finished in that second
-                done = set()
-            for future in done:
-                unit = futures.pop(future)
-                try:
-                    result = future.result()
-                except (KilledWorker, FutureCancelledError):
-                    # the unit was on workers that died: give it to the others
-                    deaths += 1
-                    if deaths > MAX_WORKER_DEATHS * max(1, len(todo)):
-                        raise BayesprogError(f"--scheduler {address}: workers keep dying on "
-                                             f"{unit.name}; the finished chunks are kept") \
-                            from None
-                    again = client.submit(compute_unit, path, unit, digest, pure=False)
-                    futures[again] = unit
-                    pending.add(again)
-                    continue
-                store.save(unit, result)
-                bar.update(1)
-            if done or client.scheduler_info().get("workers"):
-                alone_since = None
-            elif alone_since is None:
-                alone_since = time.monotonic()
-            elif time.monotonic() - alone_since > WORKER_TIMEOUT:
-                raise BayesprogError(f"--scheduler {address}: no worker for "
-                                     f"{WORKER_TIMEOUT:.0f} s: start workers (dask worker "
-                                     f"{address}); the finished chunks are kept")
-
-
-def progress_bar(total: int, what: str, unit: str = "step", done: int = 0,
-                 enabled: bool | None = None, leave: bool = False) -> Any:
-    """A tqdm bar, shown on a terminal (or as ``enabled`` says)."""
-    from tqdm import tqdm
-
-    disable = not sys.stderr.isatty() if enabled is None else not enabled
-    return tqdm(total=total, initial=done, desc=what, unit=unit, leave=leave, disable=disable)
 
 
 def load_results(store: ResultStore, spec: ExperimentSpec) -> dict[str, dict[str, np.ndarray]]:

@@ -1,8 +1,12 @@
-"""Exploration metrics: Gamma (eq. 16) and visit counts."""
+"""Exploration metrics: Gamma (eq. 16), its area, visit counts, how the walker moved, and the
+paired test of two configurations over the same runs."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
+from scipy import stats
 
 
 class BorderDistance:
@@ -98,3 +102,17 @@ def behaviour(paths: np.ndarray, border: np.ndarray,
         "distinct": float(np.mean([len(np.unique(p)) for p in paths])),
         "returns": float(np.mean(paths[:, 2:] == paths[:, :-2])) if paths.shape[1] > 2 else 0.0,
     }
+
+
+def area_under(gamma: np.ndarray) -> np.ndarray:
+    """Area under Gamma(k) over k = 0..K-1 (trapezoids, unit steps), per run: metre-steps."""
+    return np.trapezoid(gamma, axis=-1)
+
+
+def paired_test(ablated: np.ndarray, full: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of paired runs (1.0 when they never differ)."""
+    if np.allclose(ablated, full):
+        return 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return float(stats.wilcoxon(ablated, full).pvalue)

@@ -9,44 +9,28 @@ import html
 import json
 import multiprocessing
 import os
-import warnings
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from bayesprog import BayesprogError
 from runner import figures
+from runner.executors import progress_bar
 from runner.experiment import (
     Experiment,
     ExperimentSpec,
     load_results,
     mean_sem,
-    progress_bar,
     stored_experiment,
 )
 from runner.explorer import CONFIGURATIONS, Explorer
-from runner.metrics import behaviour, border_band, visits
+from runner.metrics import area_under, behaviour, border_band, paired_test, visits
 from runner.scenario import Scenario
 from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write
-
-
-def area_under(gamma: np.ndarray) -> np.ndarray:
-    """Area under Gamma(k) over k = 0..K-1 (trapezoids, unit steps), per run: metre-steps."""
-    return np.trapezoid(gamma, axis=-1)
-
-
-def paired_test(ablated: np.ndarray, full: np.ndarray) -> float:
-    """Two-sided Wilcoxon signed-rank p-value of paired runs (1.0 when they never differ)."""
-    if np.allclose(ablated, full):
-        return 1.0
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return float(stats.wilcoxon(ablated, full).pvalue)
 
 
 def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int],

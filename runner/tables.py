@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 from bayesprog import BayesprogError, atomic_write
-from runner.experiment import CUES, load_results, progress_bar, stored_experiment
+from runner.executors import progress_bar
+from runner.experiment import CUES, load_results, stored_experiment
 from runner.figures import centre_cm
 from runner.metrics import border_band
 from runner.store import ResultStore

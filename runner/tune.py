@@ -32,10 +32,10 @@ from typing import Any
 import numpy as np
 
 from bayesprog import BayesprogError, SizeError, SpecError, canonical, check_size, load_document
-from runner.experiment import ExperimentSpec, TuneSpec, progress_bar, simulate, start_cells
+from runner.executors import progress_bar
+from runner.experiment import ExperimentSpec, TuneSpec, simulate, start_cells
 from runner.explorer import Explorer
-from runner.metrics import behaviour, moves, visits
-from runner.report import area_under, paired_test
+from runner.metrics import area_under, behaviour, moves, paired_test, visits
 from runner.scenario import Scenario, load_scenario
 
 
@@ -272,11 +272,11 @@ class Evaluator:
             import os
             from concurrent.futures import ProcessPoolExecutor
 
-            from runner.experiment import _worker_init
+            from runner.executors import worker_init
 
             self.pool = ProcessPoolExecutor(
                 max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                initializer=_worker_init, initargs=(os.getpid(),))
+                initializer=worker_init, initargs=(os.getpid(),))
 
     def __call__(self, pairs: list[tuple[Scenario, str]], values: Mapping[str, float] | None,
                  runs: int, iterations: int, seed: int) -> list[dict[str, np.ndarray]]:
@@ -289,9 +289,9 @@ class Evaluator:
 
     def close(self) -> None:
         if self.pool is not None:
-            from runner.experiment import _stop
+            from runner.executors import stop_pool
 
-            _stop(self.pool)
+            stop_pool(self.pool)
 
 
 # the search -------------------------------------------------------------------------------------

@@ -1,0 +1,151 @@
+"""Where an experiment's units are computed: local processes or a Dask cluster, each unit saved
+as soon as it is finished, workers that die replaced; and the progress bar. Used by the
+experiment (:func:`runner.experiment.run_experiment`) and the parameter search (its pool)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from bayesprog import BayesprogError
+from runner.store import ResultStore, Unit
+
+
+def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
+                  bar: Any, max_deaths: int) -> None:
+    """The units on local processes; a pool whose worker dies is replaced and the units it had
+    not finished are computed again (numbers do not depend on which process computes them)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked child
+    # must not inherit; each worker then uses one thread (no oversubscription)
+    context = multiprocessing.get_context("spawn")
+    left, deaths = list(todo), 0
+    while left:
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(left)), mp_context=context,
+                                   initializer=worker_init, initargs=(os.getpid(),))
+        futures = {pool.submit(job, u): u for u in left}
+        broken = False
+        try:
+            for future in as_completed(futures):
+                if isinstance(future.exception(), BrokenProcessPool):
+                    broken = True
+                    break
+                store.save(futures[future], future.result())
+                left.remove(futures[future])
+                deaths = 0
+                bar.update(1)
+            if broken:  # keep what finished before the pool broke
+                for future, unit in futures.items():
+                    if unit in left and future.done() and future.exception() is None:
+                        store.save(unit, future.result())
+                        left.remove(unit)
+                        bar.update(1)
+        except BaseException:
+            # Ctrl-C or a failed chunk: what is saved stays; stop the workers at once
+            stop_pool(pool)
+            raise
+        if not broken:
+            pool.shutdown()
+            return
+        stop_pool(pool)
+        deaths += 1
+        if deaths > max_deaths:
+            raise BayesprogError(f"worker processes died {deaths} times in a row (killed, or "
+                                 "out of memory?): the finished chunks are kept; run again to "
+                                 "resume")
+        print(f"a worker process died: {len(left)} chunk(s) left go to new workers",
+              file=sys.stderr)
+
+
+def stop_pool(pool: Any) -> None:
+    """Stop ``pool`` now: its queued work cancelled, its processes terminated."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
+def worker_init(parent: int) -> None:
+    """A worker process: one compiled-kernel thread, Ctrl-C left to the parent, and an end of
+    its own when the parent is gone (killed: nothing else would stop it)."""
+    import signal
+    import threading
+    import time
+
+    import numba
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    numba.set_num_threads(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+
+
+def run_dask(address: str, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
+             bar: Any, max_deaths: int, worker_timeout: float) -> None:
+    """The units on an existing Dask cluster; a unit whose workers died goes to the others."""
+    try:
+        from dask.distributed import Client, wait
+        from distributed.client import FutureCancelledError
+        from distributed.scheduler import KilledWorker
+    except ImportError:
+        raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
+    try:
+        client = Client(address, timeout="10s")
+    except (OSError, ValueError, TypeError) as exc:
+        raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
+            from None
+    import time
+
+    with client:
+        futures = {client.submit(job, u, pure=False): u for u in todo}
+        pending, deaths, alone_since = set(futures), 0, None
+        while pending:
+            try:
+                done, still = wait(list(pending), timeout=1.0, return_when="FIRST_COMPLETED")
+                pending = set(still)
+            except TimeoutError:  # nothing finished in that second
+                done = set()
+            for future in done:
+                unit = futures.pop(future)
+                try:
+                    result = future.result()
+                except (KilledWorker, FutureCancelledError):
+                    # the unit was on workers that died: give it to the others
+                    deaths += 1
+                    if deaths > max_deaths * max(1, len(todo)):
+                        raise BayesprogError(f"--scheduler {address}: workers keep dying on "
+                                             f"{unit.name}; the finished chunks are kept") \
+                            from None
+                    again = client.submit(job, unit, pure=False)
+                    futures[again] = unit
+                    pending.add(again)
+                    continue
+                store.save(unit, result)
+                bar.update(1)
+            if done or client.scheduler_info().get("workers"):
+                alone_since = None
+            elif alone_since is None:
+                alone_since = time.monotonic()
+            elif time.monotonic() - alone_since > worker_timeout:
+                raise BayesprogError(f"--scheduler {address}: no worker for "
+                                     f"{worker_timeout:.0f} s: start workers (dask worker "
+                                     f"{address}); the finished chunks are kept")
+
+
+def progress_bar(total: int, what: str, unit: str = "step", done: int = 0,
+                 enabled: bool | None = None, leave: bool = False) -> Any:
+    """A tqdm bar, shown on a terminal (or as ``enabled`` says)."""
+    from tqdm import tqdm
+
+    disable = not sys.stderr.isatty() if enabled is None else not enabled
+    return tqdm(total=total, initial=done, desc=what, unit=unit, leave=leave, disable=disable)
