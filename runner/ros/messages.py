@@ -88,11 +88,6 @@ def pose(centre: np.ndarray, head: Header) -> PoseStamped:
     return msg
 
 
-def path(centres: np.ndarray, head: Header) -> Path:
-    """The probed cells' centres [K, dims] in order."""
-    return Path(header=head, poses=[pose(c, head) for c in centres])
-
-
 class GrowingPath:
     """A path that grows by one pose per step, kept serialized (CDR) so that publishing it
     costs the same at the thousandth step as at the first: rclpy converts a message's poses
