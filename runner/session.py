@@ -116,8 +116,8 @@ class Session:
 
     def chosen(self) -> dict:
         e = self.explorer
-        assert e.last is not None
-        d, nxt = e.last, int(e.last.next_cell[0])
+        d = e.decision
+        nxt = int(d.next_cell[0])
         return {"inhibition": _number(d.inhibition[0, nxt]),
                 "saliency": _number(d.saliency[0, nxt]),
                 "uncertainty": _number(d.uncertainty[0, nxt]),

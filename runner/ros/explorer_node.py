@@ -112,8 +112,7 @@ class ExplorerNode(Node):
     # what RViz shows --------------------------------------------------------------------------
     def publish_state(self, reply: dict, head: messages.Header) -> None:
         e = self.session.explorer
-        assert e.last is not None
-        d = e.last
+        d = e.decision
         posterior = e.target_probabilities[0]
         values = {"belief": messages.percent(e.belief()[0]),
                   "posterior": messages.percent(posterior, float(np.max(posterior))),
