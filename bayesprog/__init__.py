@@ -14,38 +14,81 @@
 [[0.998, 0.002], [0.002, 0.998]]
 """
 
-from typing import Any
-
-from bayesprog.display import show_inference
-from bayesprog.errors import (
-    BayesprogError,
-    Diagnostic,
-    QuestionError,
-    SpecError,
-    ZeroEvidenceError,
-    short_repr,
-)
-from bayesprog.expressions import Question, canonical
-from bayesprog.files import atomic_write
-from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
-from bayesprog.inference import MapResult, Posterior
-from bayesprog.inference.density import Density
-from bayesprog.language.document import load_document
-from bayesprog.language.loader import Located, load_yaml, wrong_kind
-from bayesprog.limits import SizeError, check_size, limit
-from bayesprog.model import Term
-from bayesprog.program import Program, load, loads
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
 
+#: Where each public name lives. They are imported when first used, so that ``import
+#: bayesprog`` costs little (a command-line question pays only for what it asks; the notebook
+#: display and the drawing load matplotlib-side modules only when a figure is drawn).
+_WHERE = {
+    "BayesprogError": "bayesprog.errors",
+    "Diagnostic": "bayesprog.errors",
+    "QuestionError": "bayesprog.errors",
+    "SpecError": "bayesprog.errors",
+    "ZeroEvidenceError": "bayesprog.errors",
+    "short_repr": "bayesprog.errors",
+    "Question": "bayesprog.expressions",
+    "canonical": "bayesprog.expressions",
+    "atomic_write": "bayesprog.files",
+    "Form": "bayesprog.forms",
+    "Param": "bayesprog.forms",
+    "ParamValue": "bayesprog.forms",
+    "available_forms": "bayesprog.forms",
+    "register_form": "bayesprog.forms",
+    "MapResult": "bayesprog.inference",
+    "Posterior": "bayesprog.inference",
+    "Density": "bayesprog.inference.density",
+    "load_document": "bayesprog.language.document",
+    "Located": "bayesprog.language.loader",
+    "load_yaml": "bayesprog.language.loader",
+    "wrong_kind": "bayesprog.language.loader",
+    "SizeError": "bayesprog.limits",
+    "check_size": "bayesprog.limits",
+    "limit": "bayesprog.limits",
+    "Term": "bayesprog.model",
+    "Program": "bayesprog.program",
+    "load": "bayesprog.program",
+    "loads": "bayesprog.program",
+    "show_inference": "bayesprog.display",
+    "render_values": "bayesprog.learning.write",
+}
+
+if TYPE_CHECKING:  # what the names are, for type checkers and editors
+    from bayesprog.display import show_inference
+    from bayesprog.errors import (
+        BayesprogError,
+        Diagnostic,
+        QuestionError,
+        SpecError,
+        ZeroEvidenceError,
+        short_repr,
+    )
+    from bayesprog.expressions import Question, canonical
+    from bayesprog.files import atomic_write
+    from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
+    from bayesprog.inference import MapResult, Posterior
+    from bayesprog.inference.density import Density
+    from bayesprog.language.document import load_document
+    from bayesprog.language.loader import Located, load_yaml, wrong_kind
+    from bayesprog.learning.write import render_values
+    from bayesprog.limits import SizeError, check_size, limit
+    from bayesprog.model import Term
+    from bayesprog.program import Program, load, loads
+
 
 def __getattr__(name: str) -> Any:
-    # the learning layer (and ruamel.yaml) is loaded when it is first used, never at import
-    if name == "render_values":
-        from bayesprog.learning.write import render_values
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'bayesprog' has no attribute {name!r}")
+    value = getattr(import_module(where), name)
+    globals()[name] = value  # found once; later reads are plain attribute reads
+    return value
 
-        return render_values
-    raise AttributeError(f"module 'bayesprog' has no attribute {name!r}")
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
 
 
 __all__ = [

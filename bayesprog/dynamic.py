@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.special import logsumexp
+import scipy
 
 from bayesprog.errors import QuestionError, expect_mapping
 from bayesprog.expressions import Expression, Question
@@ -115,7 +115,7 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
             scores = delta[..., :, None] + np.log(answer.probabilities) + scale
         pointers.append(np.argmax(scores, axis=-2))
         # the state before the first step is not part of the sequence: summed out, not maximised
-        delta = logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
+        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
         top = np.max(delta, axis=-1, keepdims=True)
         log_best += top[..., 0]
         delta = delta - top

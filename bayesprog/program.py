@@ -13,8 +13,6 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import networkx as nx
-
 from bayesprog import inference, rich
 from bayesprog.errors import (
     ArgumentError,
@@ -41,7 +39,9 @@ from bayesprog.language.loader import Located, load_yaml
 from bayesprog.model import FitRecord, InputDecl, Term
 from bayesprog.variables import Variable
 
-if TYPE_CHECKING:  # imported when a program is learned, not when bayesprog is
+if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayesprog is
+    import networkx as nx
+
     from bayesprog.learning import Estimate
 
 
@@ -97,6 +97,8 @@ class Program:
     @cached_property
     def graph(self) -> nx.DiGraph:
         """The decomposition as a DAG: one node per variable, an edge from each parent."""
+        import networkx as nx
+
         g = nx.DiGraph()
         for name, var in self.variables.items():
             g.add_node(name, variable=var)
@@ -107,10 +109,27 @@ class Program:
         return g
 
     def ancestors(self, name: str) -> set[str]:
+        """The variables ``name`` depends on through the decomposition (its parents, theirs...)."""
         cache = self.__dict__.setdefault("_ancestors", {})
         if name not in cache:
-            cache[name] = nx.ancestors(self.graph, name)
+            parents = self._parents
+            found: set[str] = set()
+            todo = [name]
+            while todo:
+                for p in parents.get(todo.pop(), ()):
+                    if p not in found:
+                        found.add(p)
+                        todo.append(p)
+            cache[name] = found
         return cache[name]
+
+    @cached_property
+    def _parents(self) -> dict[str, tuple[str, ...]]:
+        out: dict[str, tuple[str, ...]] = {}
+        for t in self.terms:
+            if not t.soft:
+                out[t.child.name] = out.get(t.child.name, ()) + tuple(p.name for p in t.parents)
+        return out
 
     @cached_property
     def active_terms(self) -> list[Term]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.special import betaln, digamma, polygamma
+import scipy
 
 from bayesprog.forms.base import Estimator, LearnOptions, Params, ParamValue, Stats, Term
 from bayesprog.variables import Discrete
@@ -245,16 +245,16 @@ class BetaEstimator(Estimator):
 
 def _beta_newton(a: np.ndarray, b: np.ndarray, g1: np.ndarray, g2: np.ndarray,
                  steps: int = 100) -> tuple[np.ndarray, np.ndarray]:
-    """Maximise ``(a-1) g1 + (b-1) g2 - betaln(a, b)`` elementwise (concave in (a, b))."""
+    """Maximise ``(a-1) g1 + (b-1) g2 - scipy.special.betaln(a, b)`` elementwise (concave in (a, b))."""
 
     def objective(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return (a - 1) * g1 + (b - 1) * g2 - betaln(a, b)
+        return (a - 1) * g1 + (b - 1) * g2 - scipy.special.betaln(a, b)
 
     for _ in range(steps):
-        dab = digamma(a + b)
-        ga, gb = g1 - digamma(a) + dab, g2 - digamma(b) + dab
-        t = polygamma(1, a + b)
-        haa, hbb = t - polygamma(1, a), t - polygamma(1, b)
+        dab = scipy.special.digamma(a + b)
+        ga, gb = g1 - scipy.special.digamma(a) + dab, g2 - scipy.special.digamma(b) + dab
+        t = scipy.special.polygamma(1, a + b)
+        haa, hbb = t - scipy.special.polygamma(1, a), t - scipy.special.polygamma(1, b)
         det = haa * hbb - t * t
         da = -(hbb * ga - t * gb) / det
         db = -(haa * gb - t * ga) / det

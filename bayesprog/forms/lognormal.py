@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.special import ndtr, ndtri
+import scipy
 
 from bayesprog.forms.base import (
     Estimator,
@@ -87,9 +87,9 @@ class LogNormal(Form):
     def cdf(self, ctx: TermContext) -> np.ndarray:
         x, mu, sigma = ctx.child_value(), ctx.param("mu"), ctx.param("sigma")
         positive_x = x > 0
-        return np.where(positive_x, ndtr((np.log(np.where(positive_x, x, 1.0)) - mu) / sigma),
+        return np.where(positive_x, scipy.special.ndtr((np.log(np.where(positive_x, x, 1.0)) - mu) / sigma),
                         0.0)
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return np.exp(params["mu"] + params["sigma"] * ndtri(u[..., 0]))
+        return np.exp(params["mu"] + params["sigma"] * scipy.special.ndtri(u[..., 0]))

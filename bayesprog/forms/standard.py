@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.special import betainc, betaincinv, betaln, ndtr, ndtri, xlog1py, xlogy
+import scipy
 
 from bayesprog.forms.base import (
     Form,
@@ -133,11 +133,11 @@ class Normal(Form):
         return -0.5 * z * z - np.log(sigma) - 0.5 * _LOG_2PI
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
-        return ndtr((ctx.child_value() - ctx.param("mean")) / ctx.param("sigma"))
+        return scipy.special.ndtr((ctx.child_value() - ctx.param("mean")) / ctx.param("sigma"))
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return params["mean"] + params["sigma"] * ndtri(u[..., 0])
+        return params["mean"] + params["sigma"] * scipy.special.ndtri(u[..., 0])
 
 
 @register_form
@@ -165,25 +165,25 @@ class Beta(Form):
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         x, a, b = ctx.child_value(), ctx.param("a"), ctx.param("b")
         with np.errstate(divide="ignore", invalid="ignore"):
-            out = np.broadcast_to(-betaln(a, b), np.broadcast_shapes(a.shape, b.shape, x.shape))
+            out = np.broadcast_to(-scipy.special.betaln(a, b), np.broadcast_shapes(a.shape, b.shape, x.shape))
             # a shape parameter of 1 contributes nothing: its log term is skipped (cue profiles
             # such as Beta(1, 2.5) and Beta(4, 1) halve their work)
-            out = _plus_xlog(out, a - 1, x, np.log, xlogy)
-            out = _plus_xlog(out, b - 1, -x, np.log1p, xlog1py)
+            out = _plus_xlog(out, a - 1, x, np.log, scipy.special.xlogy)
+            out = _plus_xlog(out, b - 1, -x, np.log1p, scipy.special.xlog1py)
         outside = (x < 0) | (x > 1)
         return np.where(outside, -np.inf, out) if outside.any() else out
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
-        return betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
+        return scipy.special.betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return betaincinv(params["a"], params["b"], u[..., 0])
+        return scipy.special.betaincinv(params["a"], params["b"], u[..., 0])
 
 
 def _plus_xlog(out: np.ndarray, c: np.ndarray, v: np.ndarray, log: Any, xlog: Any) -> np.ndarray:
     """``out + c * log(v)`` with ``0 * log(0) = 0``: nothing to add where every ``c`` is 0,
-    numpy's (vectorised) log where none is, scipy's ``xlogy``/``xlog1py`` for a mix."""
+    numpy's (vectorised) log where none is, scipy's ``scipy.special.xlogy``/``scipy.special.xlog1py`` for a mix."""
     if not np.any(c):
         return out
     if np.all(c):
@@ -364,7 +364,7 @@ class GaussianMixture(Form):
         rest = np.where(in_floor, 0.0, (pick - floor) / np.where(floor < 1, 1 - floor, 1))
         component = np.minimum((np.cumsum(weights, -1) <= rest[..., None]).sum(-1), k - 1)
         mean = np.take_along_axis(means, component[..., None], -1)[..., 0]
-        value = mean + params["sigma"] * ndtri(u[..., 1])
+        value = mean + params["sigma"] * scipy.special.ndtri(u[..., 1])
         if np.any(in_floor):
             assert isinstance(child, Continuous)
             value = np.where(in_floor, child.low + u[..., 1] * child.width, value)

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.special import logsumexp
+import scipy
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.binding import Bound
@@ -147,7 +147,7 @@ def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]],
         take = [f for f in pool if var in f[0]]
         pool = [f for f in pool if var not in f[0]]
         axes, arr = _log_product(take)
-        pool.append((tuple(a for a in axes if a != var), logsumexp(arr, axis=axes.index(var))))
+        pool.append((tuple(a for a in axes if a != var), scipy.special.logsumexp(arr, axis=axes.index(var))))
     axes, arr = _log_product(pool, output)
     return arr
 
@@ -375,7 +375,7 @@ def _normalised(plan: QuestionPlan, operands: list[Factor], offset: np.ndarray |
     for row in np.flatnonzero(bad):
         logs = [(f.axes, f.log[row] if f.batched else f.log) for f in factors]
         lt = log_contract(logs, searched)
-        total = logsumexp(lt) if np.isfinite(lt).any() else -np.inf
+        total = scipy.special.logsumexp(lt) if np.isfinite(lt).any() else -np.inf
         log_z[row] = total
         probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
     return probs, log_z

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.special import ndtr
+import scipy
 
 from bayesprog import rich
 from bayesprog.errors import QuestionError
@@ -121,7 +121,7 @@ class Density:
                 z = (x[:, :, None] - m[:, None, :]) / s[:, None, :]
             z = np.where(s[:, None, :] > 0, z, np.where(x[:, :, None] >= m[:, None, :],
                                                          np.inf, -np.inf))
-            return (w[:, None, :] * ndtr(z)).sum(-1)
+            return (w[:, None, :] * scipy.special.ndtr(z)).sum(-1)
         edges, p = self._bins(variable)
         cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
         return np.stack([np.interp(x[r], edges, cum[r]) for r in range(p.shape[0])])

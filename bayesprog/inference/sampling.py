@@ -18,9 +18,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import networkx as nx
 import numpy as np
-from scipy.special import logsumexp
+import scipy
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, ParamValue
@@ -76,6 +75,8 @@ def generators(rng: Any, rows: int) -> list[np.random.Generator]:
 
 def _order(program: ProgramLike, terms: list[Term]) -> list[Term]:
     """The decomposition's terms parents first; soft-evidence terms after their variable."""
+    import networkx as nx
+
     by_child = {t.child.name: t for t in terms if not t.soft}
     graph = nx.DiGraph()
     for t in by_child.values():
@@ -135,7 +136,7 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
             check_size(float(rows) * n * child.card, f"drawing {name} ({child.card:,} states) "
                        f"{n:,} times")
             row = _at_draws(program, term, inputs_only, drawn, values, rows, n, keep=name)
-            total = logsumexp(row, axis=-1)
+            total = scipy.special.logsumexp(row, axis=-1)
             if not np.all(np.isfinite(total)):
                 raise QuestionError(f"term {term.label} gives no state of {name} a positive "
                                     "probability for some drawn parents: it cannot be sampled")

@@ -6,13 +6,13 @@ user sees all of them at once.
 
 from __future__ import annotations
 
+import graphlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import networkx as nx
 import numpy as np
 
 from bayesprog.errors import Diagnostic, short_repr
@@ -591,15 +591,16 @@ class _Checker:
         return out
 
     def check_cycles(self, terms: list[Term]) -> None:
-        graph = nx.DiGraph()
+        parents: dict[str, list[str]] = {}  # lists, not sets: the same cycle named every time
         for t in terms:
             if not t.soft:
-                graph.add_edges_from((p.name, t.child.name) for p in t.parents)
+                parents.setdefault(t.child.name, []).extend(p.name for p in t.parents)
         try:
-            cycle = nx.find_cycle(graph)
-        except nx.NetworkXNoCycle:
+            graphlib.TopologicalSorter(parents).prepare()
+        except graphlib.CycleError as exc:
+            loop = list(exc.args[1])  # each node a parent of the next; first and last the same
+        else:
             return
-        loop = [u for u, _ in cycle] + [cycle[0][0]]
         first = next(i for i, s in enumerate(self.doc.decomposition)
                      if _child_of(s.term) in loop)
         self.error(("decomposition", first, "term"), "the decomposition has a cycle: "

@@ -10,8 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import scipy
 from opt_einsum import contract, get_symbol
-from scipy.special import logsumexp
 
 from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import Posterior
@@ -128,13 +128,13 @@ def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list
         for g, (_, cards, _, where, _) in enumerate(plans):
             for p, c in enumerate(cards):
                 log = received[where[:, p], :, :c] - np.log(to_var[g][p])
-                to_factor[g][p] = log - logsumexp(log, axis=-1, keepdims=True)
+                to_factor[g][p] = log - scipy.special.logsumexp(log, axis=-1, keepdims=True)
         if residual < tolerance:
             break
 
     def var_belief(v: str) -> np.ndarray:
         log = received[index[v], :, : card[v]]
-        return np.exp(log - logsumexp(log, axis=-1, keepdims=True))
+        return np.exp(log - scipy.special.logsumexp(log, axis=-1, keepdims=True))
 
     position = {i: (g, k) for g, (members, *_) in enumerate(plans)
                 for k, i in enumerate(members)}

@@ -8,7 +8,7 @@ so it also answers a discrete question where the exact methods do not apply."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import logsumexp
+import scipy
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
@@ -66,5 +66,5 @@ class LikelihoodWeighting(Method):
         variance = sq * (1 - 2 * probs) + w2 * probs**2
         stderr = np.sqrt(np.maximum(variance, 0.0))
         with np.errstate(divide="ignore"):
-            log_z = logsumexp(draws.log_weights, axis=1) - np.log(n)
+            log_z = scipy.special.logsumexp(draws.log_weights, axis=1) - np.log(n)
         return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=draws.ess)

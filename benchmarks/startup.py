@@ -1,0 +1,119 @@
+"""What a user waits for before the first answer (not a test): ``import bayesprog`` against
+``import pyagrum`` and ``import pgmpy``, the package with its engine (``from bayesprog import
+Program``) against ``import pyagrum``, and a question asked on the command line against the
+same question asked of pyAgrum in a fresh interpreter.
+
+Each pair is timed interleaved (bayesprog, then the reference, ``--repeats`` times) in fresh
+interpreters: the wall time of the process, and the import time Python itself reports
+(``python -X importtime``: the cumulative time of the top-level module). Reported: the medians
+and their ratios, to ``--out`` as JSON and to standard output.
+
+    python benchmarks/startup.py [--repeats 15] [--out results/benchmarks/startup.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+STUDENT = """\
+bayesprog: 1
+variables:
+  D: {states: [easy, hard]}
+  I: {states: [low, high]}
+  G: {states: [A, B, C]}
+decomposition:
+  - {term: P(D), form: table, table: [0.6, 0.4]}
+  - {term: P(I), form: table, table: [0.7, 0.3]}
+  - term: P(G | I, D)
+    form: table
+    table: {low: {easy: [0.3, 0.4, 0.3], hard: [0.05, 0.25, 0.7]},
+            high: {easy: [0.9, 0.08, 0.02], hard: [0.5, 0.3, 0.2]}}
+"""
+
+PYAGRUM_QUESTION = """
+import pyagrum as gum
+bn = gum.BayesNet()
+d = bn.add(gum.LabelizedVariable("D", "D", ["easy", "hard"]))
+i = bn.add(gum.LabelizedVariable("I", "I", ["low", "high"]))
+g = bn.add(gum.LabelizedVariable("G", "G", ["A", "B", "C"]))
+bn.addArc(d, g); bn.addArc(i, g)
+bn.cpt(d).fillWith([0.6, 0.4]); bn.cpt(i).fillWith([0.7, 0.3])
+bn.cpt(g)[{"I": "low", "D": "easy"}] = [0.3, 0.4, 0.3]
+bn.cpt(g)[{"I": "low", "D": "hard"}] = [0.05, 0.25, 0.7]
+bn.cpt(g)[{"I": "high", "D": "easy"}] = [0.9, 0.08, 0.02]
+bn.cpt(g)[{"I": "high", "D": "hard"}] = [0.5, 0.3, 0.2]
+ie = gum.LazyPropagation(bn); ie.setEvidence({"G": "A"}); ie.makeInference()
+print(ie.posterior("I"))
+"""
+
+
+def wall(command: list[str], cwd: Path) -> float:
+    start = time.perf_counter()
+    subprocess.run(command, check=True, cwd=cwd, capture_output=True)
+    return time.perf_counter() - start
+
+
+def import_time(module: str) -> float:
+    """Seconds Python reports for importing ``module`` (cumulative, -X importtime)."""
+    err = subprocess.run([sys.executable, "-X", "importtime", "-c", f"import {module}"],
+                         check=True, capture_output=True, text=True).stderr
+    line = [x for x in err.splitlines() if re.search(rf"\|\s*{re.escape(module)}$", x)][-1]
+    return int(line.split("|")[1]) / 1e6
+
+
+def paired(ours: list[str], reference: list[str], repeats: int, cwd: Path) -> dict:
+    a, b = [], []
+    wall(ours, cwd), wall(reference, cwd)  # warm the file cache
+    for _ in range(repeats):
+        a.append(wall(ours, cwd))
+        b.append(wall(reference, cwd))
+    return {"bayesprog_s": float(np.median(a)), "reference_s": float(np.median(b)),
+            "ratio": float(np.median(a) / np.median(b))}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--out", default="results/benchmarks/startup.json")
+    args = parser.parse_args()
+    py = sys.executable
+    bayesprog = str(Path(py).with_name("bayesprog"))
+    report: dict = {"repeats": args.repeats}
+    with tempfile.TemporaryDirectory() as tmp:
+        cwd = Path(tmp)
+        (cwd / "student.yaml").write_text(STUDENT)
+        for ref in ("pyagrum", "pgmpy"):
+            report[f"import_vs_{ref}"] = paired([py, "-c", "import bayesprog"],
+                                                [py, "-c", f"import {ref}"], args.repeats, cwd)
+            ours = [import_time("bayesprog") for _ in range(args.repeats)]
+            theirs = [import_time(ref) for _ in range(args.repeats)]
+            report[f"importtime_vs_{ref}"] = {
+                "bayesprog_s": float(np.median(ours)), "reference_s": float(np.median(theirs)),
+                "ratio": float(np.median(ours) / np.median(theirs))}
+        # the package with its engine loaded, as a Python session that asks a question has it
+        report["engine_import_vs_pyagrum"] = paired(
+            [py, "-c", "from bayesprog import Program"], [py, "-c", "import pyagrum"],
+            args.repeats, cwd)
+        report["cli_question_vs_pyagrum"] = paired(
+            [bayesprog, "query", "student.yaml", "P(I | G)", "--evidence", "G=A"],
+            [py, "-c", PYAGRUM_QUESTION], args.repeats, cwd)
+    for key, value in report.items():
+        if isinstance(value, dict):
+            print(f"{key:28s} bayesprog {value['bayesprog_s'] * 1000:7.1f} ms   reference "
+                  f"{value['reference_s'] * 1000:7.1f} ms   ratio {value['ratio']:.2f}")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,83 @@
+"""What ``import bayesprog`` and a command-line question load: the names of the package are
+imported when first used, and a discrete question never loads the modules of the features it
+does not use (scipy.special, networkx, matplotlib, pandas). Each check runs in a fresh
+interpreter, where nothing has been imported yet. How long they take is measured in
+benchmarks/startup.py, not here."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HEAVY = ("numpy", "scipy", "networkx", "matplotlib", "pandas", "pydantic", "pgmpy", "yaml",
+         "ruamel", "opt_einsum", "pyarrow")
+
+STUDENT = """\
+bayesprog: 1
+variables:
+  D: {states: [easy, hard]}
+  I: {states: [low, high]}
+  G: {states: [A, B, C]}
+decomposition:
+  - {term: P(D), form: table, table: [0.6, 0.4]}
+  - {term: P(I), form: table, table: [0.7, 0.3]}
+  - term: P(G | I, D)
+    form: table
+    table: {low: {easy: [0.3, 0.4, 0.3], hard: [0.05, 0.25, 0.7]},
+            high: {easy: [0.9, 0.08, 0.02], hard: [0.5, 0.3, 0.2]}}
+"""
+
+
+def loaded_after(code: str, cwd: Path | None = None) -> set[str]:
+    """The modules loaded after running ``code`` in a fresh interpreter."""
+    script = code + "\nimport sys, json\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, cwd=cwd).stdout
+    return set(json.loads(out.splitlines()[-1]))
+
+
+def top_level(modules: set[str]) -> set[str]:
+    return {m.split(".")[0] for m in modules}
+
+
+def test_import_bayesprog_loads_none_of_its_dependencies():
+    loaded = top_level(loaded_after("import bayesprog"))
+    assert not loaded & set(HEAVY), loaded & set(HEAVY)
+    assert loaded_after("import bayesprog") >= {"bayesprog"}
+
+
+def test_every_public_name_is_found_when_first_used():
+    code = ("import bayesprog\n"
+            "missing = [n for n in bayesprog.__all__ if getattr(bayesprog, n, None) is None]\n"
+            "assert not missing, missing\n"
+            "assert set(dir(bayesprog)) >= set(bayesprog.__all__)\n"
+            "assert bayesprog.Program is __import__('bayesprog.program').program.Program")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    with pytest.raises(subprocess.CalledProcessError):
+        subprocess.run([sys.executable, "-c", "import bayesprog; bayesprog.nothing_of_that_name"],
+                       check=True, capture_output=True)
+
+
+def test_a_discrete_question_on_the_command_line_loads_no_plotting_graph_or_table_library(
+        tmp_path):
+    (tmp_path / "student.yaml").write_text(STUDENT)
+    loaded = loaded_after(
+        "from bayesprog.cli import main\n"
+        "assert main(['query', 'student.yaml', 'P(I | G)', '--evidence', 'G=A']) == 0",
+        cwd=tmp_path)
+    assert "bayesprog.program" in loaded  # the question was asked
+    unused = {"scipy.special", "networkx", "matplotlib", "pandas", "pgmpy", "bayesprog.display",
+              "bayesprog.draw", "bayesprog.learning"}
+    assert not loaded & unused, loaded & unused
+
+
+def test_a_program_displays_in_a_notebook_without_importing_the_display_first():
+    code = ("import bayesprog\n"
+            "p = bayesprog.loads(" + repr(STUDENT) + ")\n"
+            "html = p.ask('P(I | G)', {'G': 'A'})._repr_html_()\n"
+            "assert html and '<table' in html, html")
+    subprocess.run([sys.executable, "-c", code], check=True)
