@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -105,12 +106,18 @@ def cmd_graph(args: argparse.Namespace) -> int:
 
 
 def _pairs(items: Sequence[str], option: str) -> dict[str, str]:
-    out = {}
+    out: dict[str, str] = {}
     for item in items:
         name, eq, value = item.partition("=")
         if not eq or not name or not value:
             raise _UserError(f"{option} {item!r}: expected NAME=VALUE")
-        out[name.strip()] = value.strip()
+        name = name.strip()
+        if name in out:
+            raise _UserError(
+                f"{option} {name} is given twice ({name}={out[name]} and {item.strip()}): "
+                f"expected each name once; for values over steps, one {option} "
+                f"{name}=v1,v2,... with --over-time; for a batch of rows, {name}=FILE.npy")
+        out[name] = value.strip()
     return out
 
 
@@ -148,9 +155,14 @@ def cmd_query(args: argparse.Namespace) -> int:
     inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
     evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
     kind = args.over_time or ("map" if args.map else None)
+    if args.over_time and args.map:
+        raise _UserError("--map and --over-time: expected one of them (--over-time sequence "
+                         "asks the most likely sequence)")
     if (kind or program.question(args.question).kind) in ("filter", "smooth", "sequence"):
         # evidence over steps: one value per step, separated by commas
         evidence = {k: v.split(",") if isinstance(v, str) else v for k, v in evidence.items()}
+    else:
+        _no_steps(program, evidence)
     soft = {}
     for name, text in _pairs(args.soft, "--soft").items():
         try:
@@ -180,6 +192,25 @@ def cmd_query(args: argparse.Namespace) -> int:
     else:
         print(format_result(result, limit=args.limit))
     return 0
+
+
+def _no_steps(program: Program, evidence: dict[str, object]) -> None:
+    """A comma list given to a question that is not over steps: say how to ask one that is."""
+    for name, value in evidence.items():
+        if not isinstance(value, str) or "," not in value:
+            continue
+        var = program.variables.get(name)
+        if var is not None and var.is_discrete and value in var.states:  # type: ignore[union-attr]
+            continue  # a state whose name has a comma
+        if program.time is not None:
+            raise _UserError(
+                f"--evidence {name}={value}: one value per step (separated by commas) is read "
+                "by a question over steps: add --over-time filter|smooth|sequence (or ask a "
+                "named question of one of these kinds)")
+        raise _UserError(
+            f"--evidence {name}={value}: expected one value; values separated by commas are "
+            "steps, for a program that repeats over time (a time: section) with --over-time; "
+            f"for a batch of rows, give {name}=FILE.npy")
 
 
 def _plot_density(result: Any, path: str) -> None:
@@ -257,7 +288,8 @@ def cmd_learn(args: argparse.Namespace) -> int:
     iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
     print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "
           f"rows of {record.data} ({record.method}{iterations}); log-likelihood "
-          f"{record.log_likelihood:.6g}")
+          f"{record.log_likelihood:.6g}; values written to {record.digits} significant digits, "
+          f"as {record.rows_used} rows support")
     if not fit.converged:
         print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
               "(raise --max-iter)", file=sys.stderr)
@@ -447,15 +479,34 @@ def _version() -> str:
     return f"bayesprog {__version__}"
 
 
+#: The exit status when the reader of the output went away (a shell's for SIGPIPE, 128 + 13).
+EXIT_CLOSED_PIPE = 141
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status (0 ok, 2 user error)."""
+    """Run the command line; returns the exit status (0 ok, 2 user error, 130 interrupted,
+    141 when the output's reader closed the pipe, as ``bayesprog query ... | head``)."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # the reader is gone: nothing more can be said to it, and the interpreter must not
+        # complain when it flushes standard output at exit
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return EXIT_CLOSED_PIPE
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse has printed the usage and the problem
         return int(exc.code or 0)
     try:
-        return int(args.func(args))
+        status = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe is found here, not at the interpreter's exit
+        return status
     except SpecError as exc:
         for d in exc.diagnostics:
             print(d, file=sys.stderr)

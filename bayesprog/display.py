@@ -57,8 +57,8 @@ def _ranked(post: Posterior, probs: np.ndarray) -> list[tuple[str, float]]:
 
     def label(flat: int) -> str:
         idx = np.unravel_index(flat, probs.shape)
-        return ", ".join(f"{v}={post.states[v][i]}" if len(post.variables) > 1 else
-                         post.states[v][i] for v, i in zip(post.variables, idx, strict=True))
+        return ", ".join(f"{v}={post.names[v][i]}" if len(post.variables) > 1 else
+                         post.names[v][i] for v, i in zip(post.variables, idx, strict=True))
 
     return [(label(int(i)), float(values[i])) for i in order]
 
@@ -115,8 +115,20 @@ def posterior_html(post: Posterior) -> str:
 
 def map_html(result: MapResult) -> str:
     """A MAP answer: the assignment, its posterior probability and the number of ties."""
-    title = f"<b>MAP {html.escape(result.question)}</b>" + _ablated(result.ablated)
+    title = (f"<b>{'' if result.kind == 'sequence' else 'MAP '}{html.escape(result.question)}"
+             "</b>" + _ablated(result.ablated))
     assignment = result.assignment
+    if result.kind == "sequence":
+        steps = {k: np.asarray(v).reshape(result.indices.shape[0], -1) for k, v in
+                 assignment.items()}
+        prob = result.probability.ravel()
+        shown = min(len(prob), ROWS)
+        header = ["step"] + [f"{k}" + (f" [{r}]" if prob.size > 1 else "")
+                             for r in range(shown) for k in steps]
+        body = [[str(t + 1)] + [str(steps[k][t, r]) for r in range(shown) for k in steps]
+                for t in range(result.indices.shape[0])]
+        body.append(["probability"] + [f"{prob[r]:.6g}" for r in range(shown) for _ in steps])
+        return f"<div>{title}{_table(header, body)}</div>"
     if result.indices.ndim > 1:
         flat = {k: np.asarray(v).ravel() for k, v in assignment.items()}
         prob = result.probability.ravel()

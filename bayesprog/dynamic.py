@@ -124,21 +124,25 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
     indices = np.stack(path[::-1])[..., None]  # [T, batch, 1]
     marginals = smoothed()
-    total = np.sum(log_evidence, axis=0)
+    total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
     with np.errstate(over="ignore", invalid="ignore"):
-        probability = np.exp(log_best - np.broadcast_to(total, batch))
-    shape = indices.shape[:-1]
+        probability = np.exp(log_best - total)
     return MapResult(
-        question=str(expr) + "   (the most likely sequence)",
+        question=f"{expr}   (the most likely sequence, {_steps_text(steps)})",
         variables=(state,),
-        states={state: program.variables[state].states},
+        names={state: program.variables[state].states},
         indices=indices,
-        probability=np.broadcast_to(probability, shape).copy(),
-        ties=np.ones(shape, int),
-        zero_evidence=np.zeros(shape, bool),
+        probability=np.where(np.isfinite(total), probability, 0.0),
+        ties=np.ones(batch, int),
+        zero_evidence=~np.isfinite(total),
         posterior=marginals,
         ablated=program.ablated,
+        kind="sequence",
     )
+
+
+def _steps_text(steps: int) -> str:
+    return f"{steps} step" + ("" if steps == 1 else "s")
 
 
 def _posterior(question: Question, program: Any, state: str, probabilities: np.ndarray,
@@ -146,9 +150,9 @@ def _posterior(question: Question, program: Any, state: str, probabilities: np.n
     shape = probabilities.shape[:-1]
     return Posterior(
         question=f"{question.expression}   ({'filtered' if kind == 'filter' else 'smoothed'}, "
-                 f"{shape[0]} steps)",
+                 f"{_steps_text(shape[0])})",
         variables=(state,),
-        states={state: program.variables[state].states},
+        names={state: program.variables[state].states},
         values={state: program.variables[state].typed_states},
         probabilities=probabilities,
         log_evidence=np.broadcast_to(log_evidence, shape).copy(),

@@ -74,6 +74,9 @@ class FitRecord(BaseModel):
     log_likelihood: float = Field(description="log-likelihood of the rows used, fitted program")
     method: str = Field(description="maximum likelihood, or EM when values are missing")
     iterations: int = 1
+    digits: int | None = Field(
+        None, description="significant digits the learned values are written with: as many as "
+        "the rows used support (rounding moves a value by under a twentieth of 1/sqrt(rows_used))")
     terms: list[str] = Field(default_factory=list, description="the terms learned")
     statistics: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="per learned term, its sufficient statistics")

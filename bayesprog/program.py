@@ -13,6 +13,8 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from bayesprog import inference, rich
 from bayesprog.errors import (
     ArgumentError,
@@ -37,10 +39,11 @@ from bayesprog.language.check import check_document, question_problem
 from bayesprog.language.document import Document, validate_located
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.model import FitRecord, InputDecl, Term
-from bayesprog.variables import Variable
+from bayesprog.variables import Discrete, Variable
 
 if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayesprog is
     import networkx as nx
+    import pandas as pd
 
     from bayesprog.learning import Estimate
 
@@ -164,6 +167,55 @@ class Program:
                 return t
         known = ", ".join(str(t.expression) for t in self.terms if not t.soft)
         raise QuestionError(f"no term {expr} in {self.name} (terms: {known})")
+
+    def table(self, term: str) -> pd.DataFrame:
+        """The probabilities of a discrete term as a pandas DataFrame: one row per
+        configuration of its parents (their states as the index, a MultiIndex for several),
+        one column per state of its variable. A term without parents is one row, indexed by
+        the term. An ablated term gives its uniform.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {A: {states: [a0, a1]}, B: {states: [b0, b1]}}
+        ... decomposition:
+        ...   - {term: P(A), form: table, table: [0.3, 0.7]}
+        ...   - {term: P(B | A), form: table, table: {a0: [0.9, 0.1], a1: [0.2, 0.8]}}
+        ... ''')
+        >>> p.table("P(B | A)")
+        B    b0   b1
+        A
+        a0  0.9  0.1
+        a1  0.2  0.8
+        """
+        import pandas as pd
+
+        from bayesprog.inference.factors import is_static, plain_table
+
+        key = self.term(term).expression.key
+        found = next(t for t in self.active_terms if not t.soft and t.expression.key == key)
+        child, parents = found.child, list(found.parents)
+        real = [p.name for p in parents if not isinstance(p, Discrete)]
+        if not isinstance(child, Discrete) or real or not is_static(found):
+            why = (f"{child.name} is real" if not isinstance(child, Discrete) else
+                   f"it depends on the real {', '.join(real)}" if real else
+                   "it reads inputs or evidence values")
+            raise QuestionError(f"{found.expression} is not a table of probabilities: {why} "
+                                "(its parameters are in program.term(...).params)")
+        made = plain_table(self, found)
+        assert made is not None  # a static term
+        axes, array, log_top = made  # a table written as probabilities: as written
+        order = [axes.index(p.name) for p in parents] + [axes.index(child.name)]
+        probabilities = np.transpose(array * np.exp(log_top) if log_top else array, order)
+        columns = pd.Index(list(child.states), name=child.name)
+        if not parents:
+            return pd.DataFrame(probabilities[None, :], index=[str(found.expression)],
+                                columns=columns)
+        levels = [list(p.states) for p in parents if isinstance(p, Discrete)]
+        index: pd.Index = pd.MultiIndex.from_product(levels, names=[p.name for p in parents])
+        if len(parents) == 1:
+            index = index.get_level_values(0)
+        return pd.DataFrame(probabilities.reshape(-1, child.card), index=index, columns=columns)
 
     # questions -------------------------------------------------------------------------------------
     def question(self, question: str | Question | Expression, kind: str | None = None) -> Question:
@@ -417,14 +469,17 @@ class Fit:
         """The fitted program file: ``source`` (by default the file the program was loaded
         from) with the learned values in place, comments and layout kept, and the fit's record
         appended under ``learned:``."""
+        from bayesprog.forms.base import simplex as simplex_constraint
         from bayesprog.learning import render_fitted
 
         path = Path(source) if source is not None else self.source
         if path is None:
             raise QuestionError("this program was not loaded from a file: give the program "
                                 "file to write the fitted values into (source=...)")
+        simplex = {t.label: [p.name for p in t.form.params if p.constraint is simplex_constraint]
+                   for t in self.program.terms}
         text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
-                             self.program.variables, self.record)
+                             self.program.variables, self.record, simplex)
         loads(text, str(path), path.parent)  # the fitted file must load as a program
         return text
 

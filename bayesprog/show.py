@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -54,7 +55,62 @@ def _param(program: Program, value: ParamValue | InputRef | FormulaParam) -> str
         body = ", ".join(f"{s}: {_array(v) if np.ndim(v) else _fmt(float(v))}"
                          for s, v in zip(states, arr, strict=False))
         return "{" + body + "}"
-    return f"table over {' x '.join(value.axes)} of shape {list(arr.shape)}"
+    return f"by {', '.join(value.axes)}, below"
+
+
+#: The most rows and value columns a table printed under its term shows (a screen's worth).
+TABLE_ROWS, TABLE_COLUMNS = 24, 10
+
+
+def _grids(program: Program, term: Term) -> list[str]:
+    """The parameters shown as ``by ..., below``: a table of the states of the variables the
+    parameter varies over (rows) by its values (columns: the states of the term's variable for
+    a table), elided beyond a screen and saying so."""
+    out = []
+    for name, value in term.params.items():
+        if not isinstance(value, ParamValue) or not value.axes or value.batched:
+            continue
+        if _param(program, value) != f"by {', '.join(value.axes)}, below":
+            continue
+        arr = np.asarray(value.array, dtype=float)
+        lead = len(value.axes)
+        rows = arr.reshape(int(np.prod(arr.shape[:lead])), -1)
+        child = term.child
+        if arr.ndim == lead:
+            headers = [name]
+        elif (arr.ndim == lead + 1 and isinstance(child, Discrete)
+              and any(p.name == name and p.keyed_by_child_states for p in term.form.params)
+              and arr.shape[-1] == child.card):
+            headers = list(child.states)
+        else:
+            headers = [str(i) for i in np.ndindex(*arr.shape[lead:])]
+        states = [program.variables[a].states for a in value.axes]  # type: ignore[union-attr]
+        labels = [[str(s) for s in combo] for combo in itertools.product(*states)]
+        shown_rows = rows.shape[0] if rows.shape[0] <= TABLE_ROWS else TABLE_ROWS - 4
+        shown_cols = len(headers) if len(headers) <= TABLE_COLUMNS else TABLE_COLUMNS - 2
+        cells = [[_fmt(float(x)) for x in row[:shown_cols]] for row in rows[:shown_rows]]
+        head = list(value.axes) + headers[:shown_cols]
+        body = [label + row for label, row in zip(labels, cells, strict=False)]
+        widths = [max(len(r[i]) for r in [head, *body]) for i in range(len(head))]
+        more = "  ..." if shown_cols < len(headers) else ""
+
+        def line(row: list[str], widths: list[int] = widths, lead: int = lead,
+                 more: str = more) -> str:
+            keys = "  ".join(f"{c:<{w}}" for c, w in zip(row[:lead], widths, strict=False))
+            vals = "  ".join(f"{c:>{w}}" for c, w in zip(row[lead:], widths[lead:],
+                                                           strict=False))
+            return f"          {keys}  | {vals}{more}"
+
+        title = f"        {name} of {term.expression}" if len(term.params) > 1 else ""
+        out += ([title] if title else []) + [line(head)] + [line(r) for r in body]
+        hidden_rows, hidden_cols = rows.shape[0] - shown_rows, len(headers) - shown_cols
+        if hidden_rows or hidden_cols:
+            what = " and ".join(x for x in (
+                f"{hidden_rows:,} more rows" if hidden_rows else "",
+                f"{hidden_cols:,} more columns" if hidden_cols else "") if x)
+            out.append(f"          ... {what} (all of them in Python: "
+                       f"program.table(\"{term.expression}\"))")
+    return out
 
 
 def _array(arr: np.ndarray) -> str:
@@ -98,6 +154,8 @@ def render(program: Program) -> str:
     lines.append("    Parametric forms")
     for t in terms:
         lines.append(f"      {t.expression} = {_form(program, t)}")
+        if str(t.expression) not in program.ablated:
+            lines += _grids(program, t)
     soft = [t for t in program.terms if t.soft]
     if soft:
         lines.append("    Soft evidence (likelihoods multiplied in)")
@@ -145,15 +203,14 @@ def format_result(result: Posterior | MapResult | Density, limit: int = 20) -> s
     """A readable table (one block per batch row when batched)."""
     if isinstance(result, Density):
         return format_density(result)
+    if isinstance(result, MapResult) and result.kind == "sequence":
+        return _format_sequence(result)
     if isinstance(result, MapResult):
         rows = np.ndindex(*result.indices.shape[:-1])
         out = [f"MAP of {result.question}" + _ablated(result.ablated)]
         for pos in rows:
-            names = [result.states[v][int(i)] for v, i in zip(result.variables, result.indices[pos], strict=False)]
+            names = [result.names[v][int(i)] for v, i in zip(result.variables, result.indices[pos], strict=False)]
             label = f"[{', '.join(map(str, pos))}] " if pos else ""
-            if result.question.endswith("(the most likely sequence)"):
-                label = f"step {pos[0] + 1}" + (f" [{', '.join(map(str, pos[1:]))}]"
-                                                if pos[1:] else "") + ": "
             assignment = ", ".join(f"{v}={s}" for v, s in zip(result.variables, names, strict=False))
             out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
                        + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
@@ -170,6 +227,29 @@ def format_result(result: Posterior | MapResult | Density, limit: int = 20) -> s
         out += _table(result, result.probabilities[pos], limit, stderr)
         if result.ess is not None:
             out.append(f"  effective sample size {float(result.ess[pos]):.0f}")
+    return "\n".join(out)
+
+
+def _format_sequence(result: MapResult) -> str:
+    """The most likely sequence: its state at each step, then its probability (per sequence of
+    a batch)."""
+    out = [result.question + _ablated(result.ablated)]
+    batch = result.probability.shape
+    for row in np.ndindex(*batch):
+        indent = "  "
+        if row:
+            out.append(f"  sequence [{', '.join(map(str, row))}]")
+            indent = "    "
+        for t in range(result.indices.shape[0]):
+            at = result.indices[(t,) + row]
+            assignment = ", ".join(f"{v}={result.names[v][int(i)]}"
+                                   for v, i in zip(result.variables, at, strict=True))
+            out.append(f"{indent}step {t + 1}: {assignment}")
+        if result.zero_evidence[row]:
+            out.append(f"{indent}the evidence has probability zero: no sequence is likelier")
+        else:
+            out.append(f"{indent}probability of the sequence: "
+                       f"{_fmt(float(result.probability[row]))}")
     return "\n".join(out)
 
 
@@ -194,7 +274,7 @@ def _table(result: Posterior, probs: np.ndarray, limit: int,
     if flat.size > limit:
         order = np.argsort(-flat, kind="stable")[:limit]
         note = f"  ... {flat.size - limit} more (the {limit} most probable are shown; --limit N)"
-    names = [result.states[v] for v in result.variables]
+    names = [result.names[v] for v in result.variables]
     cells = []
     for k in order:
         idx = np.unravel_index(k, probs.shape)

@@ -43,17 +43,22 @@ class Deferred:
 class Posterior:
     """``P(searched | evidence)``: ``probabilities`` has shape ``batch + cards of variables``.
 
+    ``states`` gives each variable's states as values of its type, as ``to_json`` and a MAP
+    give them (integers for a range, ``(ix, iy)`` for a grid's cells, names else); ``names``
+    the same states as the text shown in tables.
+
     ``log_evidence`` is the log-probability of the evidence per row; where the question left
     out evidence that does not bear on its answer, it is computed at its first read."""
 
     question: str
     variables: tuple[str, ...]
-    states: dict[str, tuple[str, ...]]
+    names: dict[str, tuple[str, ...]]
     probabilities: np.ndarray
     log_evidence: np.ndarray
     batch_shape: tuple[int, ...]
     ablated: tuple[str, ...] = ()
     #: the states as values of each variable's type (integers for a range); names by default
+    #: (read them as ``states``)
     values: dict[str, tuple[Any, ...]] | None = None
     #: the inference method that answered (``table``, ``contraction``: exact; ``lbp``, ``lw``)
     method: str = ""
@@ -75,8 +80,13 @@ class Posterior:
         self.log_evidence  # noqa: B018  (computed where it was deferred)
         return dict(self.__dict__)
 
+    @property
+    def states(self) -> dict[str, tuple[Any, ...]]:
+        """Each searched variable's states, as values of its type."""
+        return {v: self.typed(v) for v in self.variables}
+
     def typed(self, variable: str) -> tuple[Any, ...]:
-        return (self.values or {}).get(variable, self.states[variable])
+        return (self.values or {}).get(variable, self.names[variable])
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -110,17 +120,32 @@ class MapResult:
 
     ``indices`` has shape ``batch + (len(variables),)``; ``probability`` is the posterior
     probability of the chosen assignment; ``ties`` counts the assignments that shared the maximum.
+
+    ``kind`` is ``"sequence"`` for the most likely sequence of a program over time steps: then
+    ``indices`` has time as its first axis, and ``probability``, ``ties`` and ``zero_evidence``
+    are one per sequence (the batch shape), ``probability`` that of the whole sequence.
     """
 
     question: str
     variables: tuple[str, ...]
-    states: dict[str, tuple[str, ...]]
+    names: dict[str, tuple[str, ...]]
     indices: np.ndarray
     probability: np.ndarray
     ties: np.ndarray
     zero_evidence: np.ndarray
     posterior: Posterior
     ablated: tuple[str, ...] = ()
+    kind: str = "map"
+
+    @property
+    def steps(self) -> int | None:
+        """The number of steps of a sequence (None for a MAP question)."""
+        return int(self.indices.shape[0]) if self.kind == "sequence" else None
+
+    @property
+    def states(self) -> dict[str, tuple[Any, ...]]:
+        """Each searched variable's states, as values of its type (as in ``assignment``)."""
+        return self.posterior.states
 
     @property
     def assignment(self) -> dict[str, Any]:
@@ -128,7 +153,7 @@ class MapResult:
         (arrays when batched)."""
         out = {}
         for i, var in enumerate(self.variables):
-            values = np.empty(len(self.states[var]), dtype=object)
+            values = np.empty(len(self.names[var]), dtype=object)
             for j, value in enumerate(self.posterior.typed(var)):
                 values[j] = value  # one object per state (a grid cell is a tuple)
             chosen = values[self.indices[..., i]]
@@ -141,7 +166,7 @@ class MapResult:
 
     def to_json(self) -> dict[str, Any]:
         assignment = self.assignment
-        return {
+        out = {
             "question": self.question,
             "map": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in assignment.items()},
             "probability": self.probability.tolist(),
@@ -151,6 +176,10 @@ class MapResult:
             "ablated": list(self.ablated),
             **self.posterior._method_json(),
         }
+        if self.kind == "sequence":  # one path per sequence: its probability once, no ties
+            del out["ties"]
+            out["method"] = "sequence"
+        return out
 
 
 def _floats(values: np.ndarray) -> Any:
@@ -210,7 +239,7 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     return MapResult(
         question=question,
         variables=posterior.variables,
-        states=posterior.states,
+        names=posterior.names,
         indices=indices,
         probability=flat[np.arange(rows), choice].reshape(shape),
         ties=counts.reshape(shape),

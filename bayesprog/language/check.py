@@ -49,7 +49,12 @@ class Checked:
 
 def build_variable(name: str, spec: Any) -> Variable:
     if spec.states is not None:
-        return Discrete(name, tuple(spec.states), description=spec.description)
+        states = tuple(spec.states)
+        # states named by integers (1, 2, 3): an integer in evidence or data is a name, not
+        # an index, as for a range
+        numbers = [int(s) for s in states if re.fullmatch(r"-?[0-9]+", s) and str(int(s)) == s]
+        values = np.array(numbers) if len(numbers) == len(states) else None
+        return Discrete(name, states, values=values, description=spec.description)
     if spec.range is not None:
         low, high = spec.range
         values = np.arange(low, high + 1)
@@ -448,20 +453,26 @@ class _Checker:
         """(axes, array) of a literal parameter; every row is checked where it is written."""
         child, what = spec.child, spec.what
         if isinstance(raw, dict):
+            named = _named_keys(raw, child, keyable, path, what)
+            if named is not None:  # keys that name their variable: {Choice=1: ...}
+                var, rows = named
+                if var is child:
+                    if not (spec.param.keyed_by_child_states and isinstance(child, Discrete)
+                            and spec.event_ndim == 1):
+                        raise _LiteralError(path, f"{what}: a row keyed by the states of "
+                                            f"{child.name} is not taken here")
+                    return self._child_row({k: v for k, (_, v) in rows.items()}, spec, keyable,
+                                           path)
+                return self._keyed_by(var, rows, spec, keyable, path)
+            keys = {str(k) for k in raw}
             if (
                 spec.param.keyed_by_child_states
                 and isinstance(child, Discrete)
                 and spec.event_ndim == 1
-                and {str(k) for k in raw} <= set(child.states)
-                and not any(set(map(str, raw)) <= set(v.states) for v in keyable)
+                and keys <= set(child.states)
+                and not any(keys <= set(v.states) for v in keyable)
             ):
-                missing = [s for s in child.states if s not in {str(k) for k in raw}]
-                if missing:
-                    raise _LiteralError(path, f"{what}: a row keyed by the states of "
-                                        f"{child.name} misses {', '.join(missing[:5])}")
-                by_str = {str(k): v for k, v in raw.items()}
-                return self._literal([by_str[s] for s in child.states], spec, keyable, path)
-            keys = {str(k) for k in raw}
+                return self._child_row({str(k): v for k, v in raw.items()}, spec, keyable, path)
             matches = [v for v in keyable if keys <= set(v.states)]
             if not matches:
                 names = ", ".join(v.name for v in keyable) or "none"
@@ -469,22 +480,14 @@ class _Checker:
                                     f"one of ({names}), found keys {sorted(keys)}")
             exact = [v for v in matches if keys == set(v.states)]
             if len(exact) > 1:
+                first = exact[0]
                 raise _LiteralError(path, f"{what}: keys {sorted(keys)} match the states of "
-                                    f"several variables ({', '.join(v.name for v in exact)})")
+                                    f"several variables ({', '.join(v.name for v in exact)}): "
+                                    f"name the variable in each key ({first.name}="
+                                    f"{first.states[0]}: ...)")
             var = exact[0] if exact else max(matches, key=lambda v: len(keys & set(v.states)))
-            missing = [s for s in var.states if s not in keys]
-            if missing:
-                raise _LiteralError(path, f"{what}: table keyed by {var.name} misses state(s) "
-                                    f"{', '.join(missing[:5])}")
-            rest = [v for v in keyable if v.name != var.name]
-            by_str = {str(k): v for k, v in raw.items()}
-            parts = [self._literal(by_str[s], spec, rest, path + (s,)) for s in var.states]
-            for state, (axes, arr) in zip(var.states, parts, strict=True):
-                if axes != parts[0][0] or arr.shape != parts[0][1].shape:
-                    raise _LiteralError(path + (state,), f"{what}: rows keyed by {var.name} "
-                                        f"must have the same layout; {var.states[0]!r} is "
-                                        f"{_layout(*parts[0])}, {state!r} is {_layout(axes, arr)}")
-            return (var.name,) + parts[0][0], np.stack([arr for _, arr in parts])
+            return self._keyed_by(var, {str(k): (k, v) for k, v in raw.items()}, spec, keyable,
+                                  path)
         leaf = spec.expected[-1] if spec.expected and spec.event_ndim else None
         array = _nested(raw, path, what, leaf, spec)
         lead = array.ndim - spec.event_ndim
@@ -511,6 +514,36 @@ class _Checker:
         return axes, array
 
     # questions and ablations --------------------------------------------------------------------
+
+    def _child_row(self, rows: dict[str, Any], spec: _LiteralSpec, keyable: list,
+                   path: YPath) -> tuple[tuple[str, ...], np.ndarray]:
+        """A row keyed by the states of the term's variable: every state named once."""
+        child = spec.child
+        assert isinstance(child, Discrete)
+        missing = [s for s in child.states if s not in rows]
+        if missing:
+            raise _LiteralError(path, f"{spec.what}: a row keyed by the states of "
+                                f"{child.name} misses {', '.join(missing[:5])}")
+        return self._literal([rows[s] for s in child.states], spec, keyable, path)
+
+    def _keyed_by(self, var: Discrete, rows: dict[str, tuple[Any, Any]], spec: _LiteralSpec,
+                  keyable: list, path: YPath) -> tuple[tuple[str, ...], np.ndarray]:
+        """A table keyed by the states of the parent ``var`` (``rows``: each state's key as
+        written and its value): one entry per state, the rest of the parents inside."""
+        what = spec.what
+        missing = [s for s in var.states if s not in rows]
+        if missing:
+            raise _LiteralError(path, f"{what}: table keyed by {var.name} misses state(s) "
+                                f"{', '.join(missing[:5])}")
+        rest = [v for v in keyable if v.name != var.name]
+        key_of = {s: rows[s][0] for s in var.states}
+        parts = [self._literal(rows[s][1], spec, rest, path + (key_of[s],)) for s in var.states]
+        for state, (axes, arr) in zip(var.states, parts, strict=True):
+            if axes != parts[0][0] or arr.shape != parts[0][1].shape:
+                raise _LiteralError(path + (key_of[state],), f"{what}: rows keyed by {var.name} "
+                                    f"must have the same layout; {var.states[0]!r} is "
+                                    f"{_layout(*parts[0])}, {state!r} is {_layout(axes, arr)}")
+        return (var.name,) + parts[0][0], np.stack([arr for _, arr in parts])
     def check_questions(self) -> dict[str, tuple[Expression, str, str]]:
         out: dict[str, tuple[Expression, str, str]] = {}
         for name in self.doc.questions:
@@ -658,6 +691,43 @@ class _LiteralSpec:
     event_ndim: int
     expected: tuple[int, ...] | None
     what: str
+
+
+def _named_keys(raw: dict, child: Variable, keyable: list, path: YPath,
+                what: str) -> tuple[Any, dict[str, tuple[Any, Any]]] | None:
+    """The variable and the rows of a mapping whose keys name it (``Choice=1``), or None when
+    no key does. Every key must then name the same variable, one of the term's (its parents,
+    or the term's variable for a row of probabilities)."""
+    named = [k for k in raw if isinstance(k, str) and "=" in k]
+    if not named:
+        return None
+    if len(named) < len(raw):
+        plain = next(k for k in raw if k not in named)
+        raise _LiteralError(path, f"{what}: expected every key to name its variable "
+                            f"(VAR=state) or none, found {named[0]!r} beside {plain!r}")
+    rows: dict[str, tuple[Any, Any]] = {}
+    names = set()
+    for key in named:
+        name, _, state = (part.strip() for part in key.partition("="))
+        names.add(name)
+        rows[state] = (key, raw[key])
+    candidates = {v.name: v for v in keyable}
+    if isinstance(child, Discrete):
+        candidates.setdefault(child.name, child)
+    if len(names) > 1:
+        raise _LiteralError(path, f"{what}: expected the keys of one mapping to name one "
+                            f"variable, found {', '.join(sorted(names))}")
+    name = names.pop()
+    var = candidates.get(name)
+    if var is None:
+        raise _LiteralError(path, f"{what}: key {named[0]!r} names {name!r}, expected one of "
+                            f"{', '.join(candidates) or 'no variable'} (the term's variables)")
+    unknown = [s for s in rows if s not in var.states]
+    if unknown:
+        raise _LiteralError(path + (rows[unknown[0]][0],),
+                            f"{what}: unknown state {unknown[0]!r} of {name} (expected one of "
+                            f"{var.describe_states()})")
+    return var, rows
 
 
 def _count(spec: _LiteralSpec) -> str:

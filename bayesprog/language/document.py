@@ -96,6 +96,13 @@ class DiscretiseSpec(_Strict):
 MAX_BINS = 100_000
 
 
+def _name_of_number(value: Any) -> Any:
+    """A number where a name stands, as its name (``1`` -> ``"1"``, ``0.5`` -> ``"0.5"``)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return repr(value)
+    return value
+
+
 class VariableSpec(_Strict):
     """Exactly one of ``states``, ``range``, ``grid`` or ``continuous``."""
 
@@ -115,6 +122,14 @@ class VariableSpec(_Strict):
         "children): its term gives each bin the probability of the interval"
     )
     description: str = ""
+
+    @field_validator("states", mode="before")
+    @classmethod
+    def _numbers_are_names(cls, value: Any) -> Any:
+        # a state is a name: an unquoted number (states: [1, 2, 3]) names it as written
+        if isinstance(value, list):
+            return [_name_of_number(v) for v in value]
+        return value
 
     @model_validator(mode="after")
     def _one_kind(self) -> VariableSpec:

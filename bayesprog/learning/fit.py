@@ -34,6 +34,7 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
 from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.learning.data import Data, DataError, load_data
+from bayesprog.learning.write import supported_digits
 from bayesprog.model import FitRecord, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable
 
@@ -139,7 +140,7 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         data=Path(data.source).name if data.source[0] != "<" else data.source,
         sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
         log_likelihood=float(ll), method=method, iterations=iterations,
-        terms=[i.term.label for i in todo],
+        digits=supported_digits(int(len(used))), terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
                     for i in todo})
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()

@@ -5,9 +5,11 @@ layout stay as the author wrote them."""
 from __future__ import annotations
 
 import io
+import math
 import os
 import re
-from collections.abc import Mapping, MutableMapping
+from collections.abc import Collection, Mapping, MutableMapping
+from decimal import Decimal
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +23,8 @@ from bayesprog.forms import ParamValue
 from bayesprog.model import FitRecord
 from bayesprog.variables import Discrete, Variable
 
-#: significant digits of learned parameters in the file (probabilities then sum to one
-#: within 1e-7, as the file checker asks)
+#: the most significant digits a value is written with (a tuned number; learned parameters
+#: are written with the digits their data supports, see :func:`supported_digits`)
 DIGITS = 8
 #: a learned mapping is written on one line ({a: 1, b: 2}) when it is this short, else one entry
 #: per line
@@ -51,8 +53,33 @@ def _flow(value: Any) -> Any:
 
 
 def _leaf(array: np.ndarray) -> Any:
-    """A parameter's array as numbers of DIGITS significant digits, in flow sequences."""
-    return _flow(np.vectorize(_number, otypes=[float])(array).tolist())
+    """A parameter's array (already rounded) in flow sequences."""
+    return _flow(np.asarray(array, float).tolist())
+
+
+def supported_digits(rows: int) -> int:
+    """The significant digits learned values are written with, from ``rows`` rows of data:
+    enough that rounding moves a value by under a twentieth of ``1/sqrt(rows)``, the relative
+    standard error of an average of that many rows (3 at least, DIGITS at most)."""
+    return int(min(DIGITS, max(3, math.ceil(0.5 * math.log10(max(rows, 1))) + 2)))
+
+
+def rounded(array: np.ndarray, digits: int, simplex: bool = False) -> np.ndarray:
+    """``array`` to ``digits`` significant digits. Each distribution of a ``simplex`` array
+    (its last axis) still sums to one: its largest entry is one minus the others, computed in
+    decimal, so that the written numbers add up exactly."""
+    array = np.asarray(array, float)
+    out = np.vectorize(lambda x: float(f"{x:.{digits}g}"), otypes=[float])(array) \
+        if array.size else array.copy()
+    if simplex and out.ndim and out.size:
+        rows, source = out.reshape(-1, out.shape[-1]), array.reshape(-1, array.shape[-1])
+        for r in range(rows.shape[0]):
+            k = int(np.argmax(source[r]))
+            others = sum((Decimal(repr(float(v))) for j, v in enumerate(rows[r]) if j != k),
+                         Decimal(0))
+            rows[r, k] = float(Decimal(1) - others)
+        out = rows.reshape(array.shape)
+    return out
 
 
 def _is_flow(node: Any) -> bool:
@@ -70,7 +97,7 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
         if not axes:
             if (isinstance(child, Discrete) and array.ndim == 1 and isinstance(old, Mapping)
                     and {str(k) for k in old} == set(child.states)):
-                row = CommentedMap((_key(child, s), _number(float(v)))
+                row = CommentedMap((_key(child, s), float(v))
                                    for s, v in zip(child.states, array, strict=True))
                 row.fa.set_flow_style()
                 return row
@@ -137,9 +164,14 @@ def _record(record: FitRecord) -> CommentedMap:
 
 
 def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
-                  variables: Mapping[str, Variable], record: FitRecord) -> str:
+                  variables: Mapping[str, Variable], record: FitRecord,
+                  simplex: Mapping[str, Collection[str]] | None = None) -> str:
     """``text`` (a program file) with the learned ``params`` (by term label) written in place of
-    the old values and ``record`` appended to its ``learned:`` list."""
+    the old values, to the record's ``digits`` (``simplex``: the parameters of each term whose
+    last axis is a distribution, kept summing to one), and ``record`` appended to its
+    ``learned:`` list."""
+    digits = record.digits or DIGITS
+    simplex = simplex or {}
     yaml = _yaml()
     doc = yaml.load(text)
     done = set()
@@ -149,6 +181,8 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
             continue
         child = variables.get(parse_expression(label).left[0])
         for name, value in params[label].items():
+            value = ParamValue(value.axes, rounded(value.array, digits,
+                                                   name in simplex.get(label, ())))
             item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child))
         done.add(label)
     missing = set(params) - done

@@ -104,7 +104,7 @@ def answer(plan: QuestionPlan, probabilities: np.ndarray, log_evidence: np.ndarr
     return Posterior(
         question=str(plan.question.expression),
         variables=plan.searched,
-        states=dict(states),
+        names=dict(states),
         values=dict(values),
         probabilities=probabilities.reshape(shape + cards),
         log_evidence=np.asarray(log_evidence).reshape(shape),
