@@ -182,11 +182,9 @@ class Program:
         ...   - {term: P(A), form: table, table: [0.3, 0.7]}
         ...   - {term: P(B | A), form: table, table: {a0: [0.9, 0.1], a1: [0.2, 0.8]}}
         ... ''')
-        >>> p.table("P(B | A)")
-        B    b0   b1
-        A
-        a0  0.9  0.1
-        a1  0.2  0.8
+        >>> t = p.table("P(B | A)")
+        >>> t.loc["a1"].tolist(), t.columns.tolist(), t.index.name
+        ([0.2, 0.8], ['b0', 'b1'], 'A')
         """
         import pandas as pd
 

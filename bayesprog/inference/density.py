@@ -83,18 +83,22 @@ class Density:
         axes = tuple(1 + j for j in range(len(self.variables)) if j != i)
         return self.edges[variable], self.masses.sum(axis=axes) if axes else self.masses
 
-    def _shape(self, values: np.ndarray) -> np.ndarray:
-        return values.reshape(self.batch_shape + values.shape[1:])
+    def _shape(self, values: np.ndarray) -> Any:
+        """``[rows] + rest`` as ``batch + rest``; a number (a numpy float) when that is empty."""
+        out = values.reshape(self.batch_shape + values.shape[1:])
+        return out[()] if out.ndim == 0 else out
 
     # summaries ---------------------------------------------------------------------------------
-    def mean(self, variable: str) -> np.ndarray:
+    def mean(self, variable: str) -> Any:
+        """The mean per batch row (a number when the question is not batched)."""
         if self.weights is not None:
             w, m, _ = self._gaussian(variable)
             return self._shape((w * m).sum(-1))
         edges, p = self._bins(variable)
         return self._shape(p @ ((edges[:-1] + edges[1:]) / 2))
 
-    def sd(self, variable: str) -> np.ndarray:
+    def sd(self, variable: str) -> Any:
+        """The standard deviation per batch row (a number when not batched)."""
         if self.weights is not None:
             w, m, s = self._gaussian(variable)
             mean = (w * m).sum(-1, keepdims=True)
@@ -106,12 +110,13 @@ class Density:
         second = p @ (mid**2 + width**2 / 12)
         return self._shape(np.sqrt(np.maximum(second - mean**2, 0.0)))
 
-    def cdf(self, variable: str, x: Any) -> np.ndarray:
-        """``P(variable <= x)`` per row; ``x`` broadcasts against the batch."""
+    def cdf(self, variable: str, x: Any) -> Any:
+        """``P(variable <= x)``, shaped ``batch + shape of x`` (a number for a number when the
+        question is not batched), as ``pdf`` and ``quantile``."""
         x = np.asarray(x, float)
-        flat = np.broadcast_to(x, self.batch_shape).reshape(-1, 1) if self.batch_shape \
-            else x.reshape(-1, 1)[:1]
-        return self._shape(self._cdf(variable, flat)[:, 0])
+        rows = int(np.prod(self.batch_shape))
+        points = np.broadcast_to(x.reshape(1, -1), (rows, x.size))
+        return self._shape(self._cdf(variable, points).reshape((rows,) + x.shape))
 
     def _cdf(self, variable: str, x: np.ndarray) -> np.ndarray:
         """CDF at ``x`` ``[rows, m]``."""
@@ -126,23 +131,30 @@ class Density:
         cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
         return np.stack([np.interp(x[r], edges, cum[r]) for r in range(p.shape[0])])
 
-    def pdf(self, variable: str, x: Any) -> np.ndarray:
-        """The marginal density at ``x`` (``[m]`` points), ``batch + [m]``."""
-        x = np.atleast_1d(np.asarray(x, float))
+    def pdf(self, variable: str, x: Any) -> Any:
+        """The marginal density at ``x``, shaped ``batch + shape of x`` (a number for a number
+        when the question is not batched)."""
+        given = np.asarray(x, float)
+        rows = int(np.prod(self.batch_shape))
+        return self._shape(self._pdf(variable, given.ravel()).reshape((rows,) + given.shape))
+
+    def _pdf(self, variable: str, x: np.ndarray) -> np.ndarray:
+        """The density at the points ``x`` ``[m]``, ``[rows, m]``."""
         if self.weights is not None:
             w, m, s = self._gaussian(variable)
             with np.errstate(divide="ignore", invalid="ignore"):
                 z = (x[None, :, None] - m[:, None, :]) / s[:, None, :]
                 comp = np.exp(-0.5 * z * z) / (s[:, None, :] * _SQRT_2PI)
             comp = np.where(s[:, None, :] > 0, comp, 0.0)
-            return self._shape((w[:, None, :] * comp).sum(-1))
+            return (w[:, None, :] * comp).sum(-1)
         edges, p = self._bins(variable)
         inside = (x >= edges[0]) & (x <= edges[-1])
         k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
-        return self._shape(np.where(inside, p[:, k] / np.diff(edges)[k], 0.0))
+        return np.where(inside, p[:, k] / np.diff(edges)[k], 0.0)
 
-    def quantile(self, variable: str, q: Any) -> np.ndarray:
-        """The ``q``-quantile(s) per row, ``batch + shape of q``."""
+    def quantile(self, variable: str, q: Any) -> Any:
+        """The ``q``-quantile(s), shaped ``batch + shape of q`` (a number for a number when the
+        question is not batched)."""
         q = np.asarray(q, float)
         if np.any((q < 0) | (q > 1)) or np.any(np.isnan(q)):
             raise QuestionError(f"quantiles must be in [0, 1], found {q.tolist()}")
@@ -165,7 +177,7 @@ class Density:
             out = np.stack([np.interp(qs, cum[r], edges) for r in range(p.shape[0])])
         return self._shape(out.reshape((-1,) + q.shape))
 
-    def map(self, variable: str) -> np.ndarray:
+    def map(self, variable: str) -> Any:
         """The mode of the marginal density per row (for several searched Gaussian variables
         with one component, the joint mode is the vector of these)."""
         if self.weights is not None:

@@ -11,9 +11,17 @@ import math
 import typing
 from collections import Counter
 from pathlib import Path
-from typing import Any, Literal, TypeVar, get_args, get_origin
+from typing import Annotated, Any, Literal, TypeVar, get_args, get_origin
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    WithJsonSchema,
+    field_validator,
+    model_validator,
+)
 
 from bayesprog.errors import Diagnostic, SpecError, short_repr
 from bayesprog.language.loader import Located, load_yaml
@@ -106,7 +114,9 @@ def _name_of_number(value: Any) -> Any:
 class VariableSpec(_Strict):
     """Exactly one of ``states``, ``range``, ``grid`` or ``continuous``."""
 
-    states: list[str] | None = Field(None, description="named states of a discrete variable")
+    states: Annotated[list[str], WithJsonSchema(
+        {"type": "array", "items": {"type": ["string", "number"]}})] | None = Field(
+        None, description="named states of a discrete variable (a number is a name, as written)")
     range: list[int] | None = Field(
         None, min_length=2, max_length=2, description="inclusive integer range [low, high]"
     )
