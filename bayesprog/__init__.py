@@ -43,7 +43,8 @@ _WHERE = {
     "load_document": "bayesprog.language.document",
     "Located": "bayesprog.language.loader",
     "load_yaml": "bayesprog.language.loader",
-    "wrong_kind": "bayesprog.language.loader",
+    "wrong_kind": "bayesprog.files",
+    "reference_problem": "bayesprog.files",
     "SizeError": "bayesprog.limits",
     "check_size": "bayesprog.limits",
     "limit": "bayesprog.limits",
@@ -66,12 +67,12 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
         short_repr,
     )
     from bayesprog.expressions import Question, canonical
-    from bayesprog.files import atomic_write
+    from bayesprog.files import atomic_write, reference_problem, wrong_kind
     from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
     from bayesprog.inference import MapResult, Posterior
     from bayesprog.inference.density import Density
     from bayesprog.language.document import load_document
-    from bayesprog.language.loader import Located, load_yaml, wrong_kind
+    from bayesprog.language.loader import Located, load_yaml
     from bayesprog.learning.write import render_values
     from bayesprog.limits import SizeError, check_size, limit
     from bayesprog.model import Term
@@ -113,9 +114,10 @@ __all__ = [
     "show_inference",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own
     # YAML files read with the same diagnostics (load_yaml, load_document, Located,
-    # wrong_kind), the same size limits (check_size, SizeError, limit), files written whole
-    # (atomic_write), a term's canonical spelling and its parameters (canonical, ParamValue),
-    # learned values written into a program's text (render_values), short reprs in messages
+    # wrong_kind; reference_problem for the files they name), the same size limits
+    # (check_size, SizeError, limit), files written whole (atomic_write), a term's canonical
+    # spelling and its parameters (canonical, ParamValue), learned values written into a
+    # program's text (render_values), short reprs in messages
     "Located",
     "ParamValue",
     "SizeError",
@@ -125,6 +127,7 @@ __all__ = [
     "limit",
     "load_document",
     "load_yaml",
+    "reference_problem",
     "render_values",
     "short_repr",
     "wrong_kind",

@@ -60,7 +60,7 @@ def _ablated(program: Program, terms: Sequence[str]) -> Program:
 
 def _kind_hint(file: str) -> str | None:
     """Why a file is not a program, when it is plainly another kind of file."""
-    from bayesprog.language.loader import wrong_kind
+    from bayesprog.files import wrong_kind
 
     return wrong_kind(file, "program", "this command reads programs; `bayesprog run` reads "
                       "experiments and their scenarios")

@@ -1,4 +1,5 @@
-"""Writing files so that a reader (or an interrupted writer) never leaves a partial one."""
+"""Files: written so that a reader (or an interrupted writer) never sees a partial one, and
+the kinds of the project's YAML files, told apart by their first key before they are read."""
 
 from __future__ import annotations
 
@@ -23,3 +24,62 @@ def atomic_write(path: Path, data: bytes) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+#: the top-level key that names each kind of file of the project
+KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenario",
+         "sensor": "sensor model"}
+
+
+def file_kind(path: str | os.PathLike[str]) -> str | None:
+    """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
+    None (unreadable, not YAML, or none of these)."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+        return None
+    if not isinstance(data, dict):
+        return None
+    return next((kind for key, kind in KINDS.items() if key in data), None)
+
+
+def wrong_kind(path: str | os.PathLike[str], expected: str, hint: str = "") -> str | None:
+    """A message when the file at ``path`` is plainly another kind of file than ``expected``."""
+    kind = file_kind(path)
+    if kind is None or kind == expected:
+        return None
+    return (f"{path}: this is {a_or_an(kind)} {kind} file, not {a_or_an(expected)} {expected} file"
+            + (f" ({hint})" if hint else ""))
+
+
+def reference_problem(file: str | os.PathLike[str], expected: str) -> str | None:
+    """Why the file a document names cannot be read as ``expected`` ("program", "scenario",
+    "experiment", "sensor model"), or None: missing, a folder, unreadable, not UTF-8 text, or
+    plainly another kind of file. The caller reports it where the file is named."""
+    path = Path(file)
+    if not path.exists():
+        return f"no such file (looked for {path})" if path.is_absolute() else "no such file"
+    if path.is_dir():
+        return f"{path} is a folder, expected {a_or_an(expected)} {expected} file"
+    try:
+        with open(path, "rb") as f:
+            head = f.read(64 * 1024)
+    except OSError as exc:
+        return f"cannot read {path}: {exc.strerror or exc}"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not a character cut at the end of what was read
+            return f"cannot read {path}: expected UTF-8 text (byte {exc.start} is not)"
+    kind = file_kind(path)
+    if kind is not None and kind != expected:
+        return f"{path} is {a_or_an(kind)} {kind} file, expected {a_or_an(expected)} {expected} file"
+    return None
+
+
+def a_or_an(word: str) -> str:
+    """The article before ``word``."""
+    return "an" if word[0] in "aeiou" else "a"

@@ -17,7 +17,14 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import BayesprogError, SizeError, SpecError, check_size, load_document
+from bayesprog import (
+    BayesprogError,
+    SizeError,
+    SpecError,
+    check_size,
+    load_document,
+    reference_problem,
+)
 from runner.executors import progress_bar, run_dask, run_processes
 from runner.explorer import CONFIGURATIONS, Explorer, state_entries
 from runner.loop import (  # noqa: F401  (re-exported: the runs' seeds and start cells)
@@ -92,6 +99,10 @@ class Experiment:
 def load_experiment(path: str | Path) -> Experiment:
     path = Path(path)
     located, spec = load_document(path, ExperimentSpec)
+    problem = reference_problem(path.parent / spec.scenario, "scenario")
+    if problem:
+        raise SpecError([located.diagnostic(("scenario",), f"scenario {spec.scenario!r}: "
+                                            f"{problem}")])
     scenario = load_scenario((path.parent / spec.scenario).resolve())
     diags = []
     for i, task in enumerate(spec.tasks):

@@ -24,7 +24,7 @@ from pydantic import (
 )
 
 import bayesprog
-from bayesprog import SpecError, limit, load_document
+from bayesprog import SpecError, limit, load_document, reference_problem
 from runner.sensor import SensorModel, load_sensor_model
 from runner.solids import (
     SOLID_KEYS,
@@ -324,12 +324,11 @@ def load_scenario(path: str | Path) -> Scenario:
     """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
     path = Path(path)
     located, spec = load_document(path, ScenarioSpec)
-    missing = [located.diagnostic(("programs", which), f"no program file {name!r} (looked for "
-                                  f"{(path.parent / name).resolve()})")
-               for which, name in spec.programs.model_dump().items()
-               if not (path.parent / name).is_file()]
-    if missing:
-        raise SpecError(missing)
+    unread = [located.diagnostic(("programs", which), f"{which} program {name!r}: {problem}")
+              for which, name in spec.programs.model_dump().items()
+              if (problem := reference_problem((path.parent / name).resolve(), "program"))]
+    if unread:
+        raise SpecError(unread)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     target = _load_target((path.parent / spec.programs.target).resolve(), spec)
@@ -376,10 +375,10 @@ def load_scenario(path: str | Path) -> Scenario:
     sensor_model = None
     if spec.sensor.model is not None:
         model_path = (path.parent / spec.sensor.model).resolve()
-        if not model_path.is_file():
-            diags.append(located.diagnostic(("sensor", "model"), f"no sensor model file "
-                                            f"{spec.sensor.model} (looked for {model_path.name} "
-                                            "beside the scenario)"))
+        problem = reference_problem(model_path, "sensor model")
+        if problem:
+            diags.append(located.diagnostic(("sensor", "model"), f"sensor model "
+                                            f"{spec.sensor.model!r}: {problem}"))
         else:
             sensor_model = load_sensor_model(model_path, materials)
     if diags:

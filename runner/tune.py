@@ -31,7 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import BayesprogError, SizeError, SpecError, canonical, check_size, load_document
+from bayesprog import (
+    BayesprogError,
+    SizeError,
+    SpecError,
+    canonical,
+    check_size,
+    load_document,
+    reference_problem,
+)
 from runner.executors import progress_bar
 from runner.experiment import ExperimentSpec, TuneSpec, simulate, start_cells
 from runner.explorer import Explorer
@@ -124,9 +132,10 @@ def load_search(path: str | Path) -> Search:
     for which in ("training", "validation"):
         for i, name in enumerate(getattr(spec.tune, which)):
             file = (path.parent / name).resolve()
-            if not file.is_file():
-                diags.append(located.diagnostic(("tune", which, i), f"no scenario file "
-                                                f"{name!r} (looked for {file})"))
+            problem = reference_problem(file, "scenario")
+            if problem:
+                diags.append(located.diagnostic(("tune", which, i), f"{which} scenario "
+                                                f"{name!r}: {problem}"))
                 continue
             if file in seen:
                 diags.append(located.diagnostic(("tune", which, i), f"{name} is already a "

@@ -15,6 +15,7 @@ import numpy as np
 
 from bayesprog.errors import ProgramCycleError, SpecError
 from bayesprog.expressions import ExpressionError, parse_expression
+from bayesprog.files import reference_problem
 from bayesprog.forms.base import Form, InputRef, ParamValue, TermContext, register_form
 
 
@@ -56,6 +57,10 @@ class ProgramForm(Form):
         file = file if file.is_absolute() else checker.base_dir / file
         if checker.load_program is None:
             checker.error(path + ("program",), f"{what}: sub-programs cannot be loaded here")
+            return len(checker.problems) - before
+        problem = reference_problem(file, "program")
+        if problem:
+            checker.error(path + ("program",), f"{what} {raw['program']!r}: {problem}")
             return len(checker.problems) - before
         try:
             sub = checker.load_program(file, tuple(v.name for v in (term.child,

@@ -7,6 +7,7 @@ user sees all of them at once.
 from __future__ import annotations
 
 import graphlib
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,8 +32,13 @@ from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.document import Document, InputSpec, LearnSpec
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
+from bayesprog.limits import limit
 from bayesprog.model import InputDecl, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable, binned_variable, grid_variable
+
+#: The most discrete variables a term may have: its table has one axis per variable and one
+#: for a batch of evidence, and numpy's einsum takes arrays of at most 32 axes.
+MAX_TERM_VARIABLES = 31
 
 
 @dataclass
@@ -295,6 +301,8 @@ class _Checker:
             self.error(tpath, f"term {expr}: {child.name!r} is a field indexed by "
                        f"{child.index!r}, so its term must condition on {child.index!r}")
             ok = False
+        if ok:
+            ok = self.check_term_size(tpath, expr, child, parents)
         if not ok:
             return None
         term = Term(expr, child, parents, form, {}, (self.located.file, *self.located.where(tpath)))
@@ -315,6 +323,32 @@ class _Checker:
                                f"mean: \"2*{parent.name} + 1\"){hint}")
                     problems += 1
         return None if problems else term
+
+    def check_term_size(self, tpath: YPath, expr: Expression, child: Variable,
+                        parents: tuple[Variable, ...]) -> bool:
+        """A term's table (one axis per discrete variable) fits: no more axes than numpy's
+        arrays take beside a batch axis, no more entries than the limit. Counted before
+        anything is allocated."""
+        axes = [v for v in (child, *parents) if isinstance(v, Discrete)]
+        if len(axes) > MAX_TERM_VARIABLES:
+            self.error(tpath, f"term {expr}: its table would have one axis per discrete "
+                       f"variable, {len(axes)}; expected at most {MAX_TERM_VARIABLES} (numpy's "
+                       "arrays take 32 axes, one of them for a batch): split the term, or "
+                       "group parents into one variable")
+            return False
+        entries = math.prod(v.card for v in axes)
+        cap = limit("entries")
+        if entries > cap:
+            shown = f"{entries:,}" if entries < 10**18 else f"{float(entries):.3g}"
+            sizes = (" x ".join(str(v.card) for v in axes) if len(axes) <= 6 else
+                     f"{len(axes)} variables of {min(v.card for v in axes)} to "
+                     f"{max(v.card for v in axes)} states")
+            self.error(tpath, f"term {expr}: its table needs {shown} entries ({sizes}), "
+                       f"more than the limit of "
+                       f"{cap:,} (raise it with the environment variable "
+                       "BAYESPROG_MAX_ENTRIES)")
+            return False
+        return True
 
     def resolve_params(self, term: Term, raw: dict[str, Any], path: YPath) -> int:
         form = term.form
@@ -670,6 +704,14 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
                 return f"expected a number for {name}, found {text!r}"
             if not var.low <= value <= var.high:
                 return (f"{name}={value} is outside its support [{var.low}, {var.high}]")
+    searched = [v for name in expr.left if isinstance(v := variables[name], Discrete)]
+    # a joint answer past the size limit is refused by the engine, with its estimate; one of
+    # many variables of one state each would pass it and still not fit numpy's arrays
+    if (len(searched) > MAX_TERM_VARIABLES and len(searched) == len(expr.left)
+            and math.prod(v.card for v in searched) <= limit("entries")):
+        return (f"{expr} searches {len(searched)} variables jointly; expected at most "
+                f"{MAX_TERM_VARIABLES} (its answer has one axis per variable, and numpy's "
+                "arrays take 32 axes, one of them for a batch)")
     return None
 
 

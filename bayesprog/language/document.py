@@ -24,6 +24,7 @@ from pydantic import (
 )
 
 from bayesprog.errors import Diagnostic, SpecError, short_repr
+from bayesprog.files import KINDS
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.limits import limit
 from bayesprog.model import FitRecord
@@ -361,8 +362,10 @@ def _inside(annotation: Any, part: Any) -> list[Any]:
 
 
 def load_document(path: Path, model: type[M]) -> tuple[Located, M]:
-    """Read a YAML file strictly into ``model``; raises :class:`SpecError` with every problem."""
-    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    """Read a YAML file strictly into ``model``; raises :class:`SpecError` with every problem
+    (``OSError`` when the file cannot be read: check it first with ``reference_problem``)."""
+    kind = next((KINDS[k] for k in model.model_fields if k in KINDS), "document")
+    located, problems = load_yaml(path.read_text(encoding="utf-8"), str(path), kind)
     if problems:
         raise SpecError(problems)
     spec, problems = validate_located(located, model)

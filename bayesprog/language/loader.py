@@ -9,7 +9,6 @@ that later checks can point at it.
 from __future__ import annotations
 
 import math
-import os
 import re
 from dataclasses import dataclass, field
 from typing import Any
@@ -17,6 +16,7 @@ from typing import Any
 import yaml
 
 from bayesprog.errors import Diagnostic
+from bayesprog.files import a_or_an
 
 Path = tuple[str | int | float, ...]
 
@@ -116,8 +116,9 @@ def yaml_problem(exc: yaml.MarkedYAMLError, text: str) -> str:
     return f"malformed YAML: {problem}{where}"
 
 
-def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
-    """Parse ``text`` strictly. Returns the located data and the problems found (maybe several)."""
+def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, list[Diagnostic]]:
+    """Parse ``text`` strictly (``kind``: what the file should hold, for the messages). Returns
+    the located data and the problems found (maybe several)."""
     problems: list[Diagnostic] = []
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
@@ -133,7 +134,8 @@ def load_yaml(text: str, file: str) -> tuple[Located, list[Diagnostic]]:
         return Located(None, file), [Diagnostic(file, 1, 1, f"malformed YAML: {exc}")]
     located = Located(None, file)
     if node is None:
-        return located, [Diagnostic(file, 1, 1, "empty file: expected a program (a mapping)")]
+        return located, [Diagnostic(file, 1, 1, f"empty file: expected {a_or_an(kind)} {kind} "
+                                    "(a mapping)")]
 
     built = [0]
     active: set[int] = set()
@@ -220,34 +222,3 @@ class _Refused(Exception):
     def __init__(self, node: yaml.Node, message: str):
         super().__init__(message)
         self.node = node
-
-
-#: the top-level key that names each kind of file of the project
-KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenario",
-         "sensor": "sensor model"}
-
-
-def file_kind(path: str | os.PathLike[str]) -> str | None:
-    """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
-    None (unreadable, not YAML, or none of these)."""
-    import yaml
-
-    try:
-        with open(path, encoding="utf-8") as f:
-            data = yaml.safe_load(f)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
-        return None
-    if not isinstance(data, dict):
-        return None
-    return next((kind for key, kind in KINDS.items() if key in data), None)
-
-
-def wrong_kind(path: str | os.PathLike[str], expected: str, hint: str = "") -> str | None:
-    """A message when the file at ``path`` is plainly another kind of file than ``expected``."""
-    kind = file_kind(path)
-    if kind is None or kind == expected:
-        return None
-    article = "an" if kind[0] in "aeiou" else "a"
-    wanted = "an" if expected[0] in "aeiou" else "a"
-    return (f"{path}: this is {article} {kind} file, not {wanted} {expected} file"
-            + (f" ({hint})" if hint else ""))
