@@ -4,6 +4,7 @@ the kinds of the project's YAML files, told apart by their first key before they
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -33,17 +34,21 @@ KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenar
 
 def file_kind(path: str | os.PathLike[str]) -> str | None:
     """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
-    None (unreadable, not YAML, or none of these)."""
-    import yaml
-
+    None (unreadable, not text, or none of these). Only the file's head is read, and not
+    parsed: a hint must cost nothing, whatever the file's size."""
     try:
         with open(path, encoding="utf-8") as f:
-            data = yaml.safe_load(f)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+            head = f.read(_HEAD)
+    except (OSError, UnicodeDecodeError):
         return None
-    if not isinstance(data, dict):
-        return None
-    return next((kind for key, kind in KINDS.items() if key in data), None)
+    block = re.findall(r"^([A-Za-z_][A-Za-z0-9_]*)[ \t]*:", head, re.M)
+    if not block and head.lstrip().startswith("{"):  # a flow mapping: {bayesprog: 1, ...}
+        block = re.findall(r"[{,]\s*([A-Za-z_][A-Za-z0-9_]*)\s*:", head)
+    return next((KINDS[key] for key in block if key in KINDS), None)
+
+
+#: how much of a file :func:`file_kind` reads
+_HEAD = 64 * 1024
 
 
 def wrong_kind(path: str | os.PathLike[str], expected: str, hint: str = "") -> str | None:

@@ -19,6 +19,7 @@ import pytest
 
 import bayesprog
 from bayesprog.cli import main
+from bayesprog.language.loader import MAX_VALUES
 
 ROOT = Path(__file__).parents[1]
 SPRINKLER = ROOT / "models" / "examples" / "sprinkler.yaml"
@@ -762,7 +763,7 @@ def test_yaml_syntax_errors_say_what_was_expected_and_found(tmp_path, capsys, te
     ("a: &x [*x]\n", "an alias that contains itself"),
     ("a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]\n" + "".join(
         f"{chr(98 + i)}: &{chr(98 + i)} [" + ", ".join([f"*{chr(97 + i)}"] * 9) + "]\n"
-        for i in range(8)), "more than 1,000,000 values"),
+        for i in range(8)), f"more than {MAX_VALUES:,} values"),
     ("a: " + "[" * 5000 + "]" * 5000 + "\n", "malformed YAML"),
 ])
 def test_yaml_that_would_never_end_is_refused(tmp_path, capsys, text, message):
