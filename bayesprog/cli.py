@@ -113,12 +113,19 @@ def _pairs(items: Sequence[str], option: str) -> dict[str, str]:
             raise _UserError(f"{option} {item!r}: expected NAME=VALUE")
         name = name.strip()
         if name in out:
-            raise _UserError(
-                f"{option} {name} is given twice ({name}={out[name]} and {item.strip()}): "
-                f"expected each name once; for values over steps, one {option} "
-                f"{name}=v1,v2,... with --over-time; for a batch of rows, {name}=FILE.npy")
+            raise _UserError(f"{option} {name} is given twice ({name}={out[name]} and "
+                             f"{item.strip()}): expected each name once{_ONCE.get(option, '')}")
         out[name] = value.strip()
     return out
+
+
+#: how to give several values where one option takes one value per name
+_ONCE = {
+    "--evidence": "; for a batch of rows, VAR=FILE.npy; for one value per step of a program "
+                  "over time, VAR=v1,v2,... with --over-time",
+    "--soft": " (one likelihood per variable: VAR=p1,p2,...)",
+    "--input": " (one array per input: NAME=FILE.npy, with a batch axis for several rows)",
+}
 
 
 def _npy(path: str, option: str) -> np.ndarray:
@@ -158,7 +165,11 @@ def cmd_query(args: argparse.Namespace) -> int:
     if args.over_time and args.map:
         raise _UserError("--map and --over-time: expected one of them (--over-time sequence "
                          "asks the most likely sequence)")
-    if (kind or program.question(args.question).kind) in ("filter", "smooth", "sequence"):
+    named = program.question(args.question).kind
+    if args.map and named in ("filter", "smooth", "sequence"):
+        raise _UserError(f"--map: {args.question!r} is a {named} question over steps; leave "
+                         "out --map (--over-time sequence asks the most likely sequence)")
+    if (kind or named) in ("filter", "smooth", "sequence"):
         # evidence over steps: one value per step, separated by commas
         evidence = {k: v.split(",") if isinstance(v, str) else v for k, v in evidence.items()}
     else:
@@ -288,8 +299,9 @@ def cmd_learn(args: argparse.Namespace) -> int:
     iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
     print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "
           f"rows of {record.data} ({record.method}{iterations}); log-likelihood "
-          f"{record.log_likelihood:.6g}; values written to {record.digits} significant digits, "
-          f"as {record.rows_used} rows support")
+          f"{record.log_likelihood:.6g}; values written to the precision "
+          f"{record.rows_supporting} rows support ({record.digits} significant digits, means to "
+          "a twentieth of their standard error)")
     if not fit.converged:
         print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
               "(raise --max-iter)", file=sys.stderr)

@@ -60,13 +60,16 @@ def wrong_kind(path: str | os.PathLike[str], expected: str, hint: str = "") -> s
             + (f" ({hint})" if hint else ""))
 
 
-def reference_problem(file: str | os.PathLike[str], expected: str) -> str | None:
+def reference_problem(file: str | os.PathLike[str], expected: str,
+                      written: str | None = None) -> str | None:
     """Why the file a document names cannot be read as ``expected`` ("program", "scenario",
     "experiment", "sensor model"), or None: missing, a folder, unreadable, not UTF-8 text, or
-    plainly another kind of file. The caller reports it where the file is named."""
+    plainly another kind of file. The caller reports it where the file is named; ``written``
+    is the name as the document gives it (a relative one is said where it was looked for)."""
     path = Path(file)
     if not path.exists():
-        return f"no such file (looked for {path})" if path.is_absolute() else "no such file"
+        relative = written is not None and not Path(written).is_absolute()
+        return f"no such file (looked for {path.resolve()})" if relative else "no such file"
     if path.is_dir():
         return f"{path} is a folder, expected {a_or_an(expected)} {expected} file"
     try:

@@ -76,7 +76,12 @@ class FitRecord(BaseModel):
     iterations: int = 1
     digits: int | None = Field(
         None, description="significant digits the learned values are written with: as many as "
-        "the rows used support (rounding moves a value by under a twentieth of 1/sqrt(rows_used))")
+        "the rows behind them support (rounding moves a value by under a twentieth of "
+        "1/sqrt(rows_supporting)); a learned mean is written to a twentieth of its standard "
+        "error instead")
+    rows_supporting: int | None = Field(
+        None, description="the rows behind the learned values: these and those of the earlier "
+        "fits this one continued from")
     terms: list[str] = Field(default_factory=list, description="the terms learned")
     statistics: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="per learned term, its sufficient statistics")

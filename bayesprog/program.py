@@ -205,11 +205,13 @@ class Program:
         axes, array, log_top = made  # a table written as probabilities: as written
         order = [axes.index(p.name) for p in parents] + [axes.index(child.name)]
         probabilities = np.transpose(array * np.exp(log_top) if log_top else array, order)
-        columns = pd.Index(list(child.states), name=child.name)
+        # the states as values of their type, as answers give them: integers for a range
+        columns = pd.Index(list(child.typed_states), name=child.name, tupleize_cols=False)
         if not parents:
             return pd.DataFrame(probabilities[None, :], index=[str(found.expression)],
                                 columns=columns)
-        levels = [list(p.states) for p in parents if isinstance(p, Discrete)]
+        levels = [pd.Index(list(p.typed_states), tupleize_cols=False) for p in parents
+                  if isinstance(p, Discrete)]
         index: pd.Index = pd.MultiIndex.from_product(levels, names=[p.name for p in parents])
         if len(parents) == 1:
             index = index.get_level_values(0)
@@ -476,8 +478,10 @@ class Fit:
                                 "file to write the fitted values into (source=...)")
         simplex = {t.label: [p.name for p in t.form.params if p.constraint is simplex_constraint]
                    for t in self.program.terms}
+        locations = {t.label: t.form.location_scale for t in self.program.terms
+                     if t.form.location_scale is not None}
         text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
-                             self.program.variables, self.record, simplex)
+                             self.program.variables, self.record, simplex, locations)
         loads(text, str(path), path.parent)  # the fitted file must load as a program
         return text
 
@@ -492,7 +496,22 @@ def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
     if not isinstance(located.data, dict):
         return None, [located.diagnostic((), "expected a program: a mapping with bayesprog, "
                                          f"variables, decomposition; found {type(located.data).__name__}")]
+    _names_as_written(located)
     return validate_located(located, Document)
+
+
+def _names_as_written(located: Located) -> None:
+    """A number written as a state is the state's name as written (``1.50``, not ``1.5``)."""
+    variables = located.data.get("variables")
+    if not isinstance(variables, dict):
+        return
+    for name, spec in variables.items():
+        states = spec.get("states") if isinstance(spec, dict) else None
+        if isinstance(states, list):
+            for i, state in enumerate(states):
+                text = located.texts.get(("variables", name, "states", i))
+                if text is not None and not isinstance(state, str):
+                    states[i] = text
 
 
 def loads(text: str, file: str = "<string>", base_dir: Path | None = None,

@@ -49,31 +49,42 @@ def _param(program: Program, value: ParamValue | InputRef | FormulaParam) -> str
         return str(value)
     arr = np.asarray(value.array)
     if not value.axes:
+        if arr.ndim == 1 and arr.size > 8:
+            return "below"
         return _fmt(float(arr)) if arr.ndim == 0 else _array(arr)
-    if len(value.axes) == 1 and arr.ndim <= 2 and arr.shape[0] <= 12:
+    if len(value.axes) == 1 and arr.ndim <= 2 and arr.shape[0] <= 12 and arr[0].size <= 8:
         states = program.variables[value.axes[0]].states  # type: ignore[union-attr]
         body = ", ".join(f"{s}: {_array(v) if np.ndim(v) else _fmt(float(v))}"
                          for s, v in zip(states, arr, strict=False))
         return "{" + body + "}"
-    return f"by {', '.join(value.axes)}, below"
+    return "below"  # a table of the parents' states (in the term's order) by values
 
 
 #: The most rows and value columns a table printed under its term shows (a screen's worth).
-TABLE_ROWS, TABLE_COLUMNS = 24, 10
+TABLE_ROWS, TABLE_COLUMNS = 24, 12
 
 
 def _grids(program: Program, term: Term) -> list[str]:
-    """The parameters shown as ``by ..., below``: a table of the states of the variables the
+    """The parameters shown as ``below``: a table of the states of the variables the
     parameter varies over (rows) by its values (columns: the states of the term's variable for
     a table), elided beyond a screen and saying so."""
     out = []
     for name, value in term.params.items():
-        if not isinstance(value, ParamValue) or not value.axes or value.batched:
+        if not isinstance(value, ParamValue) or value.batched:
             continue
-        if _param(program, value) != f"by {', '.join(value.axes)}, below":
+        if not value.axes:
+            if _param(program, value) == "below":
+                out += _listing(term, name, np.asarray(value.array, dtype=float))
             continue
-        arr = np.asarray(value.array, dtype=float)
-        lead = len(value.axes)
+        if _param(program, value) != "below":
+            continue
+        # rows in the order of the term's parents, as program.table gives them
+        axes = tuple(p.name for p in term.parents if p.name in value.axes)
+        if set(axes) != set(value.axes):
+            axes = value.axes
+        lead = len(axes)
+        arr = np.asarray(value.array, dtype=float).transpose(
+            [value.axes.index(a) for a in axes] + list(range(lead, np.ndim(value.array))))
         rows = arr.reshape(int(np.prod(arr.shape[:lead])), -1)
         child = term.child
         if arr.ndim == lead:
@@ -84,12 +95,12 @@ def _grids(program: Program, term: Term) -> list[str]:
             headers = list(child.states)
         else:
             headers = [str(i) for i in np.ndindex(*arr.shape[lead:])]
-        states = [program.variables[a].states for a in value.axes]  # type: ignore[union-attr]
+        states = [program.variables[a].states for a in axes]  # type: ignore[union-attr]
         labels = [[str(s) for s in combo] for combo in itertools.product(*states)]
         shown_rows = rows.shape[0] if rows.shape[0] <= TABLE_ROWS else TABLE_ROWS - 4
         shown_cols = len(headers) if len(headers) <= TABLE_COLUMNS else TABLE_COLUMNS - 2
         cells = [[_fmt(float(x)) for x in row[:shown_cols]] for row in rows[:shown_rows]]
-        head = list(value.axes) + headers[:shown_cols]
+        head = list(axes) + headers[:shown_cols]
         body = [label + row for label, row in zip(labels, cells, strict=False)]
         widths = [max(len(r[i]) for r in [head, *body]) for i in range(len(head))]
         more = "  ..." if shown_cols < len(headers) else ""
@@ -111,6 +122,25 @@ def _grids(program: Program, term: Term) -> list[str]:
             out.append(f"          ... {what} (all of them in Python: "
                        f"program.table(\"{term.expression}\"))")
     return out
+
+
+def _listing(term: Term, name: str, values: np.ndarray) -> list[str]:
+    """A long vector without parents, one value per line (the states of the term's variable
+    beside a table's probabilities), elided beyond a screen and saying so."""
+    child = term.child
+    labels = (list(child.states) if isinstance(child, Discrete) and values.size == child.card
+              else [str(i) for i in range(values.size)])
+    shown = values.size if values.size <= TABLE_ROWS else TABLE_ROWS - 4
+    width = max(len(x) for x in labels[:shown] + [child.name])
+    keyed = any(p.name == name and p.keyed_by_child_states for p in term.form.params)
+    out = [f"        {name} of {term.expression}" if len(term.params) > 1 else "",
+           f"          {child.name:<{width}}  | {'probability' if keyed else name}"]
+    out += [f"          {label:<{width}}  | {_fmt(float(v))}"
+            for label, v in zip(labels[:shown], values[:shown], strict=True)]
+    if shown < values.size:
+        out.append(f"          ... {values.size - shown:,} more rows (all of them in Python: "
+                   f"program.table(\"{term.expression}\"))")
+    return [line for line in out if line]
 
 
 def _array(arr: np.ndarray) -> str:

@@ -99,7 +99,7 @@ class Experiment:
 def load_experiment(path: str | Path) -> Experiment:
     path = Path(path)
     located, spec = load_document(path, ExperimentSpec)
-    problem = reference_problem(path.parent / spec.scenario, "scenario")
+    problem = reference_problem(path.parent / spec.scenario, "scenario", spec.scenario)
     if problem:
         raise SpecError([located.diagnostic(("scenario",), f"scenario {spec.scenario!r}: "
                                             f"{problem}")])

@@ -326,7 +326,7 @@ def load_scenario(path: str | Path) -> Scenario:
     located, spec = load_document(path, ScenarioSpec)
     unread = [located.diagnostic(("programs", which), f"{which} program {name!r}: {problem}")
               for which, name in spec.programs.model_dump().items()
-              if (problem := reference_problem((path.parent / name).resolve(), "program"))]
+              if (problem := reference_problem((path.parent / name).resolve(), "program", name))]
     if unread:
         raise SpecError(unread)
     perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
@@ -375,7 +375,7 @@ def load_scenario(path: str | Path) -> Scenario:
     sensor_model = None
     if spec.sensor.model is not None:
         model_path = (path.parent / spec.sensor.model).resolve()
-        problem = reference_problem(model_path, "sensor model")
+        problem = reference_problem(model_path, "sensor model", spec.sensor.model)
         if problem:
             diags.append(located.diagnostic(("sensor", "model"), f"sensor model "
                                             f"{spec.sensor.model!r}: {problem}"))

@@ -132,7 +132,7 @@ def load_search(path: str | Path) -> Search:
     for which in ("training", "validation"):
         for i, name in enumerate(getattr(spec.tune, which)):
             file = (path.parent / name).resolve()
-            problem = reference_problem(file, "scenario")
+            problem = reference_problem(file, "scenario", name)
             if problem:
                 diags.append(located.diagnostic(("tune", which, i), f"{which} scenario "
                                                 f"{name!r}: {problem}"))

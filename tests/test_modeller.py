@@ -413,17 +413,42 @@ def test_show_prints_a_table_of_parent_states_by_child_states(capsys, tmp_path):
 
 
 def test_show_elides_what_does_not_fit_and_says_so(capsys, tmp_path):
-    table = np.full((30, 40, 12), 1 / 12).tolist()
+    table = np.full((30, 40, 15), 1 / 15).tolist()
     path = tmp_path / "wide.yaml"
     path.write_text("bayesprog: 1\nvariables:\n  A: {range: [0, 29]}\n  B: {range: [0, 39]}\n"
-                    "  C: {range: [0, 11]}\ndecomposition:\n  - {term: P(A), form: uniform}\n"
-                    "  - {term: P(B), form: uniform}\n"
+                    "  C: {range: [0, 14]}\ndecomposition:\n  - {term: P(A), form: uniform}\n"
+                    "  - {term: P(B), form: table, table: " + json.dumps([1 / 40] * 40) + "}\n"
                     f"  - term: P(C | A, B)\n    form: table\n    table: {json.dumps(table)}\n")
     code, out, _ = run(capsys, "show", path)
     rows = [line for line in out.splitlines() if re.match(r"\s+\d+\s+\d+\s+\|", line)]
     assert code == 0 and 0 < len(rows) <= 24
-    assert f"{1200 - len(rows):,} more rows and 4 more columns" in out
+    header = next(line for line in out.splitlines() if re.match(r"\s+A\s+B\s+\|", line))
+    shown = len(header.split("|")[1].split()) - 1  # the states of C, then "..."
+    assert header.rstrip().endswith("...")
+    assert f"{1200 - len(rows):,} more rows and {15 - shown} more columns" in out
     assert 'program.table("P(C | A, B)")' in out
+    # a long table without parents: one state per line, elided alike
+    listed = [line for line in out.splitlines() if re.match(r"\s+\d+\s+\|\s+0.025$", line)]
+    assert 0 < len(listed) <= 24 and f"{40 - len(listed)} more rows" in out
+    assert 'program.table("P(B)")' in out
+
+
+def test_show_lays_out_a_wide_table_of_one_parent_in_full(capsys, tmp_path):
+    rows = {f"a{i}": list(np.round(np.arange(1, 13) / 78, 6)) for i in range(3)}
+    for row in rows.values():
+        row[-1] = round(1 - sum(row[:-1]), 6)
+    path = tmp_path / "one.yaml"
+    path.write_text("bayesprog: 1\nvariables:\n  A: {states: [a0, a1, a2]}\n  X: {range: [0, 11]}\n"
+                    "decomposition:\n  - {term: P(A), form: uniform}\n"
+                    f"  - {{term: P(X | A), form: table, table: {json.dumps(rows)}}}\n")
+    code, out, _ = run(capsys, "show", path)
+    assert code == 0 and "more columns" not in out
+    lines = out.splitlines()
+    head = next(i for i, line in enumerate(lines) if re.match(r"\s+A\s+\|\s+0\s+1\s", line))
+    for k in range(3):
+        cells = lines[head + 1 + k].split()
+        assert cells[0] == f"a{k}" and [float(x) for x in cells[2:]] == rows[f"a{k}"]
+        assert not lines[head + 1 + k].rstrip().endswith("...")
 
 
 def test_program_table_is_a_dataframe_of_parent_states_by_child_states():
@@ -453,7 +478,7 @@ def test_learn_writes_the_digits_its_rows_support_and_says_so(capsys, tmp_path, 
     data.to_csv(csv, index=False)
     out = tmp_path / "fitted.yaml"
     code, said, _ = run(capsys, "learn", source, csv, "-o", out)
-    assert code == 0 and f"{digits} significant digits, as {rows} rows support" in said
+    assert code == 0 and f"the precision {rows} rows support ({digits} significant digits" in said
     fitted = bayesprog.load(out)
     assert fitted.learned[-1].digits == digits and f"digits: {digits}" in out.read_text()
     counts = pd.crosstab([data["I"], data["D"]], data["G"]).reindex(
@@ -472,3 +497,100 @@ def test_learn_writes_the_digits_its_rows_support_and_says_so(capsys, tmp_path, 
             for number in re.findall(r"\d\.\d+(?:e-?\d+)?", line):
                 mantissa = number.split("e")[0].replace(".", "").lstrip("0")
                 assert len(mantissa) <= digits + 2, number  # the largest entry takes the rest
+
+
+FAR = """\
+bayesprog: 1
+variables:
+  M: {states: [a, b]}
+  T: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(M), form: table, table: [0.5, 0.5]}
+  - {term: P(T | M), form: normal, mean: {a: 999, b: 1001}, sigma: 1}
+"""
+
+
+def test_a_learned_mean_far_from_zero_keeps_the_decimals_its_standard_error_needs(tmp_path):
+    rng = np.random.default_rng(3)
+    states = np.repeat(["a", "b"], 6)
+    values = np.where(states == "a", 1000.121, 1000.164) + rng.normal(0, 0.01, 12)
+    csv = tmp_path / "far.csv"
+    pd.DataFrame({"M": states, "T": values}).to_csv(csv, index=False)
+    (tmp_path / "far.yaml").write_text(FAR)
+    assert main(["learn", str(tmp_path / "far.yaml"), str(csv), "-o", str(tmp_path / "l.yaml")]) == 0
+    written = bayesprog.load(tmp_path / "l.yaml")
+    for state in ("a", "b"):
+        x = values[states == state]
+        mean, sd = x.mean(), x.std()  # maximum likelihood, as scipy.stats.norm.fit
+        assert stats.norm.fit(x) == pytest.approx((mean, sd))
+        got = written.term("P(T | M)").params["mean"].array[("a", "b").index(state)]
+        assert abs(got - mean) <= sd / math.sqrt(12) / 20  # a twentieth of its standard error
+    # the written program answers as the fitted one, to what its sigmas' 3 digits (12 rows)
+    # allow; with the means rounded to 3 significant digits (1000) it gave a: 1, b: 2e-11
+    exact = bayesprog.load(tmp_path / "far.yaml").fit(csv).program
+    for t in (1000.123, 1000.14, 1000.16):
+        np.testing.assert_allclose(written.ask("P(M | T)", {"T": t}).probabilities,
+                                   exact.ask("P(M | T)", {"T": t}).probabilities, atol=5e-3)
+
+
+def test_a_continued_fit_writes_the_digits_of_all_its_rows(capsys, tmp_path):
+    source = tmp_path / "student.yaml"
+    source.write_text(STUDENT)
+    first, second = tmp_path / "first.csv", tmp_path / "second.csv"
+    bayesprog.loads(STUDENT).sample(20_000, rng=1).to_csv(first, index=False)
+    bayesprog.loads(STUDENT).sample(2, rng=2).to_csv(second, index=False)
+    run(capsys, "learn", source, first, "-o", tmp_path / "f1.yaml")
+    code, said, _ = run(capsys, "learn", tmp_path / "f1.yaml", second, "-o", tmp_path / "f2.yaml")
+    record = bayesprog.load(tmp_path / "f2.yaml").learned[-1]
+    assert code == 0 and record.rows_used == 2 and record.rows_supporting == 20_002
+    assert record.digits == 5 and "the precision 20002 rows support" in said
+
+
+def test_tables_and_batched_maps_keep_the_type_of_their_states():
+    program = bayesprog.loads(RANGE)
+    table = program.table("P(Alarm | Count)")
+    assert table.index.tolist() == [2, 3, 4, 5] and table.loc[4].tolist() == [0.3, 0.7]
+    assert program.table("P(Count)").columns.tolist() == [2, 3, 4, 5]
+    assert program.table("P(Cell)").columns.tolist() == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    best = program.ask("P(Count | Alarm)", {"Alarm": ["on", "off"]}, kind="map")
+    assert best.assignment["Count"].dtype.kind == "i"
+    # P(Count | on) ~ (0.01, 0.08, 0.21, 0.36), P(Count | off) ~ (0.09, 0.12, 0.09, 0.04)
+    assert best.assignment["Count"].tolist() == [5, 3]
+
+
+def test_a_cell_given_back_as_answers_give_it_is_that_cell():
+    program = bayesprog.loads(RANGE.replace("  - {term: P(Cell), form: uniform}\n", "")
+                              .replace("decomposition:\n", "decomposition:\n  - {term: P(Cell), "
+                                       "form: table, table: [0.1, 0.2, 0.3, 0.4]}\n"))
+    cells = program.ask("P(Cell)").states["Cell"]
+    by_tuple = program.ask("P(Alarm | Cell)", {"Cell": cells[2]}).probabilities
+    by_name = program.ask("P(Alarm | Cell)", {"Cell": "1_0"}).probabilities
+    np.testing.assert_array_equal(by_tuple, by_name)
+    batch = program.ask("P(Alarm | Cell)", {"Cell": [cells[0], cells[3]]})
+    assert batch.batch_shape == (2,)
+    with pytest.raises(bayesprog.QuestionError, match="unknown cell"):
+        program.ask("P(Alarm | Cell)", {"Cell": (5, 0)})
+
+
+def test_a_float_state_is_named_as_written(capsys, tmp_path):
+    path = tmp_path / "f.yaml"
+    path.write_text("bayesprog: 1\nvariables:\n  F: {states: [0.50, 1.50, 2]}\n"
+                    "  G: {states: [g0, g1]}\ndecomposition:\n"
+                    "  - {term: P(F), form: table, table: {0.50: 0.2, 1.50: 0.3, 2: 0.5}}\n"
+                    "  - {term: P(G | F), form: table, table: {0.50: [0.1, 0.9], 1.50: [0.5, 0.5], "
+                    "2: [0.9, 0.1]}}\n")
+    assert bayesprog.load(path).variables["F"].states == ("0.50", "1.50", "2")
+    code, out, _ = run(capsys, "query", path, "P(G | F)", "--evidence", "F=1.50", "--json")
+    assert code == 0 and json.loads(out)["probabilities"] == [0.5, 0.5]
+
+
+def test_map_on_a_question_over_steps_names_the_conflict(capsys):
+    code, _, err = run(capsys, "query", UMBRELLA, "today", "--map", "--evidence",
+                       "Umbrella=yes,no")
+    assert code == 2 and "'today' is a filter question over steps; leave out --map" in err
+
+
+def test_the_ends_of_a_gaussian_density_are_infinite_and_no_quantiles_are_none():
+    d = bayesprog.loads(GAUSS).ask("P(Pos)")
+    assert d.quantile("Pos", 1.0) == np.inf and d.quantile("Pos", 0.0) == -np.inf
+    assert d.quantile("Pos", []).shape == (0,) and d.pdf("Pos", []).shape == (0,)

@@ -253,6 +253,10 @@ class Form:
     #: conditional linear-Gaussian algebra and the substitution of a deterministic term use it
     mean_param: ClassVar[str | None] = None
     scale_param: ClassVar[str | None] = None
+    #: a location parameter and the spread of the values around it (``("mu", "sigma")``): a
+    #: learned location is written to the precision its standard error allows, not to a number
+    #: of significant digits (a mean of 1000.12 with a spread of 0.01 needs its decimals)
+    location_scale: ClassVar[tuple[str, str] | None] = None
     #: a likelihood over a discrete variable's states may be given in this form (soft evidence)
     soft_evidence: ClassVar[bool] = False
     #: the term is another program's answer (loaded with the program, shown by its question)

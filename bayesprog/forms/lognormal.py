@@ -65,6 +65,8 @@ class LogNormal(Form):
     """``LogNormal(x; mu[parents], sigma[parents])``: ``log x`` is Normal with mean ``mu`` and
     standard deviation ``sigma`` (``exp(mu)`` is the median); density 0 at x <= 0."""
 
+    location_scale = ("mu", "sigma")
+
     name = "lognormal"
     title = "LogNormal"
     child_kinds = ("continuous",)

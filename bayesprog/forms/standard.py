@@ -123,6 +123,7 @@ class Normal(Form):
         Param("sigma", positive, doc="standard deviation, > 0"),
     )
     mean_param, scale_param = "mean", "sigma"
+    location_scale = ("mean", "sigma")
 
     def estimator(self, child: Variable) -> Estimator | None:
         return NormalEstimator()

@@ -58,7 +58,7 @@ class ProgramForm(Form):
         if checker.load_program is None:
             checker.error(path + ("program",), f"{what}: sub-programs cannot be loaded here")
             return len(checker.problems) - before
-        problem = reference_problem(file, "program")
+        problem = reference_problem(file, "program", raw["program"])
         if problem:
             checker.error(path + ("program",), f"{what} {raw['program']!r}: {problem}")
             return len(checker.problems) - before

@@ -153,9 +153,13 @@ class MapResult:
         (arrays when batched)."""
         out = {}
         for i, var in enumerate(self.variables):
-            values = np.empty(len(self.names[var]), dtype=object)
-            for j, value in enumerate(self.posterior.typed(var)):
-                values[j] = value  # one object per state (a grid cell is a tuple)
+            typed = self.posterior.typed(var)
+            if all(isinstance(v, (int, float)) for v in typed):  # a range, bins: numbers
+                values = np.asarray(typed)
+            else:
+                values = np.empty(len(self.names[var]), dtype=object)
+                for j, value in enumerate(typed):
+                    values[j] = value  # one object per state (a grid cell is a tuple)
             chosen = values[self.indices[..., i]]
             out[var] = chosen if self.indices.ndim > 1 else chosen.item() if hasattr(
                 chosen, "item") else chosen

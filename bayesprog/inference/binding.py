@@ -182,9 +182,34 @@ def _state_lookups(program: ProgramLike) -> dict[str, dict[str, int]]:
     return cache.state_lookups
 
 
+def _cell_indices(var: Discrete, value: Any) -> Any:
+    """A grid's cells given as ``(ix, iy, ...)`` tuples, as answers give them (a tuple, or
+    lists of tuples for a batch), as their indices; None for anything else."""
+    dims = len(var.grid_shape or ())
+    if isinstance(value, tuple):
+        if len(value) != dims or not all(isinstance(i, (int, np.integer)) for i in value):
+            return None
+        name = "_".join(str(int(i)) for i in value)
+        if name not in var._lookup:
+            raise QuestionError(f"unknown cell {value} of {var.name} (its grid is "
+                                f"{' x '.join(map(str, var.grid_shape or ()))})")
+        return var._lookup[name]
+    if isinstance(value, list) and value and _cell_indices(var, value[0]) is not None:
+        out = [_cell_indices(var, v) for v in value]
+        if any(v is None for v in out):
+            raise QuestionError(f"evidence for {var.name}: expected cells (ix, iy, ...) "
+                                "throughout, found a mixture of cells and other values")
+        return out
+    return None
+
+
 def _state_indices(var: Discrete, value: Any) -> np.ndarray:
     if isinstance(value, str) and value in var._lookup:  # one state by name: the common case
         return np.asarray(var._lookup[value], dtype=np.intp)
+    if var.kind == "grid" and isinstance(value, (tuple, list)):
+        cells = _cell_indices(var, value)
+        if cells is not None:
+            return np.asarray(cells, dtype=np.intp)
     arr = np.asarray(value)
     if var.edges is not None and arr.dtype.kind in "iuf":  # a discretised variable: a reading
         assert var.support is not None

@@ -159,6 +159,8 @@ class Density:
         if np.any((q < 0) | (q > 1)) or np.any(np.isnan(q)):
             raise QuestionError(f"quantiles must be in [0, 1], found {q.tolist()}")
         qs = np.atleast_1d(q).ravel()
+        if not qs.size:
+            return self._shape(np.zeros((int(np.prod(self.batch_shape)),) + q.shape))
         if self.weights is not None:
             w, m, s = self._gaussian(variable)
             rows = w.shape[0]
@@ -171,6 +173,8 @@ class Density:
                 if np.all(hi - lo <= 4 * np.finfo(float).eps * np.maximum(1, np.abs(hi))):
                     break
             out = (lo + hi) / 2
+            # the ends of a mixture of Gaussians are infinite, as scipy's ppf gives them
+            out = np.where(qs[None, :] >= 1, np.inf, np.where(qs[None, :] <= 0, -np.inf, out))
         else:
             edges, p = self._bins(variable)
             cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)

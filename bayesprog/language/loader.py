@@ -35,6 +35,8 @@ class Located:
     file: str
     positions: dict[Path, tuple[int, int]] = field(default_factory=dict)
     key_positions: dict[Path, tuple[int, int]] = field(default_factory=dict)
+    #: the text of each number, as written (``1.50``), for where a name stands
+    texts: dict[Path, str] = field(default_factory=dict)
 
     def where(self, path: Path) -> tuple[int, int]:
         """Line and column of ``path``, or of its closest located ancestor."""
@@ -179,6 +181,8 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
             out: dict[Any, Any] = {}
             for key_node, value_node in node.value:
                 key = build(key_node, path + ("<key>",))
+                if isinstance(key, (int, float)) and not isinstance(key, bool):
+                    key = key_node.value  # a key is a name: a number as written (1.50, 0x1F)
                 if not isinstance(key, (str, int, float)):
                     problems.append(located.diagnostic(path + ("<key>",), "expected a plain key"))
                     continue
@@ -218,7 +222,10 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
                 )
             )
             return node.value
-        return _plain_scalar(node.value)
+        value = _plain_scalar(node.value)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            located.texts[path] = node.value  # where a name stands, the number as written
+        return value
 
     try:
         located.data = build(node, ())

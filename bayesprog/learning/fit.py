@@ -136,11 +136,15 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         method += "; " + "; ".join(choices)
     if learned and any(i.prior is not None for i in todo):
         method += "; continued from the statistics of the previous fit"
+    # the rows behind the values: these, and those of the fits whose statistics it continues
+    supporting = int(len(used)) + sum(r.rows_supporting or r.rows_used for r in learned
+                                      if any(i.prior is not None and i.term.label in r.terms
+                                             for i in todo))
     record = FitRecord(
         data=Path(data.source).name if data.source[0] != "<" else data.source,
         sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
         log_likelihood=float(ll), method=method, iterations=iterations,
-        digits=supported_digits(int(len(used))), terms=[i.term.label for i in todo],
+        digits=supported_digits(supporting), rows_supporting=supporting, terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
                     for i in todo})
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()

@@ -64,6 +64,24 @@ def supported_digits(rows: int) -> int:
     return int(min(DIGITS, max(3, math.ceil(0.5 * math.log10(max(rows, 1))) + 2)))
 
 
+def rounded_location(location: np.ndarray, scale: np.ndarray, rows: int) -> np.ndarray:
+    """A learned location (a mean) to the decimal place of a twentieth of its standard error,
+    ``scale / sqrt(rows)`` (the error of a mean of ``rows`` values of that spread; fewer rows
+    per parent state only make it larger): 1000.1234 with a spread of 0.01 from 12 rows stays
+    1000.1234, 0.51140987 with a spread of 0.11 from 3000 rows becomes 0.5114."""
+    location = np.asarray(location, float)
+    error = np.broadcast_to(np.asarray(scale, float), location.shape) / math.sqrt(max(rows, 1))
+    out = location.copy()
+    for index in np.ndindex(*location.shape):
+        quantum = error[index] / 20
+        if not (np.isfinite(quantum) and quantum > 0 and np.isfinite(location[index])):
+            continue
+        places = -math.floor(math.log10(quantum))
+        out[index] = float(f"{location[index]:.{places}f}") if places >= 0 else \
+            round(float(location[index]), places)
+    return out
+
+
 def rounded(array: np.ndarray, digits: int, simplex: bool = False) -> np.ndarray:
     """``array`` to ``digits`` significant digits. Each distribution of a ``simplex`` array
     (its last axis) still sums to one: its largest entry is one minus the others, computed in
@@ -165,13 +183,16 @@ def _record(record: FitRecord) -> CommentedMap:
 
 def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
                   variables: Mapping[str, Variable], record: FitRecord,
-                  simplex: Mapping[str, Collection[str]] | None = None) -> str:
+                  simplex: Mapping[str, Collection[str]] | None = None,
+                  locations: Mapping[str, tuple[str, str]] | None = None) -> str:
     """``text`` (a program file) with the learned ``params`` (by term label) written in place of
     the old values, to the record's ``digits`` (``simplex``: the parameters of each term whose
-    last axis is a distribution, kept summing to one), and ``record`` appended to its
-    ``learned:`` list."""
+    last axis is a distribution, kept summing to one; ``locations``: each term's location and
+    scale parameters, the location written to its standard error), and ``record`` appended to
+    its ``learned:`` list."""
     digits = record.digits or DIGITS
-    simplex = simplex or {}
+    simplex, locations = simplex or {}, locations or {}
+    rows = record.rows_supporting or record.rows_used
     yaml = _yaml()
     doc = yaml.load(text)
     done = set()
@@ -180,9 +201,15 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
         if label is None or label not in params:
             continue
         child = variables.get(parse_expression(label).left[0])
-        for name, value in params[label].items():
-            value = ParamValue(value.axes, rounded(value.array, digits,
-                                                   name in simplex.get(label, ())))
+        fitted = params[label]
+        location, scale = locations.get(label, (None, None))
+        for name, value in fitted.items():
+            spread = fitted.get(scale) if name == location and scale else None
+            if spread is not None and spread.axes in ((), value.axes):
+                value = ParamValue(value.axes, rounded_location(value.array, spread.array, rows))
+            else:
+                value = ParamValue(value.axes, rounded(value.array, digits,
+                                                       name in simplex.get(label, ())))
             item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child))
         done.add(label)
     missing = set(params) - done

@@ -244,7 +244,7 @@ def test_parameters_not_searched_keep_the_files_values(tmp_path):
     (lambda spec: spec["tune"]["validation"].append(spec["tune"]["training"][0]),
      "small_grid.yaml is already a training scenario"),
     (lambda spec: spec["tune"].update(validation=["nowhere.yaml"]),
-     "tiny.yaml:16:5: no scenario file 'nowhere.yaml'"),
+     "tiny.yaml:16:5: validation scenario 'nowhere.yaml': no such file"),
     (lambda spec: spec["tune"].update(trials=0), "trials: Input should be greater than or equal"),
     (lambda spec: spec["tune"].update(runs=10**12), "tiny.yaml:18:9: 1,000,000,000,000 runs"),
     (lambda spec: spec["tune"].update(objective="speed"), "objective: Input should be 'probes'"),
