@@ -594,3 +594,8 @@ def test_the_ends_of_a_gaussian_density_are_infinite_and_no_quantiles_are_none()
     d = bayesprog.loads(GAUSS).ask("P(Pos)")
     assert d.quantile("Pos", 1.0) == np.inf and d.quantile("Pos", 0.0) == -np.inf
     assert d.quantile("Pos", []).shape == (0,) and d.pdf("Pos", []).shape == (0,)
+
+
+def test_show_says_which_variable_is_the_previous_step(capsys):
+    code, out, _ = run(capsys, "show", UMBRELLA)
+    assert code == 0 and "Rain_before is Rain one step earlier" in out
