@@ -48,6 +48,9 @@ def _steps(evidence: dict[str, Any]) -> tuple[int, dict[str, list[Any]]]:
         raise QuestionError(f"evidence over steps of different lengths ({found}): expected "
                             "one value per step for every variable")
     steps = next(iter(lengths.values()))
+    if steps == 0:
+        raise QuestionError("evidence over no steps: expected at least one step (time is the "
+                            "first axis; a batch of sequences goes after it)")
     return steps, {name: [value[t] for t in range(steps)] for name, value in evidence.items()}
 
 

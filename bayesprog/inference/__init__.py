@@ -46,6 +46,7 @@ from bayesprog.inference.methods.base import (
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size, limit
+from bayesprog.variables import Discrete
 
 __all__ = [
     "Bound", "Cost", "InferenceCache", "MapResult", "Method", "Posterior", "ProgramLike",
@@ -258,6 +259,29 @@ def _by(name: str, plan: QuestionPlan) -> Posterior | Density:
     return answer
 
 
+def _empty_answer(program: ProgramLike, question: Question,
+                  batch: tuple[int, ...]) -> Posterior | Density:
+    """The answer to a batch of no rows: its arrays shaped ``batch + ...``, nothing computed."""
+    searched = question.expression.left
+    variables = [v for name in searched if isinstance(v := program.variables[name], Discrete)]
+    if len(variables) < len(searched):
+        d = len(searched)
+        return Density(str(question.expression), tuple(searched), batch,
+                       np.zeros(batch), program.ablated, weights=np.zeros((0, 1)),
+                       means=np.zeros((0, 1, d)), covariances=np.zeros((0, 1, d, d)))
+    cards = tuple(v.card for v in variables)
+    return Posterior(
+        question=str(question.expression),
+        variables=tuple(searched),
+        names={v.name: v.states for v in variables},
+        probabilities=np.zeros(batch + cards),
+        log_evidence=np.zeros(batch),
+        batch_shape=batch,
+        ablated=program.ablated,
+        values={v.name: v.typed_states for v in variables},
+    )
+
+
 def ask(
     program: ProgramLike,
     question: Question,
@@ -270,7 +294,11 @@ def ask(
 ) -> Posterior | MapResult | Density:
     """Answer ``question`` (posterior or MAP, by its kind) for batched evidence."""
     bound = bind(program, question, evidence, inputs, soft)
-    posterior = compute_posterior(program, question, bound, method, dict(options or {}, rng=rng))
+    if bound.batch_shape and bound.size == 0:  # an empty batch: empty answers of its shape
+        posterior = _empty_answer(program, question, bound.batch_shape)
+    else:
+        posterior = compute_posterior(program, question, bound, method,
+                                      dict(options or {}, rng=rng))
     if isinstance(posterior, Density):  # its MAP is among its summaries
         check_zero(posterior)
         return posterior

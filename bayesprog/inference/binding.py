@@ -211,6 +211,8 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
         if cells is not None:
             return np.asarray(cells, dtype=np.intp)
     arr = np.asarray(value)
+    if arr.size == 0:  # no rows: no values to read, whatever numpy made their type
+        return np.zeros(arr.shape, dtype=np.intp)
     if var.edges is not None and arr.dtype.kind in "iuf":  # a discretised variable: a reading
         assert var.support is not None
         low, high = var.support
