@@ -491,15 +491,35 @@ def _version() -> str:
     return f"bayesprog {__version__}"
 
 
-#: The exit status when the reader of the output went away (a shell's for SIGPIPE, 128 + 13).
+#: The exit status when the reader of the output went away (a shell's for SIGPIPE, 128 + 13),
+#: and when the command was asked to stop (SIGTERM, 128 + 15).
 EXIT_CLOSED_PIPE = 141
+EXIT_TERMINATED = 143
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised where the command is, so that it stops as after Ctrl-C: its workers
+    stopped, what is finished kept, its files and semaphores released."""
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise _Terminated()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 ok, 2 user error, 130 interrupted,
-    141 when the output's reader closed the pipe, as ``bayesprog query ... | head``)."""
+    141 when the output's reader closed the pipe, as ``bayesprog query ... | head``, 143 when
+    terminated)."""
+    import signal
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         return _main(argv)
+    except _Terminated:
+        print("bayesprog: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except BrokenPipeError:
         # the reader is gone: nothing more can be said to it, and the interpreter must not
         # complain when it flushes standard output at exit
@@ -507,6 +527,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
         return EXIT_CLOSED_PIPE
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -1,10 +1,11 @@
-"""Where an experiment's units are computed: local processes or a Dask cluster, each unit saved
-as soon as it is finished, workers that die replaced; and the progress bar. Used by the
-experiment (:func:`runner.experiment.run_experiment`) and the parameter search (its pool)."""
+"""Where the project's work is computed: local processes or a Dask cluster, each unit saved as
+soon as it is finished, workers that die replaced; and the progress bar. Every local process
+of the project comes from :func:`process_pool` (the experiment's units, the report's Fig. 11,
+the parameter search): its workers die with their parent whatever the moment, and leave
+Ctrl-C to it (:mod:`runner.child`)."""
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -17,17 +18,12 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
                   bar: Any, max_deaths: int) -> None:
     """The units on local processes; a pool whose worker dies is replaced and the units it had
     not finished are computed again (numbers do not depend on which process computes them)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # spawn, not fork: the compiled ICP kernel runs on an OpenMP pool, which a forked child
-    # must not inherit; each worker then uses one thread (no oversubscription)
-    context = multiprocessing.get_context("spawn")
     left, deaths = list(todo), 0
     while left:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(left)), mp_context=context,
-                                   initializer=worker_init, initargs=(os.getpid(),))
+        pool = process_pool(min(workers, len(left)))
         futures = {pool.submit(job, u): u for u in left}
         broken = False
         try:
@@ -62,6 +58,17 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
               file=sys.stderr)
 
 
+def process_pool(workers: int) -> Any:
+    """A pool of ``workers`` local processes (a ``ProcessPoolExecutor``): spawned, dying with
+    this process, Ctrl-C left to it, one compiled-kernel thread each (no oversubscription)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from runner.child import WatchedContext
+
+    return ProcessPoolExecutor(max_workers=workers, mp_context=WatchedContext(),
+                               initializer=worker_init)
+
+
 def stop_pool(pool: Any) -> None:
     """Stop ``pool`` now: its queued work cancelled, its processes terminated."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
@@ -70,24 +77,25 @@ def stop_pool(pool: Any) -> None:
         process.terminate()
 
 
-def worker_init(parent: int) -> None:
-    """A worker process: one compiled-kernel thread, Ctrl-C left to the parent, and an end of
-    its own when the parent is gone (killed: nothing else would stop it)."""
+def worker_init() -> None:
+    """A worker process (already dying with its parent, :mod:`runner.child`): one
+    compiled-kernel thread, Ctrl-C left to the parent; stopped (SIGTERM), it ends as a Python
+    program does, its files and semaphores released; its progress bars lock with a thread
+    lock, not a semaphore of the machine's that a killed process would leave behind."""
     import signal
     import threading
-    import time
 
     import numba
+    from tqdm import tqdm
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _exit_quietly)
     numba.set_num_threads(1)
+    tqdm.set_lock(threading.RLock())
 
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
 
-    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+def _exit_quietly(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
 
 
 def run_dask(address: str, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,

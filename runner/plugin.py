@@ -99,7 +99,12 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
     from runner.report import build_report
 
     _output_folder(out)
-    folder = build_report(out, animation=options.animation, compare=options.compare)
+    try:
+        folder = build_report(out, animation=options.animation, compare=options.compare)
+    except KeyboardInterrupt:
+        print(f"interrupted while drawing the report: the results are kept in {out}; "
+              f"bayesprog report {out} draws it", file=sys.stderr)
+        return 130
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 

@@ -3,11 +3,9 @@ findings (Sec. 6.3) beside what was measured. Built from stored results only."""
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import html
 import json
-import multiprocessing
 import os
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
@@ -18,7 +16,7 @@ import numpy as np
 
 from bayesprog import BayesprogError
 from runner import figures
-from runner.executors import progress_bar
+from runner.executors import process_pool, progress_bar, stop_pool
 from runner.experiment import (
     Experiment,
     ExperimentSpec,
@@ -30,7 +28,7 @@ from runner.explorer import CONFIGURATIONS, Explorer
 from runner.metrics import area_under, behaviour, border_band, paired_test, visits
 from runner.scenario import Scenario
 from runner.sensor import SensorModel, confusion
-from runner.store import ResultStore, atomic_write
+from runner.store import ResultStore, atomic_write, sweep_partial
 
 
 def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int],
@@ -298,9 +296,11 @@ class DecisionFigure:
         canvas.draw()
         background = canvas.copy_from_bbox(self.fig.bbox)
         width, height = canvas.get_width_height()
+        # written beside, then renamed over ``out``: the animation is whole or not there
+        partial = out.with_name(f".{out.stem}.tmp{out.suffix}")
         writer = imageio_ffmpeg.write_frames(
-            str(out), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgba",
-            pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
+            str(partial), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgba",
+            pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="fatal",
             output_params=["-crf", "26", "-preset", "ultrafast"])
         writer.send(None)
         bar = progress_bar(len(frames), "Fig. 11 animation")
@@ -312,8 +312,13 @@ class DecisionFigure:
                     self.fig.draw_artist(artist)
                 writer.send(bytes(canvas.buffer_rgba()))
                 bar.update(1)
-        finally:
             writer.close()
+            os.replace(partial, out)
+        except BaseException:
+            writer.close()
+            partial.unlink(missing_ok=True)
+            raise
+        finally:
             bar.close()
         for artist in dynamic:
             artist.set_animated(False)
@@ -544,6 +549,7 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
     scenario = experiment.scenario
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
+    sweep_partial(folder)  # what a report killed half-way left
     borders = {t: int(scenario.border(t).sum()) for t in spec.tasks}
     task = spec.tasks[0]
     shown = "full" if "full" in spec.configurations else spec.configurations[0]
@@ -594,14 +600,14 @@ def _beside(fig11: tuple) -> Iterator[Callable[[], None]]:
     if (os.cpu_count() or 1) < 2:
         yield lambda: _plot_stored_decision(*fig11)
         return
-    context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+    pool = process_pool(1)
+    try:
         future = pool.submit(_plot_stored_decision, *fig11)
-        try:
-            yield future.result
-        except BaseException:
-            future.cancel()
-            raise
+        yield future.result
+    except BaseException:
+        stop_pool(pool)  # Ctrl-C, or a figure that failed: the second process stops now
+        raise
+    pool.shutdown()
 
 
 def following_step(paths: np.ndarray, border: np.ndarray, iterations: int) -> tuple[int, int]:

@@ -52,6 +52,18 @@ def config_hash(manifest: dict) -> str:
     return hashlib.sha256(json.dumps(identity(manifest), sort_keys=True).encode()).hexdigest()[:16]
 
 
+def sweep_partial(folder: Path) -> list[Path]:
+    """Remove what writes killed half-way left in ``folder``: the temporary files that a whole
+    write renames over its target (``.NAME.XXXX.tmp``, ``.NAME.tmp.mp4``); returns them."""
+    gone = []
+    if folder.is_dir():
+        for path in folder.iterdir():
+            if path.name.startswith(".") and ".tmp" in path.name and path.is_file():
+                path.unlink(missing_ok=True)
+                gone.append(path)
+    return gone
+
+
 class ResultStore:
     def __init__(self, out: Path):
         self.out = Path(out)
@@ -101,6 +113,7 @@ class ResultStore:
                         "--out folder, or remove this one to start again"
                     )
                 if old.get("hash") == manifest["hash"]:
+                    sweep_partial(self.out / "chunks")
                     return
                 # the same configuration under the hash of an earlier version: written anew
         try:

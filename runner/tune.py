@@ -277,15 +277,9 @@ class Evaluator:
     def __init__(self, workers: int = 1):
         self.pool = None
         if workers > 1:
-            import multiprocessing
-            import os
-            from concurrent.futures import ProcessPoolExecutor
+            from runner.executors import process_pool
 
-            from runner.executors import worker_init
-
-            self.pool = ProcessPoolExecutor(
-                max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                initializer=worker_init, initargs=(os.getpid(),))
+            self.pool = process_pool(workers)
 
     def __call__(self, pairs: list[tuple[Scenario, str]], values: Mapping[str, float] | None,
                  runs: int, iterations: int, seed: int) -> list[dict[str, np.ndarray]]:
