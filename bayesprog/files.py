@@ -71,20 +71,21 @@ def reference_problem(file: str | os.PathLike[str], expected: str,
         relative = written is not None and not Path(written).is_absolute()
         return f"no such file (looked for {path.resolve()})" if relative else "no such file"
     if path.is_dir():
-        return f"{path} is a folder, expected {a_or_an(expected)} {expected} file"
+        return f"a folder, expected {a_or_an(expected)} {expected} file"
     try:
         with open(path, "rb") as f:
-            head = f.read(64 * 1024)
+            head = f.read(_HEAD)
     except OSError as exc:
-        return f"cannot read {path}: {exc.strerror or exc}"
+        return f"cannot read it: {exc.strerror or exc}"
     try:
         head.decode("utf-8")
     except UnicodeDecodeError as exc:
-        if exc.start < len(head) - 4:  # not a character cut at the end of what was read
-            return f"cannot read {path}: expected UTF-8 text (byte {exc.start} is not)"
+        # a character cut at the end of what was read is not an error of the file
+        if len(head) < _HEAD or exc.start < len(head) - 4:
+            return f"cannot read it: expected UTF-8 text (byte {exc.start} is not)"
     kind = file_kind(path)
     if kind is not None and kind != expected:
-        return f"{path} is {a_or_an(kind)} {kind} file, expected {a_or_an(expected)} {expected} file"
+        return f"{a_or_an(kind)} {kind} file, expected {a_or_an(expected)} {expected} file"
     return None
 
 
