@@ -240,3 +240,27 @@ def test_a_run_killed_at_any_moment_leaves_nothing_behind_and_resumes(reference,
         assert not [p.name for p in folder.iterdir() if ".tmp" in p.name]
     ours = json.loads((out / "report" / "statistics.json").read_text())
     assert ours == json.loads((whole / "report" / "statistics.json").read_text())
+
+
+def test_a_worker_still_starting_dies_with_its_parent(tmp_path):
+    """The parent killed the moment its first worker exists, before that worker has imported
+    anything of the project: the worker ends too."""
+    mark = uuid.uuid4().hex
+    process = subprocess.Popen([BAYESPROG, "run", str(_tiny(tmp_path)), "--out",
+                                str(tmp_path / "out"), "--workers", "2", "-q"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env(mark))
+    parent = psutil.Process(process.pid)
+    children: list[psutil.Process] = []
+    deadline = time.monotonic() + 60
+    while not children and time.monotonic() < deadline:
+        children = [c for c in parent.children() if "resource_tracker" not in
+                    " ".join(c.cmdline())]
+        time.sleep(0.005)
+    assert children, "no worker was started"
+    imported = " ".join(children[0].cmdline())
+    process.send_signal(signal.SIGKILL)
+    _, err = process.communicate(timeout=5)
+    # ended by the kernel with its parent, not a second later when it would have looked
+    gone, alive = psutil.wait_procs(children, timeout=1)
+    assert not alive and _marked(mark) == [], imported
+    assert "Traceback" not in err.decode()
