@@ -172,6 +172,13 @@ def _env(mark: str) -> dict:
     return dict(os.environ, BAYESPROG_TEST_MARK=mark)
 
 
+def _status(process: psutil.Process) -> str:
+    try:
+        return process.status()
+    except psutil.NoSuchProcess:
+        return psutil.STATUS_DEAD
+
+
 def _marked(mark: str) -> list[str]:
     """The processes still alive that a run of ``mark`` started."""
     found = []
@@ -242,9 +249,10 @@ def test_a_run_killed_at_any_moment_leaves_nothing_behind_and_resumes(reference,
     assert ours == json.loads((whole / "report" / "statistics.json").read_text())
 
 
-def test_a_worker_still_starting_dies_with_its_parent(tmp_path):
-    """The parent killed the moment its first worker exists, before that worker has imported
-    anything of the project: the worker ends too."""
+@pytest.mark.parametrize("after", [0.0, 0.4])
+def test_a_worker_still_starting_dies_with_its_parent(tmp_path, after):
+    """The parent killed the moment its first worker exists (before that worker runs any code
+    of the project), or while the worker imports its modules: the worker ends too."""
     mark = uuid.uuid4().hex
     process = subprocess.Popen([BAYESPROG, "run", str(_tiny(tmp_path)), "--out",
                                 str(tmp_path / "out"), "--workers", "2", "-q"],
@@ -258,9 +266,11 @@ def test_a_worker_still_starting_dies_with_its_parent(tmp_path):
         time.sleep(0.005)
     assert children, "no worker was started"
     imported = " ".join(children[0].cmdline())
+    time.sleep(after)
     process.send_signal(signal.SIGKILL)
     _, err = process.communicate(timeout=5)
     # ended by the kernel with its parent, not a second later when it would have looked
     gone, alive = psutil.wait_procs(children, timeout=1)
-    assert not alive and _marked(mark) == [], imported
+    running = [p for p in alive if _status(p) != psutil.STATUS_ZOMBIE]  # dead, not yet reaped
+    assert not running and _marked(mark) == [], imported
     assert "Traceback" not in err.decode()
