@@ -66,9 +66,47 @@ def _kind_hint(file: str) -> str | None:
                       "experiments and their scenarios")
 
 
+def _plugin_validate(file: str, kind: str) -> list[str] | None:
+    """The warnings of a file of another kind than a program, checked by the runner plugin
+    that knows that kind (its module's ``validate(path, kind)``); None when none does."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group="bayesprog.runners"), key=lambda ep: ep.name):
+        try:
+            plugin = ep.load()
+        except Exception:  # a broken plugin is reported by the command line's set-up
+            continue
+        check = getattr(plugin, "validate", None)
+        found = check(file, kind) if check is not None else None
+        if found is not None:
+            return list(found)
+    return None
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
+    from bayesprog.files import file_kind
+
     problems = 0
     for file in args.files:
+        kind = file_kind(file) if Path(file).is_file() else None
+        if kind not in (None, "program"):
+            try:
+                warnings = _plugin_validate(file, kind)
+            except SpecError as exc:
+                problems += len(exc.diagnostics)
+                for d in exc.diagnostics:
+                    print(d, file=sys.stderr)
+                continue
+            except BayesprogError as exc:
+                problems += 1
+                print(f"bayesprog: {file}: {exc}", file=sys.stderr)
+                continue
+            if warnings is not None:
+                for warning in warnings:
+                    print(warning, file=sys.stderr)
+                if not args.quiet:
+                    print(f"{file}: ok ({kind})")
+                continue
         try:
             _load(file)
         except _UserError as exc:  # not a program (another kind of file), or unreadable
@@ -345,7 +383,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("validate", help="check program files; list every problem")
-    p.add_argument("files", nargs="+", metavar="FILE", help="program files (.yaml)")
+    p.add_argument("files", nargs="+", metavar="FILE",
+                   help="programs, and any file a runner plugin knows (scenarios, "
+                        "experiments, sensor models), told apart by their first key")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="print nothing for valid files (default: print FILE: ok)")
     p.set_defaults(func=cmd_validate)

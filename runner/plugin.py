@@ -72,6 +72,7 @@ def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
     from runner.experiment import load_experiment, run_experiment
 
     exp = load_experiment(_experiment_file(experiment))
+    _say(exp.scenario.warnings)
     try:
         run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
                        progress=False if options.quiet else None)
@@ -162,6 +163,12 @@ def _output_folder(out: Path) -> None:
         raise BayesprogError(f"{out}: written by the runner {name!r}, not {RUNNER!r}")
 
 
+def _say(warnings: list) -> None:
+    """A scenario's warnings (``FILE:LINE:COL: warning: ...``), on standard error."""
+    for warning in warnings:
+        print(warning, file=sys.stderr)
+
+
 def _scenario_path(target: Path) -> Path:
     if not target.exists():
         raise BayesprogError(f"cannot read {target}: no such file or folder")
@@ -192,6 +199,7 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
     from runner.scenario import load_scenario
 
     scenario = load_scenario(_scenario_path(target))
+    _say(scenario.warnings)
     task = options.task or next(iter(scenario.spec.tasks))
     for term in options.ablate:
         try:
@@ -222,6 +230,7 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     require()
     print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
     scenario = load_scenario(_scenario_path(target))
+    _say(scenario.warnings)
     task = options.task or next(iter(scenario.spec.tasks))
     if task not in scenario.spec.tasks:
         raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
@@ -288,6 +297,32 @@ def _cmd_robot(args: argparse.Namespace) -> int:
     return robot(Path(args.target), RobotCommand(
         task=args.task, steps=args.steps, seed=args.seed, run=args.run,
         namespace=args.namespace, timeout=args.timeout, json=args.json))
+
+
+def validate(path: str, kind: str) -> list | None:
+    """``bayesprog validate`` of this runner's files: a scenario (its programs, sensor model,
+    materials, tasks and objects), an experiment (its scenario, tasks and sizes; its search
+    when it has a ``tune:`` section) or a sensor model; its warnings, or None for another
+    kind. Problems raise, each at its place."""
+    if kind == "scenario":
+        from runner.scenario import load_scenario
+
+        return load_scenario(Path(path)).warnings
+    if kind == "experiment":
+        from runner.experiment import load_experiment
+
+        experiment = load_experiment(Path(path))
+        if experiment.spec.tune is not None:
+            from runner.tune import load_search
+
+            load_search(path)
+        return experiment.scenario.warnings
+    if kind == "sensor model":
+        from runner.sensor import load_sensor_model
+
+        load_sensor_model(path)
+        return []
+    return None
 
 
 def add_commands(commands: argparse._SubParsersAction) -> None:

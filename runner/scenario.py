@@ -7,7 +7,7 @@ A scenario is a YAML file (see ``models/scenarios/paper.yaml``): users describe 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -181,6 +181,9 @@ class Scenario:
     target: bayesprog.Program
     #: the model simulated probes are drawn from (None: the perception program's Normals)
     sensor_model: SensorModel | None = None
+    #: what the scenario does that is allowed but may not be meant (an object clipped by the
+    #: grid's edge), at its place in the file: the commands print them
+    warnings: list = field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -304,8 +307,15 @@ class Scenario:
 
 def _load_target(path: Path, spec: ScenarioSpec,
                  terms: Mapping[str, Mapping[str, Any]] | None = None) -> bayesprog.Program:
-    """pi_tar as the scenario ``spec`` sets it: its grid O and its shapes R (the templates)."""
-    return bayesprog.load(path, variables={"O": _grid(spec), "R": _shapes(spec)}, terms=terms)
+    """pi_tar as the scenario ``spec`` sets it: its grid O, its shapes R (the templates) and
+    its tasks T (the scenario's, named as it names them)."""
+    return bayesprog.load(path, variables={"O": _grid(spec), "R": _shapes(spec),
+                                           "T": _tasks(spec)}, terms=terms)
+
+
+def _tasks(spec: ScenarioSpec) -> dict:
+    return {"states": list(spec.tasks),
+            "description": "task: the border to follow (the scenario's tasks)"}
 
 
 def _shapes(spec: ScenarioSpec) -> dict:
@@ -333,12 +343,13 @@ def load_scenario(path: str | Path) -> Scenario:
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     target = _load_target((path.parent / spec.programs.target).resolve(), spec)
     diags = []
-    tasks = getattr(target.variables.get("T"), "states", ())
-    for task in spec.tasks:
-        if task not in tasks:
-            diags.append(located.diagnostic(("tasks", task), f"task {task!r} is not a state of "
-                                            f"T in {spec.programs.target}: expected one of "
-                                            f"{', '.join(tasks)}", at_key=True))
+    laid = {spec.background, *(o.material for o in spec.objects)}
+    for task, material in spec.tasks.items():
+        if material in materials and material not in laid:
+            diags.append(located.diagnostic(("tasks", task), f"task {task!r} follows the border "
+                                            f"of {material!r}, which is in no object of this "
+                                            "layout and is not its background: expected one of "
+                                            f"{', '.join(sorted(laid))}"))
     named = [("background",), *[("objects", i, "material") for i in range(len(spec.objects))],
              *[("tasks", t) for t in spec.tasks]]
     values = [spec.background, *[o.material for o in spec.objects], *spec.tasks.values()]
@@ -397,7 +408,26 @@ def load_scenario(path: str | Path) -> Scenario:
                                                        strict=True)) if not cells.any()]
     if empty:
         raise SpecError(empty)
+    scenario.warnings = _clipped(scenario, located)
     return scenario
+
+
+def _clipped(scenario: Scenario, located: Any) -> list:
+    """Objects of a 2-D layout that reach past the grid's edge (they are clipped to it), each
+    named at its place in the file."""
+    if scenario.dims != 2:
+        return []
+    low = np.zeros(2)
+    high = np.asarray(scenario.spec.grid.shape, float) * scenario.spec.grid.cell
+    out = []
+    for i, (material, polygon) in enumerate(scenario.polygons()):
+        outside = np.any((polygon < low - 1e-12) | (polygon > high + 1e-12), axis=1)
+        if outside.any():
+            out.append(located.diagnostic(
+                ("objects", i), f"warning: object {i + 1} ({material}) reaches past the edge of "
+                f"the grid ({_extent(scenario.spec)} metres): {int(outside.sum())} of its "
+                f"{len(polygon)} corners are outside; it is clipped to the grid"))
+    return out
 
 
 def _extent(spec: ScenarioSpec) -> str:

@@ -692,14 +692,15 @@ def test_schema(capsys, tmp_path):
     assert code == 0 and json.loads(target.read_text(encoding="utf-8")) == schema
 
 
-def test_validate_names_the_kind_of_a_scenario_or_experiment_file(capsys):
+def test_validate_checks_every_kind_of_file_the_runner_knows(capsys):
     root = Path(__file__).parents[1]
-    assert main(["validate", str(root / "models/scenarios/paper.yaml"),
-                 str(root / "models/experiments/quick.yaml")]) == 2
-    err = capsys.readouterr().err
-    assert "paper.yaml: this is a scenario file, not a program" in err
-    assert "quick.yaml: this is an experiment file, not a program" in err
-    assert "Traceback" not in err
+    files = ["models/scenarios/paper.yaml", "models/experiments/quick.yaml",
+             "models/sensors/biotac_proxy.yaml", "models/pi_tar.yaml"]
+    assert main(["validate", *(str(root / f) for f in files)]) == 0
+    out, err = capsys.readouterr()
+    assert "paper.yaml: ok (scenario)" in out and "quick.yaml: ok (experiment)" in out
+    assert "biotac_proxy.yaml: ok (sensor model)" in out and "pi_tar.yaml: ok\n" in out
+    assert not err
 
 
 def test_import_of_a_file_without_variables_writes_nothing(tmp_path, capsys):
