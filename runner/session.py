@@ -16,10 +16,18 @@ what stood behind the choice::
      "maps": {"belief": [[...]], "inhibition": ..., "saliency": ..., "uncertainty": ...,
               "posterior": ...}}                           (only when asked; null: unknown)
 
-``{"maps": true}`` alone answers the maps of the last decision. ``{"reset": {"seed": s}}``
-starts a new exploration; ``{"reset": {"seed": s, "run": r}}`` starts it with the decisions'
-random stream of run ``r`` of an experiment of seed ``s`` (the seed may then be left out: the
-session's). A malformed line gets ``{"error": "line N: ..."}`` and the session goes on.
+Beside ``next``, ``"position"`` is the centre of that cell in metres, in the workspace's frame:
+its origin at the grid's corner (the outer corner of cell [0, 0]), x along ix, y along iy (z
+along iz), cells of the scenario's size. A reading far from every material the perception
+program knows (more than :data:`FAR` of its standard deviations from each material's mean, in
+texture or in compliance) is still decided on, and the reply says so in ``"warning"``.
+
+``{"maps": true}`` alone answers the maps of the last decision. ``{"reset": {...}}`` starts a
+new exploration, with any of: ``"task"`` (a task of the scenario, by its name), ``"seed"``,
+``"run"`` (the decisions' random stream of run ``r`` of an experiment of that seed; the seed
+may then be left out: the session's) and ``"start"`` (the cell to probe first, answered as
+``next`` with its ``position``). A malformed line gets ``{"error": "line N: ..."}`` and the
+session goes on.
 """
 
 from __future__ import annotations
@@ -36,6 +44,9 @@ from runner.loop import decision_seed
 
 #: The longest line read (characters); a longer one is answered with an error.
 MAX_LINE = 1 << 20
+#: A reading farther than this many standard deviations from every material's mean, in the
+#: perception program's Normals, gets a warning (a sensor reporting on another scale, a fault)
+FAR = 6.0
 
 
 def _reading(obj: dict, key: str) -> float:
@@ -91,6 +102,8 @@ class Session:
 
     def __init__(self, explorer: Explorer, seed: int = 0):
         self.explorer = explorer
+        #: the explorers of the tasks a reset has named (built once each)
+        self._by_task = {explorer.task: explorer}
         self.seed = seed
         #: the decisions' seeds of the current exploration (an experiment run's when reset so)
         self._seeds: int | list[tuple[int, ...]] = seed
@@ -152,6 +165,32 @@ class Session:
                 "uncertainty": _grid(e.last.uncertainty[0], shape),
                 "posterior": _grid(e.target_probabilities[0], shape)}
 
+    def position(self, cell: list[int] | tuple[int, ...]) -> list[float]:
+        """The centre of ``cell`` in metres (origin at the grid's corner, axes along ix, iy, iz)."""
+        size = self.explorer.scenario.spec.grid.cell
+        return [round((int(i) + 0.5) * size, 12) for i in cell]
+
+    def warning(self, texture: float, compliance: float) -> str | None:
+        """Why a reading is far from anything the perception program knows, or None."""
+        program = self.explorer.perception
+        far = []
+        for variable, value, what in (("E", texture, "texture"), ("C", compliance, "compliance")):
+            try:
+                params = program.term(f"P({variable} | M)").params
+                mean = np.asarray(params["mean"].array, float)  # type: ignore[union-attr]
+                sd = np.asarray(params["sigma"].array, float)  # type: ignore[union-attr]
+            except (BayesprogError, KeyError, AttributeError):
+                continue  # not the Normals of pi_per: nothing to measure against
+            z = np.abs(value - mean) / np.broadcast_to(sd, mean.shape)
+            if float(np.min(z)) > FAR:
+                nearest = self.explorer.scenario.materials[int(np.argmin(z))]
+                far.append(f"{what} {value:g} is {float(np.min(z)):.0f} standard deviations from "
+                           f"the nearest material's mean ({nearest}, {float(mean[np.argmin(z)]):.3g})")
+        if not far:
+            return None
+        return ("; ".join(far) + ": outside what the perception program was built for (a "
+                "sensor on another scale?); the decision is made all the same")
+
     # one line --------------------------------------------------------------------------------
     def answer(self, line: str) -> dict | None:
         """The reply to one input line (None for a blank line, which is counted all the same)."""
@@ -187,11 +226,14 @@ class Session:
             raise ValueError('expected {"reset": {"seed": S}} alone, found other keys: '
                              + ", ".join(sorted(set(obj) - {"reset"})))
         opts = obj["reset"]
-        if not isinstance(opts, dict) or set(opts) - {"seed", "run"}:
-            raise ValueError('expected {"reset": {"seed": S}}, {"reset": {"seed": S, "run": R}} '
-                             f'or {{"reset": {{}}}}, found {_short(opts)}')
+        if not isinstance(opts, dict) or set(opts) - {"seed", "run", "task", "start"}:
+            raise ValueError('expected {"reset": {...}} with any of task, seed, run and start, '
+                             f'found {_short(opts)}')
         seed = _natural(opts.get("seed", self.seed), "seed")
-        reply: dict = {"reset": True, "seed": seed}
+        start = self._cell(opts["start"], "start") if "start" in opts else None
+        if "task" in opts:
+            self._use_task(opts["task"])
+        reply: dict = {"reset": True, "task": self.explorer.task, "seed": seed}
         if "run" in opts:
             run = _natural(opts["run"], "run")
             self._seeds = [decision_seed(seed, run)]
@@ -201,7 +243,30 @@ class Session:
         self.seed = seed
         self.k, self._started = 0, False
         self.explorer.last = None  # the maps of the last session are not this one's
+        if start is not None:
+            reply["next"], reply["position"] = start, self.position(start)
         return reply
+
+    def _use_task(self, task: object) -> None:
+        tasks = self.explorer.scenario.spec.tasks
+        if not isinstance(task, str) or task not in tasks:
+            raise ValueError(f"unknown task {_short(task)}: expected one of {', '.join(tasks)}")
+        if task not in self._by_task:
+            e = self.explorer
+            self._by_task[task] = Explorer(e.scenario, task, ablate=e.ablated)
+        self.explorer = self._by_task[task]
+
+    def _cell(self, cell: object, what: str) -> list[int]:
+        shape = self.explorer.scenario.shape
+        axes = ("ix", "iy", "iz")[:len(shape)]
+        if (not isinstance(cell, list) or len(cell) != len(shape)
+                or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
+            raise ValueError(f"expected {what!r} as {len(shape)} integers "
+                             f"[{', '.join(axes)}], found {_short(cell)}")
+        if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
+            raise ValueError(f"cell {_short(cell)} is outside the "
+                             f"{' x '.join(map(str, shape))} grid")
+        return list(cell)
 
     def _probe(self, obj: dict) -> dict:
         explorer = self.explorer
@@ -211,14 +276,7 @@ class Session:
         if missing:
             raise ValueError(f"missing {', '.join(missing)}: expected "
                              f'{{"cell": [{", ".join(axes)}], "texture": e, "compliance": c}}')
-        cell = obj["cell"]
-        if (not isinstance(cell, list) or len(cell) != len(shape)
-                or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
-            raise ValueError(f"expected 'cell' as {len(shape)} integers "
-                             f"[{', '.join(axes)}], found {_short(cell)}")
-        if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
-            raise ValueError(f"cell {_short(cell)} is outside the "
-                             f"{' x '.join(map(str, shape))} grid")
+        cell = self._cell(obj["cell"], "cell")
         texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
         if not self._started:
             explorer.reset(start=cell, seed=self._seeds)
@@ -230,8 +288,11 @@ class Session:
         if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
             raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
         nxt = explorer.observe(cell, texture, compliance)
-        reply = {"k": self.k, "next": list(nxt), "probed": self.probed(cell),
-                 "chosen": self.chosen(), "shape": self.shape()}
+        reply = {"k": self.k, "next": list(nxt), "position": self.position(nxt),
+                 "probed": self.probed(cell), "chosen": self.chosen(), "shape": self.shape()}
+        warning = self.warning(texture, compliance)
+        if warning:
+            reply["warning"] = warning
         if obj.get("maps"):
             reply["maps"] = self.maps()
         self.k += 1

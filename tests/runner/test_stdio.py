@@ -54,10 +54,12 @@ WALK = [probe((10, 12), "silicone"), probe((11, 12), "silicone"), probe((11, 13)
 
 def assert_step_replies(replies: list[dict], first_k: int = 0) -> None:
     for j, reply in enumerate(replies):
-        assert set(reply) == {"k", "next", "probed", "chosen", "shape"}, reply
+        assert set(reply) == {"k", "next", "position", "probed", "chosen", "shape"}, reply
         assert reply["k"] == first_k + j
         ix, iy = reply["next"]
         assert isinstance(ix, int) and isinstance(iy, int)
+        # the centre of that cell in metres, from the grid's corner (1 cm cells)
+        assert reply["position"] == pytest.approx([(ix + 0.5) * 0.01, (iy + 0.5) * 0.01])
         assert 0 <= ix < NX and 0 <= iy < NY
 
 
@@ -132,7 +134,7 @@ def test_reset_restarts_the_exploration():
     after = [probe((10, 13), "wood"), probe((11, 13), "silicone"), probe((12, 12), "wood"),
              probe((12, 14), "silicone")]
     replies = session(before + [json.dumps({"reset": {"seed": 3}})] + after)
-    assert replies[3] == {"reset": True, "seed": 3}
+    assert replies[3] == {"reset": True, "task": "T2", "seed": 3}
     assert_step_replies(replies[:3])
     assert_step_replies(replies[4:])  # k counts from 0 again
     # after the reset the session is a fresh one with seed 3: nothing of the first walk remains
@@ -204,14 +206,35 @@ def test_reset_with_a_negative_seed_is_refused_or_works():
     if "error" in replies[0]:
         assert "line 1" in replies[0]["error"]
     else:
-        assert replies[0] == {"reset": True, "seed": -1}
+        assert replies[0] == {"reset": True, "task": "T2", "seed": -1}
     assert_step_replies(replies[1:])
 
 
 def test_reset_with_an_unknown_key_gets_an_error_reply():
-    replies = session(['{"reset": {"start": [3, 4]}}', WALK[0]])
-    assert "line 1" in replies[0]["error"] and "start" in replies[0]["error"]
+    replies = session(['{"reset": {"begin": [3, 4]}}', WALK[0]])
+    assert "line 1" in replies[0]["error"] and "begin" in replies[0]["error"]
     assert replies[1]["k"] == 0
+
+
+def test_reset_sets_the_task_the_seed_and_the_start_cell():
+    replies = session(['{"reset": {"task": "T1", "seed": 4, "start": [3, 40]}}', probe((3, 40)),
+                       '{"reset": {"task": "T9"}}', '{"reset": {"start": [30, 0]}}'])
+    assert replies[0] == {"reset": True, "task": "T1", "seed": 4, "next": [3, 40],
+                          "position": [0.035, 0.405]}
+    # decided for T1 (plush), as an explorer of T1 with that seed decides
+    alone = Explorer(scenario(), "T1")
+    alone.reset(start=[3, 40], seed=4)
+    assert replies[1]["next"] == list(alone.observe([3, 40], *READINGS["wood"]))
+    assert "unknown task 'T9': expected one of T1, T2, T3" in replies[2]["error"]
+    assert "outside the 30 x 60 grid" in replies[3]["error"]
+
+
+def test_a_reading_far_from_every_material_is_decided_on_with_a_warning():
+    far = json.dumps({"cell": [10, 12], "texture": 0.5, "compliance": 5})
+    replies = session([WALK[0], far])
+    assert "warning" not in replies[0]
+    assert "compliance 5 is" in replies[1]["warning"] and "standard deviations" in replies[1]["warning"]
+    assert replies[1]["k"] == 1 and len(replies[1]["next"]) == 2
 
 
 def test_replies_say_what_stood_behind_the_choice_and_the_maps_when_asked():
@@ -268,7 +291,7 @@ def test_maps_after_a_reset_and_malformed_maps_requests_get_errors():
              json.dumps({"cell": [10, 12], "texture": 0.1, "compliance": 0.3, "maps": 1}),
              json.dumps({"reset": {}, "maps": True}), WALK[1]]
     replies = session(lines)
-    assert replies[1] == {"reset": True, "seed": 2}
+    assert replies[1] == {"reset": True, "task": "T2", "seed": 2}
     assert "no decision yet" in replies[2]["error"]
     assert "'maps' true or false" in replies[3]["error"]
     assert "alone" in replies[4]["error"]
