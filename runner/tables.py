@@ -22,6 +22,9 @@ COLUMNS = {
     "run": "the run (same start cell and seeds in every configuration)",
     "step": "k, from 0 (the start cell)",
     "cell": "the probed cell (flat index, x-major)",
+    "ix": "its index along x, as explore names cells [ix, iy]",
+    "iy": "its index along y",
+    "iz": "its index along z (in a volume; absent on a 2-D grid)",
     "x_cm": "its centre, cm",
     "y_cm": "its centre, cm",
     "z_cm": "its centre, cm (in a volume; absent on a 2-D grid)",
@@ -51,10 +54,13 @@ def runs_table(out: str | Path) -> Any:
             paths = r["paths"]
             runs, steps = paths.shape
             x, y = centre_cm(scenario, paths.ravel())
+            indices = np.unravel_index(paths.ravel(), scenario.shape)
             columns = {
                 "task": np.full(paths.size, task), "configuration": np.full(paths.size, conf),
                 "run": np.repeat(r["runs"], steps), "step": np.tile(np.arange(steps), runs),
-                "cell": paths.ravel(), "x_cm": x, "y_cm": y,
+                "cell": paths.ravel(),
+                **{axis: index for axis, index in zip(("ix", "iy", "iz"), indices, strict=False)},
+                "x_cm": x, "y_cm": y,
                 "near_border": band[paths.ravel()], "gamma_m": r["gamma"].ravel()}
             if scenario.dims == 3:
                 columns["z_cm"] = scenario.centres[paths.ravel(), 2] * 100

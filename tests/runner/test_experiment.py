@@ -251,6 +251,10 @@ def test_the_runs_table_holds_every_probe_with_its_cues(reference, tmp_path, cap
     rows = table[(table.task == "T3") & (table.configuration == "full")]
     stored = results["T3/full"]
     np.testing.assert_array_equal(rows["cell"].to_numpy(), stored["paths"].ravel())
+    # the cell as explore names it, [ix, iy]: the flat index is ix * ny + iy
+    ny = experiment.scenario.shape[1]
+    np.testing.assert_array_equal(rows["ix"] * ny + rows["iy"], rows["cell"])
+    assert "iz" not in table.columns and (rows["iy"] < ny).all()
     np.testing.assert_array_equal(rows["gamma_m"].to_numpy(), stored["gamma"].ravel())
     assert rows[rows.step == 0][["inhibition", "saliency", "uncertainty"]].isna().all().all()
     # the cues at a probed cell are those of the decision that chose it (a replay agrees)
