@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import html
 import json
+import math
 import os
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
@@ -55,6 +56,7 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
                 row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
             rows.append(row)
     _runner_up_tests(rows, results)
+    _detectable(rows, results)
     for key in ("p_final", "p_auc", "p_runner_up"):  # Holm's correction over each column
         tested = [r for r in rows if key in r]
         if tested:
@@ -64,6 +66,35 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
             for r, value in zip(tested, adjusted, strict=True):
                 r[f"{key}_holm"] = float(value)
     return rows
+
+
+#: the power at which :func:`_detectable` says what the paired tests can see
+POWER = 0.8
+#: the smallest effect a verdict turns on: removing U must cost more than 5 %
+SMALLEST_EFFECT = 0.05
+
+
+def _detectable(rows: list[dict], results: dict) -> None:
+    """Per ablation row, ``detectable_auc``: the smallest change of the area under Gamma,
+    relative to the full model's, that its paired test finds with probability POWER at the
+    verdicts' threshold after Holm's adjustment over the column's tests (at worst ALPHA / m),
+    by the normal approximation of the paired differences; and ``runs_for_smallest``: how many
+    runs would find SMALLEST_EFFECT so."""
+    from scipy import stats
+
+    tested = [r for r in rows if "p_auc" in r]
+    if not tested:
+        return
+    z = stats.norm.ppf(1 - ALPHA / len(tested) / 2) + stats.norm.ppf(POWER)
+    for row in tested:
+        task = row["task"]
+        full = area_under(results[f"{task}/full"]["gamma"])
+        diff = area_under(results[f"{task}/{row['configuration']}"]["gamma"]) - full
+        n, spread, scale = len(diff), float(np.std(diff, ddof=1)) if len(diff) > 1 else math.inf, \
+            float(np.mean(full))
+        row["detectable_auc"] = float(z * spread / math.sqrt(n) / scale) if scale > 0 else math.inf
+        row["runs_for_smallest"] = (int(math.ceil((z * spread / (SMALLEST_EFFECT * scale)) ** 2))
+                                    if scale > 0 and math.isfinite(spread) else None)
 
 
 def _runner_up_tests(rows: list[dict], results: dict) -> None:
@@ -465,7 +496,16 @@ def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str
             agree = all(abs(changes[t]) < 0.10 or ps[t] >= ALPHA for t in tasks)
         else:  # R: no strong influence, or the full model is better; never a significant loss
             agree = all(changes[t] > -0.10 or ps[t] >= ALPHA for t in tasks)
-        out.append((text, measured, "agrees" if agree else "differs"))
+        verdict = "agrees" if agree else "differs"
+        # not significant where the test could not have seen a change as large as the
+        # verdicts weigh: the runs, not the model, may have decided
+        unseen = [t for t in tasks if _unseen(by[(t, conf)], changes[t], ps[t], key)]
+        if unseen:
+            said = ", ".join(f"{t} {100 * changes[t]:+.0f}%" for t in unseen)
+            finds = max(by[(t, conf)].get("detectable_auc", math.nan) for t in unseen)
+            verdict += (f" (runs too few to tell: {said} not significant; with these runs the "
+                        f"test finds changes of about {100 * finds:.0f}% or more)")
+        out.append((text, measured, verdict))
     return out
 
 
@@ -728,8 +768,55 @@ def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str
               "the change is under 10% or not significant (p >= 0.01); *R* when the change is "
               "under 10%, not significant, or in the full model's favour; *T* compares the "
               "final Gamma per border cell.", ""]
+    lines += _power_lines(rows, spec)
     lines += list(extra)
     return "\n".join(lines)
+
+
+def _power_lines(rows: list[dict], spec: ExperimentSpec) -> list[str]:
+    """What the runs could tell: the smallest change of the area under Gamma the paired tests
+    find, and the runs the smallest effect of a verdict would need."""
+    tested = [r for r in rows if "detectable_auc" in r]
+    if not tested:
+        return []
+    worst = max(tested, key=lambda r: r["detectable_auc"])
+    best = min(r["detectable_auc"] for r in tested)
+    needed = max((r["runs_for_smallest"] or 0) for r in tested)
+    text = (f"What {spec.runs} runs can tell: by the spread of the paired differences, the tests "
+            f"find (with probability {POWER:.0%}, at the verdicts' threshold after Holm's "
+            f"adjustment; a normal approximation, cautious for the signed-rank test) changes "
+            f"of the area under Gamma of about {100 * best:.0f}% to "
+            f"{100 * worst['detectable_auc']:.0f}% or more, depending on the task and the "
+            f"ablation ({worst['task']}, {worst['configuration']}: the largest).")
+    unseen = [r for r in tested if _unseen(r, r["auc_mean"] / _full_auc(rows, r["task"]) - 1,
+                                           r.get("p_auc_holm", r["p_auc"]),
+                                           r["configuration"].removeprefix("without_"))]
+    needed = max((r["runs_for_smallest"] or 0) for r in unseen) if unseen else needed
+    if unseen:
+        text += (f" **These runs are too few to tell** {len(unseen)} of the changes the "
+                 f"verdicts weigh (not significant, and not shown to be under "
+                 f"{100 * SMALLEST_EFFECT:.0f}%: marked beside their verdicts); about {needed} "
+                 f"runs would find a {100 * SMALLEST_EFFECT:.0f}% change there.")
+    return [text, ""]
+
+
+def _unseen(row: dict, change: float, p: float, key: str) -> bool:
+    """Whether the verdict on ablation ``key`` rests, in this task, on a test that these runs
+    were too few for: S and U agree only on a significant change, so one not significant
+    where the test could not have found a 5% change (or the change is larger) is unsettled;
+    I and R agree on a small change or a not significant one, so only a large change that is
+    not significant is."""
+    if p < ALPHA:
+        return False
+    if key in ("S", "U"):
+        return abs(change) > SMALLEST_EFFECT or row.get("detectable_auc", 0.0) > SMALLEST_EFFECT
+    if key == "I":
+        return abs(change) >= 0.10
+    return change <= -0.10
+
+
+def _full_auc(rows: list[dict], task: str) -> float:
+    return next(r["auc_mean"] for r in rows if r["task"] == task and r["configuration"] == "full")
 
 
 def _p(row: dict, key: str) -> str:

@@ -1,0 +1,138 @@
+"""Another lab's scenario: tasks named as the lab names them, every mistake caught at its line
+before anything runs, and a report that says when its runs were too few to tell."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayesprog.cli import main
+from runner.experiment import ExperimentSpec
+from runner.explorer import Explorer
+from runner.metrics import area_under
+from runner.report import ALPHA, POWER, findings, statistics_table
+from runner.scenario import load_scenario
+
+MODELS = Path(__file__).parents[2] / "models"
+
+LAB = """\
+scenario: 1
+name: lab
+programs:
+  perception: {models}/pi_per.yaml
+  shape: {models}/pi_obj.yaml
+  target: {models}/pi_tar.yaml
+grid: {{shape: [20, 20], cell: 0.01}}
+background: wood
+templates:
+  square: [[-0.04, -0.04], [0.04, -0.04], [0.04, 0.04], [-0.04, 0.04]]
+objects:
+  - {{template: square, material: copper, at: [0.06, 0.06]}}
+  - {{template: square, material: silicone, at: {second}}}
+tasks:
+  follow_copper: copper
+  follow_silicone: silicone
+  edge_of_wood: wood
+  around_the_copper_again: copper
+"""
+
+
+def lab(tmp_path: Path, second: str = "[0.14, 0.12]", extra: str = "") -> Path:
+    path = tmp_path / "lab.yaml"
+    path.write_text(LAB.format(models=MODELS, second=second) + extra)
+    return path
+
+
+def test_a_scenario_names_its_tasks_and_as_many_as_it_needs(tmp_path):
+    scenario = load_scenario(lab(tmp_path))
+    names = ["follow_copper", "follow_silicone", "edge_of_wood", "around_the_copper_again"]
+    assert scenario.target.variables["T"].states == tuple(names)
+    explorer = Explorer(scenario, "follow_silicone")
+    explorer.reset(start=[2, 2], seed=0)
+    nxt = explorer.observe([2, 2], 0.13, 0.35)  # a silicone-like reading
+    assert len(nxt) == 2 and explorer.task == "follow_silicone"
+
+
+def test_an_experiment_runs_with_the_labs_task_names(tmp_path, capsys):
+    scenario = lab(tmp_path)
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text(f"experiment: 1\nname: lab\nrunner: haptic\nscenario: {scenario}\n"
+                          "tasks: [follow_copper, edge_of_wood]\nconfigurations: [full]\n"
+                          "runs: 2\niterations: 5\nseed: 1\n")
+    assert main(["run", str(experiment), "--out", str(tmp_path / "out"), "-q", "--no-report"]) == 0
+    assert main(["results", str(tmp_path / "out"), "-o", str(tmp_path / "runs.csv")]) == 0
+    import pandas as pd
+
+    table = pd.read_csv(tmp_path / "runs.csv")
+    assert set(table["task"]) == {"follow_copper", "edge_of_wood"}
+
+
+def test_a_task_whose_material_is_not_laid_out_is_refused_at_its_line(tmp_path, capsys):
+    path = lab(tmp_path, extra="  plush_border: plush\n")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    line = path.read_text().splitlines().index("  plush_border: plush") + 1
+    assert f"lab.yaml:{line}:17: task 'plush_border' follows the border of 'plush'" in err
+    assert "expected one of copper, silicone, wood" in err and "Traceback" not in err
+
+
+def test_an_object_past_the_grids_edge_is_clipped_with_a_warning_at_its_line(tmp_path, capsys):
+    path = lab(tmp_path, second="[0.18, 0.12]")
+    assert main(["validate", str(path)]) == 0
+    out, err = capsys.readouterr()
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1) if "0.18" in text)
+    assert f"lab.yaml:{line}:5: warning: object 2 (silicone) reaches past the edge" in err
+    assert "lab.yaml: ok (scenario)" in out
+    scenario = load_scenario(path)
+    inside = scenario.object_cells()[1][1].reshape(scenario.shape)
+    assert inside[19].any() and inside.sum() < 64  # clipped: fewer than its 8 x 8 cells
+
+
+# the report says when the runs were too few -----------------------------------------------
+
+def _results(spread: float, shift: float, runs: int, seed: int = 0) -> dict:
+    """Synthetic stored results of one task: the full model, and without S and U whose areas
+    under Gamma differ from the full model's by ``shift`` (relative) plus noise."""
+    rng = np.random.default_rng(seed)
+    steps = 11
+    full = np.tile(np.linspace(2.0, 1.0, steps), (runs, 1))
+    out = {"T1/full": {"gamma": full, "paths": np.zeros((runs, steps), int)}}
+    for conf in ("without_S", "without_U"):
+        noise = rng.normal(shift, spread, size=(runs, 1))
+        out[f"T1/{conf}"] = {"gamma": full * (1 + noise), "paths": np.zeros((runs, steps), int)}
+    return out
+
+
+def _spec(runs: int) -> ExperimentSpec:
+    return ExperimentSpec(name="x", runner="haptic", scenario="s.yaml", tasks=["T1"],
+                          configurations=["full", "without_S", "without_U"], runs=runs,
+                          iterations=11, seed=0)
+
+
+def test_the_smallest_detectable_change_follows_the_paired_differences():
+    runs = 40
+    results = _results(spread=0.2, shift=0.02, runs=runs)
+    rows = statistics_table(results, _spec(runs), {"T1": 10})
+    z = stats.norm.ppf(1 - ALPHA / 2 / 2) + stats.norm.ppf(POWER)  # two tests in the column
+    for row in rows[1:]:
+        full = area_under(results["T1/full"]["gamma"])
+        diff = area_under(results[f"T1/{row['configuration']}"]["gamma"]) - full
+        expected = z * np.std(diff, ddof=1) / math.sqrt(runs) / np.mean(full)
+        assert row["detectable_auc"] == pytest.approx(expected, rel=1e-12)
+        needed = math.ceil((z * np.std(diff, ddof=1) / (0.05 * np.mean(full))) ** 2)
+        assert row["runs_for_smallest"] == needed
+    json.dumps(rows)
+
+
+def test_verdicts_the_runs_could_not_settle_say_so_and_others_do_not():
+    few = findings(statistics_table(_results(0.3, 0.08, runs=8), _spec(8), {"T1": 10}), _spec(8))
+    verdicts = {text.split()[1]: verdict for text, _, verdict in few}
+    assert "runs too few to tell" in verdicts["S"] and "runs too few to tell" in verdicts["U"]
+    many = findings(statistics_table(_results(0.01, 0.08, runs=60), _spec(60), {"T1": 10}),
+                    _spec(60))
+    assert not any("too few" in verdict for _, _, verdict in many)
