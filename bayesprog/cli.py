@@ -328,7 +328,17 @@ def cmd_learn(args: argparse.Namespace) -> int:
         raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
     if not (args.tol >= 0 and np.isfinite(args.tol)):
         raise _UserError(f"--tol: expected a number >= 0, found {args.tol}")
-    fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol)
+    columns = {}
+    for item in args.column:
+        column, eq, variable = item.partition("=")
+        if not eq or not column.strip() or not variable.strip():
+            raise _UserError(f"--column {item!r}: expected COLUMN=VARIABLE")
+        if column.strip() in columns:
+            raise _UserError(f"--column {column.strip()} is given twice: expected each column "
+                             "once")
+        columns[column.strip()] = variable.strip()
+    fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
+                      columns=columns or None)
     try:
         out = fit.save(args.output)
     except OSError as exc:
@@ -480,6 +490,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tol", type=float, default=1e-8,
                    help="EM stops when the log-likelihood gains less than this, relative "
                    "(default: %(default)s)")
+    p.add_argument("--column", action="append", default=[], metavar="COLUMN=VARIABLE",
+                   help="read the data's column COLUMN as the variable VARIABLE, e.g. --column "
+                   "material=M; repeatable (default: columns named like the variables)")
     p.set_defaults(func=cmd_learn)
 
     p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")

@@ -79,6 +79,9 @@ class FitRecord(BaseModel):
         "the rows behind them support (rounding moves a value by under a twentieth of "
         "1/sqrt(rows_supporting)); a learned mean is written to a twentieth of its standard "
         "error instead")
+    columns: dict[str, str] = Field(
+        default_factory=dict, description="the data's columns read as variables of other names "
+        "(column: variable)")
     rows_supporting: int | None = Field(
         None, description="the rows behind the learned values: these and those of the earlier "
         "fits this one continued from")

@@ -388,9 +388,10 @@ class Program:
 
     # identification --------------------------------------------------------------------------------
     def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
-            tol: float = 1e-8) -> Fit:
+            tol: float = 1e-8, columns: Mapping[str, str] | None = None) -> Fit:
         """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
-        DataFrame or a mapping of columns; one column per variable, missing values allowed.
+        DataFrame or a mapping of columns; one column per variable, missing values allowed
+        (``columns`` maps a column of another name to its variable: ``{"material": "M"}``).
 
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
@@ -425,8 +426,12 @@ class Program:
             labels = [str(self.term(t).expression) for t in freeze]
         except ExpressionError as exc:
             raise QuestionError(f"freeze: {exc}") from None
+        if columns is not None and (not isinstance(columns, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, str) for k, v in columns.items())):
+            raise ArgumentError(f"columns: expected a mapping of column names to variable "
+                                f"names, found {short_repr(columns)}")
         estimate = fit_terms(self.variables, self.terms, self.learned, data, freeze=labels,
-                             max_iter=max_iter, tol=tol)
+                             max_iter=max_iter, tol=tol, columns=columns)
         terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
                  if t.label in estimate.params else t for t in self.terms]
         fitted = Program(self.variables, terms, self.questions, self.inputs, name=self.name,

@@ -550,3 +550,30 @@ def test_edited_statistics_are_refused_with_a_message(tmp_path):
         (tmp_path / "bad.yaml").write_text(text[:start] + bad + text[end + 1:])
         with pytest.raises(DataError, match=message):
             bayesprog.load(tmp_path / "bad.yaml").fit(normal_data(29))
+
+
+def test_columns_of_other_names_are_read_as_the_variables_they_are_mapped_to(tmp_path, capsys):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    data = normal_data(7)
+    named = tmp_path / "named.csv"
+    data.to_csv(named, index=False)
+    other = tmp_path / "other.csv"
+    data.rename(columns={"M": "material", "E": "texture"}).to_csv(other, index=False)
+    assert main(["learn", str(source), str(named), "-o", str(tmp_path / "a.yaml")]) == 0
+    assert main(["learn", str(source), str(other), "-o", str(tmp_path / "b.yaml"),
+                 "--column", "material=M", "--column", "texture=E"]) == 0
+    a, b = bayesprog.load(tmp_path / "a.yaml"), bayesprog.load(tmp_path / "b.yaml")
+    for term in ("P(M)", "P(E | M)"):
+        for name, value in a.term(term).params.items():
+            np.testing.assert_array_equal(b.term(term).params[name].array, value.array)
+    assert b.learned[-1].columns == {"material": "M", "texture": "E"}
+    capsys.readouterr()
+    for args, expected in ((["--column", "mat=M"], "no column 'mat' to read as M"),
+                           (["--column", "material=X"], "the program has no variable 'X'"),
+                           (["--column", "material"], "expected COLUMN=VARIABLE"),
+                           ([], "the program has no variable 'material'")):
+        assert main(["learn", str(source), str(other), "-o", str(tmp_path / "c.yaml"),
+                     *args]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and "Traceback" not in err, err

@@ -103,9 +103,21 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
     return frame, str(path), hexdigest, True
 
 
-def load_data(source: Any, variables: Mapping[str, Variable]) -> Data:
-    """Read ``source`` and code its columns for ``variables``; every problem names its place."""
+def load_data(source: Any, variables: Mapping[str, Variable],
+              rename: Mapping[str, str] | None = None) -> Data:
+    """Read ``source`` and code its columns for ``variables`` (``rename``: the variable each
+    differently named column holds, ``{"material": "M"}``); every problem names its place."""
     frame, name, digest, csv = read_frame(source)
+    if rename:
+        found = [str(c) for c in frame.columns]
+        for column, variable in rename.items():
+            if column not in found:
+                raise DataError(f"{name}: no column {column!r} to read as {variable} (columns: "
+                                f"{', '.join(found)})")
+            if variable not in variables:
+                raise DataError(f"column {column!r}: the program has no variable {variable!r} "
+                                f"(variables: {', '.join(variables)})")
+        frame = frame.rename(columns=dict(rename))
     columns = [str(c) for c in frame.columns]
     if len(set(columns)) != len(columns):
         dup = next(c for c in columns if columns.count(c) > 1)

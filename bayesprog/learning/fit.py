@@ -71,13 +71,15 @@ class _Group:
 
 def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
               learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
-              max_iter: int = 200, tol: float = 1e-8) -> Estimate:
-    """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``."""
+              max_iter: int = 200, tol: float = 1e-8,
+              columns: Mapping[str, str] | None = None) -> Estimate:
+    """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``
+    (``columns``: the variable each differently named column holds)."""
     if not (np.isfinite(tol) and tol >= 0):
         raise DataError(f"tol: expected a number >= 0, found {tol}")
     if max_iter < 1:
         raise DataError(f"max_iter: expected at least 1, found {max_iter}")
-    data = load_data(source, variables)
+    data = load_data(source, variables, columns)
     seen = [r for r in learned if r.sha256 == data.sha256]
     if seen:
         raise DataError(f"{data.source}: these data (SHA-256 {data.sha256[:12]}...) were already "
@@ -144,7 +146,8 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         data=Path(data.source).name if data.source[0] != "<" else data.source,
         sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
         log_likelihood=float(ll), method=method, iterations=iterations,
-        digits=supported_digits(supporting), rows_supporting=supporting, terms=[i.term.label for i in todo],
+        digits=supported_digits(supporting), rows_supporting=supporting,
+        columns=dict(columns or {}), terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
                     for i in todo})
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()
