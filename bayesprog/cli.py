@@ -338,7 +338,7 @@ def cmd_learn(args: argparse.Namespace) -> int:
                              "once")
         columns[column.strip()] = variable.strip()
     fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
-                      columns=columns or None)
+                      columns=columns or None, states_from_data=args.states_from_data)
     try:
         out = fit.save(args.output)
     except OSError as exc:
@@ -493,6 +493,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--column", action="append", default=[], metavar="COLUMN=VARIABLE",
                    help="read the data's column COLUMN as the variable VARIABLE, e.g. --column "
                    "material=M; repeatable (default: columns named like the variables)")
+    p.add_argument("--states-from-data", action="append", default=[], metavar="VARIABLE",
+                   help="the variable takes the states found in its column (sorted), the terms "
+                   "over it learned anew, e.g. a lab's own materials; repeatable (default: the "
+                   "states declared)")
     p.set_defaults(func=cmd_learn)
 
     p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")

@@ -32,7 +32,7 @@ from bayesprog.expressions import (
     parse_expression,
 )
 from bayesprog.files import atomic_write
-from bayesprog.forms import get_form
+from bayesprog.forms import ParamValue, get_form
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
 from bayesprog.language.check import check_document, question_problem
@@ -388,10 +388,14 @@ class Program:
 
     # identification --------------------------------------------------------------------------------
     def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
-            tol: float = 1e-8, columns: Mapping[str, str] | None = None) -> Fit:
+            tol: float = 1e-8, columns: Mapping[str, str] | None = None,
+            states_from_data: Sequence[str] = ()) -> Fit:
         """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
         DataFrame or a mapping of columns; one column per variable, missing values allowed
         (``columns`` maps a column of another name to its variable: ``{"material": "M"}``).
+        ``states_from_data`` names variables whose states are those found in their column
+        (sorted, as written: a lab's own materials), the terms over them learned anew; the
+        fitted file then declares them so.
 
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
@@ -430,6 +434,14 @@ class Program:
                 isinstance(k, str) and isinstance(v, str) for k, v in columns.items())):
             raise ArgumentError(f"columns: expected a mapping of column names to variable "
                                 f"names, found {short_repr(columns)}")
+        if isinstance(states_from_data, str):
+            states_from_data = [states_from_data]
+        if states_from_data:
+            program, found = self._with_states_from(data, list(states_from_data), columns,
+                                                    labels)
+            fit = program.fit(data, freeze=labels, max_iter=max_iter, tol=tol, columns=columns)
+            fit.states = found
+            return fit
         estimate = fit_terms(self.variables, self.terms, self.learned, data, freeze=labels,
                              max_iter=max_iter, tol=tol, columns=columns)
         terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
@@ -438,6 +450,64 @@ class Program:
                          description=self.description, path=self.path, ablated=self.ablated,
                          learned=[*self.learned, estimate.record], time=self.time)
         return Fit(fitted, estimate, self.path)
+
+    def _with_states_from(self, data: Any, names: Sequence[str],
+                          columns: Mapping[str, str] | None, freeze: Sequence[str]
+                          ) -> tuple[Program, dict[str, list[str]]]:
+        """This program with each variable of ``names`` taking the states found in its column
+        of ``data`` (sorted, as written), and the terms over it starting from neutral values
+        (uniform tables, means 0, spreads 1) that the fit then replaces."""
+        from bayesprog.forms.base import nonnegative, positive, real, simplex, unit_interval
+        from bayesprog.learning.data import DataError, read_frame
+
+        frame, source, _, _ = read_frame(data)
+        frame = frame.rename(columns=dict(columns or {}))
+        found: dict[str, list[str]] = {}
+        variables = dict(self.variables)
+        for name in names:
+            var = self.variables.get(name)
+            if not isinstance(var, Discrete) or var.kind != "states":
+                raise ArgumentError(f"states from the data: {name!r} is not a variable with "
+                                    "named states of this program")
+            if name not in frame.columns:
+                raise DataError(f"{source}: no column for {name} to take its states from")
+            values = sorted({str(v) for v in frame[name] if isinstance(v, str) or (
+                v is not None and v == v)})
+            if not values:
+                raise DataError(f"{source}: column {name} holds no value to take states from")
+            found[name] = values
+            variables[name] = Discrete(name, tuple(values), description=var.description)
+        neutral = {nonnegative: 1.0, positive: 1.0, real: 0.0, unit_interval: 0.5}
+        terms = []
+        for t in self.terms:
+            over = {t.child.name, *(p.name for p in t.parents)} & set(found)
+            if not over:
+                terms.append(t)
+                continue
+            if t.learn is None or str(t.expression) in freeze:
+                raise ArgumentError(f"{t.label} keeps its values (learn: false or freeze) but "
+                                    f"they are laid out by the states of {', '.join(over)}, "
+                                    "which the data replace: learn it too")
+            child = variables[t.child.name]
+            params: dict[str, Any] = {}
+            for p in t.form.params:
+                if p.name not in t.params:
+                    continue
+                if p.constraint is simplex and isinstance(child, Discrete):
+                    params[p.name] = ParamValue((), np.full(child.card, 1.0 / child.card))
+                elif p.constraint in neutral and p.event_ndim == 0:
+                    params[p.name] = ParamValue((), np.asarray(neutral[p.constraint]))
+                else:
+                    raise ArgumentError(f"{t.label}: its parameter {p.name!r} has no neutral "
+                                        "value to start from once the states change")
+            terms.append(dataclasses.replace(
+                t, child=child, parents=tuple(variables[p.name] for p in t.parents),
+                params=params))
+        # the statistics of earlier fits count other states: this fit starts afresh
+        program = Program(variables, terms, self.questions, self.inputs, name=self.name,
+                          description=self.description, path=self.path, ablated=self.ablated,
+                          learned=[], time=self.time)
+        return program, found
 
     def _repr_html_(self) -> str | None:
         """In a notebook: the decomposition in Bayesian-programming notation and the graph."""
@@ -457,6 +527,8 @@ class Fit:
     program: Program
     estimate: Estimate
     source: Path | None
+    #: the variables whose states the data set (their new states), written into the file
+    states: dict[str, list[str]] = dataclasses.field(default_factory=dict)
 
     @property
     def log_likelihood(self) -> float:
@@ -486,7 +558,8 @@ class Fit:
         locations = {t.label: t.form.location_scale for t in self.program.terms
                      if t.form.location_scale is not None}
         text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
-                             self.program.variables, self.record, simplex, locations)
+                             self.program.variables, self.record, simplex, locations,
+                             self.states)
         loads(text, str(path), path.parent)  # the fitted file must load as a program
         return text
 

@@ -577,3 +577,32 @@ def test_columns_of_other_names_are_read_as_the_variables_they_are_mapped_to(tmp
                      *args]) == 2
         err = capsys.readouterr().err
         assert expected in err and "Traceback" not in err, err
+
+
+def test_a_variable_takes_the_states_of_its_data_and_is_learned_anew(tmp_path, capsys):
+    source = tmp_path / "sensor.yaml"
+    source.write_text(NORMAL)
+    data = normal_data(11).replace({"M": {"wood": "cork", "silk": "steel", "felt": "foam"}})
+    csv = tmp_path / "lab.csv"
+    data.rename(columns={"M": "material"}).to_csv(csv, index=False)
+    out = tmp_path / "lab.yaml"
+    assert main(["learn", str(source), str(csv), "-o", str(out), "--column", "material=M",
+                 "--states-from-data", "M"]) == 0
+    lab = bayesprog.load(out)
+    assert lab.variables["M"].states == ("cork", "foam", "steel")  # sorted, as written
+    assert "# a comment the fitted file must keep" in out.read_text()
+    # as a program declaring those states, fitted to the same data (values to their digits)
+    declared = bayesprog.loads(NORMAL.replace("[wood, silk, felt]", "[cork, foam, steel]"))
+    direct = declared.fit(data)
+    for term in ("P(M)", "P(E | M)"):
+        for name, value in direct.program.term(term).params.items():
+            np.testing.assert_allclose(lab.term(term).params[name].array, value.array,
+                                       rtol=2e-3, atol=1e-4)
+    counts = data["M"].value_counts(normalize=True)
+    np.testing.assert_allclose(lab.term("P(M)").params["table"].array,
+                               [counts["cork"], counts["foam"], counts["steel"]], atol=1e-3)
+    # a term over M that keeps its values cannot follow the new states
+    capsys.readouterr()
+    assert main(["learn", str(source), str(csv), "-o", str(tmp_path / "x.yaml"), "--column",
+                 "material=M", "--states-from-data", "M", "--freeze", "P(M)"]) == 2
+    assert "P(M) keeps its values" in capsys.readouterr().err

@@ -184,17 +184,24 @@ def _record(record: FitRecord) -> CommentedMap:
 def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
                   variables: Mapping[str, Variable], record: FitRecord,
                   simplex: Mapping[str, Collection[str]] | None = None,
-                  locations: Mapping[str, tuple[str, str]] | None = None) -> str:
+                  locations: Mapping[str, tuple[str, str]] | None = None,
+                  states: Mapping[str, list[str]] | None = None) -> str:
     """``text`` (a program file) with the learned ``params`` (by term label) written in place of
     the old values, to the record's ``digits`` (``simplex``: the parameters of each term whose
     last axis is a distribution, kept summing to one; ``locations``: each term's location and
     scale parameters, the location written to its standard error), and ``record`` appended to
-    its ``learned:`` list."""
+    its ``learned:`` list; ``states``: variables that take new states (from the data),
+    declared so."""
     digits = record.digits or DIGITS
     simplex, locations = simplex or {}, locations or {}
     rows = record.rows_supporting or record.rows_used
     yaml = _yaml()
     doc = yaml.load(text)
+    for name, names in (states or {}).items():
+        declaration = doc["variables"][name]
+        var = variables[name]
+        assert isinstance(var, Discrete)
+        declaration["states"] = _flow([_key(var, s) for s in names])
     done = set()
     for item in doc.get("decomposition", []):
         label = canonical(item.get("term"))
