@@ -232,6 +232,7 @@ def manifest(experiment: Experiment) -> dict:
         files[which] = scenario.program_path(which)
     if scenario.sensor_model is not None and scenario.sensor_model.path is not None:
         files["sensor_model"] = scenario.sensor_model.path
+    files.update(scenario.recordings_paths())  # what a lab's programs are learned from
     return {
         # a search's settings (tune:) do not change what a run computes
         "experiment": experiment.spec.model_dump(exclude={"tune"}),

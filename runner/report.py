@@ -548,7 +548,7 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
         lines += ["", ", ".join(f"{t} ({names[scenario.task_material(t)]}): recognised "
                                 f"{100 * rate[t]:.1f}%, final Gamma per border cell "
                                 f"{per[t]:.1f} mm" for t in tasks) + "."]
-        if worst_task == hardest:
+        if worst_task == hardest and len({round(r, 3) for r in rate.values()}) > 1:
             lines.append(f"The least accurately followed task, {worst_task}, is also the one "
                          "whose material is least recognised, as the paper explains its T3.")
         else:

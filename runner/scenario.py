@@ -128,8 +128,27 @@ class ObjectSpec(_Strict):
         return self
 
 
+#: the columns of a lab's recordings, by default: the probed material and the two features
+RECORDING_COLUMNS = {"material": "M", "texture": "E", "compliance": "C"}
+#: the perception program whose forms a lab's recordings are learned into, by default
+PERCEPTION_TEMPLATE = Path(__file__).resolve().parents[1] / "models" / "pi_per.yaml"
+
+
+class RecordingsSpec(_Strict):
+    """A perception program learned from a lab's recordings, at load."""
+
+    recordings: str = Field(description="a CSV or Parquet file of probes (relative to the "
+                            "scenario): one row per probe, its material and its two readings")
+    program: str | None = Field(None, description="the program whose forms are learned (by "
+                                "default the runner's pi_per.yaml: a Normal per material and "
+                                "feature)")
+    columns: dict[str, str] = Field(default_factory=lambda: dict(RECORDING_COLUMNS),
+                                    description="the variable each column holds (columns "
+                                    "named M, E, C need none)")
+
+
 class ProgramsSpec(_Strict):
-    perception: str
+    perception: str | RecordingsSpec
     shape: str
     target: str
 
@@ -138,7 +157,16 @@ class SensorSpec(_Strict):
     model: str | None = Field(None, description="a sensor model file (relative to the "
                               "scenario) the simulated probes are drawn from; by default the "
                               "perception program's own Normals")
+    recordings: str | None = Field(None, description="draw the simulated probes from a sensor "
+                                   "model fitted to these recordings (per material, a "
+                                   "skew-normal per feature and their correlation)")
     extra_noise: float = Field(0.0, ge=0)
+
+    @model_validator(mode="after")
+    def _one_source(self) -> SensorSpec:
+        if self.model is not None and self.recordings is not None:
+            raise ValueError("expected a sensor model or recordings, not both")
+        return self
 
 
 class ScenarioSpec(_Strict):
@@ -292,7 +320,21 @@ class Scenario:
         return out
 
     def program_path(self, which: str) -> Path:
-        return (self.path.parent / getattr(self.spec.programs, which)).resolve()
+        named = getattr(self.spec.programs, which)
+        if isinstance(named, RecordingsSpec):  # the program its recordings are learned into
+            return ((self.path.parent / named.program).resolve() if named.program
+                    else PERCEPTION_TEMPLATE)
+        return (self.path.parent / named).resolve()
+
+    def recordings_paths(self) -> dict[str, Path]:
+        """The recordings the scenario learns from: for its perception, for its sensor."""
+        out = {}
+        if isinstance(self.spec.programs.perception, RecordingsSpec):
+            out["perception_recordings"] = (self.path.parent
+                                            / self.spec.programs.perception.recordings).resolve()
+        if self.spec.sensor.recordings is not None:
+            out["sensor_recordings"] = (self.path.parent / self.spec.sensor.recordings).resolve()
+        return out
 
     def load_target(self, terms: Mapping[str, Mapping[str, Any]] | None = None
                     ) -> bayesprog.Program:
@@ -334,12 +376,22 @@ def load_scenario(path: str | Path) -> Scenario:
     """Load and check a scenario file; problems are reported as ``FILE:LINE:COL: message``."""
     path = Path(path)
     located, spec = load_document(path, ScenarioSpec)
+    files = {"shape": spec.programs.shape, "target": spec.programs.target}
+    recordings = spec.programs.perception if isinstance(spec.programs.perception,
+                                                        RecordingsSpec) else None
+    if isinstance(spec.programs.perception, str):
+        files["perception"] = spec.programs.perception
+    elif recordings is not None and recordings.program is not None:
+        files["perception"] = recordings.program
     unread = [located.diagnostic(("programs", which), f"{which} program {name!r}: {problem}")
-              for which, name in spec.programs.model_dump().items()
+              for which, name in files.items()
               if (problem := reference_problem((path.parent / name).resolve(), "program", name))]
     if unread:
         raise SpecError(unread)
-    perception = bayesprog.load((path.parent / spec.programs.perception).resolve())
+    if recordings is None:
+        perception = bayesprog.load((path.parent / files["perception"]).resolve())
+    else:
+        perception = _learned_perception(path, recordings, located)
     materials = perception.variables["M"].states  # type: ignore[union-attr]
     target = _load_target((path.parent / spec.programs.target).resolve(), spec)
     diags = []
@@ -384,6 +436,8 @@ def load_scenario(path: str | Path) -> Scenario:
                                             f"{obj.template!r}: expected one of "
                                             f"{', '.join(spec.templates)}"))
     sensor_model = None
+    if spec.sensor.recordings is not None:
+        sensor_model = _fitted_sensor(path, spec, located, materials)
     if spec.sensor.model is not None:
         model_path = (path.parent / spec.sensor.model).resolve()
         problem = reference_problem(model_path, "sensor model", spec.sensor.model)
@@ -428,6 +482,67 @@ def _clipped(scenario: Scenario, located: Any) -> list:
                 f"the grid ({_extent(scenario.spec)} metres): {int(outside.sum())} of its "
                 f"{len(polygon)} corners are outside; it is clipped to the grid"))
     return out
+
+
+def _recordings_frame(path: Path, name: str, columns: Mapping[str, str], located: Any,
+                      where: tuple) -> tuple[Path, Any, dict[str, str]]:
+    """The recordings ``name`` (relative to the scenario at ``path``): the file, a DataFrame of
+    its columns M, E, C, and the columns it reads under another name; a problem at ``where``."""
+    from bayesprog.learning.data import DataError, read_frame
+
+    file = (path.parent / name).resolve()
+    problem = reference_problem(file, "recordings", name) if not file.is_file() else None
+    if problem:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {problem}")])
+    try:
+        frame, _, _, _ = read_frame(str(file))
+    except DataError as exc:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}")]) from None
+    rename = {c: v for c, v in columns.items() if c in frame.columns and c != v}
+    frame = frame.rename(columns=rename)
+    missing = [v for v in ("M", "E", "C") if v not in frame.columns]
+    if missing:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: no column for "
+                                            f"{', '.join(missing)} (columns: "
+                                            f"{', '.join(map(str, frame.columns))}; name the "
+                                            "columns with columns: {COLUMN: VARIABLE})")])
+    return file, frame, rename
+
+
+def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayesprog.Program:
+    """The perception program learned from a lab's recordings: the template's forms, the
+    materials of the recordings (as written), a Normal per material and feature fitted by
+    maximum likelihood (as ``bayesprog learn --states-from-data M`` does)."""
+    where = ("programs", "perception", "recordings")
+    file, _, rename = _recordings_frame(path, spec.recordings, spec.columns, located, where)
+    template = (path.parent / spec.program).resolve() if spec.program else PERCEPTION_TEMPLATE
+    try:
+        return bayesprog.load(template).fit(str(file), columns=rename or None,
+                                            states_from_data=["M"]).program
+    except bayesprog.BayesprogError as exc:
+        raise SpecError([located.diagnostic(where, f"recordings {spec.recordings!r}: "
+                                            f"{exc}")]) from None
+
+
+def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
+                   materials: tuple[str, ...]) -> SensorModel:
+    where = ("sensor", "recordings")
+    assert spec.sensor.recordings is not None
+    columns = (spec.programs.perception.columns
+               if isinstance(spec.programs.perception, RecordingsSpec) else RECORDING_COLUMNS)
+    file, frame, _ = _recordings_frame(path, spec.sensor.recordings, columns, located, where)
+    found = sorted({str(m) for m in frame["M"]})
+    lacking = [m for m in materials if m not in found]
+    if lacking:
+        raise SpecError([located.diagnostic(where, f"recordings {spec.sensor.recordings!r} hold "
+                                            f"no probe of {', '.join(lacking)}: the simulated "
+                                            "sensor needs each material of the perception "
+                                            "program")])
+    try:
+        return SensorModel.from_recordings(frame, materials, file)
+    except ValueError as exc:
+        raise SpecError([located.diagnostic(where, f"recordings {spec.sensor.recordings!r}: "
+                                            f"{exc}")]) from None
 
 
 def _extent(spec: ScenarioSpec) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -116,6 +116,46 @@ class SensorModel:
                                                    scale=normals["C"][1][i]))
             for i, m in enumerate(materials)})
         return cls(spec, materials)
+
+    @classmethod
+    def from_recordings(cls, frame: Any, materials: Sequence[str],
+                        path: Path | None = None) -> SensorModel:
+        """A sensor model fitted to a lab's recordings (a DataFrame of columns M, E, C): per
+        material, each feature's skew-normal by maximum likelihood (``scipy.stats.skewnorm.fit``:
+        its shape is this model's ``skew``, its location and scale ``loc`` and ``scale``), and
+        the correlation of the two features' symmetric parts, estimated by the correlation of
+        their ranks (Spearman's, turned into the Normal's: ``2 sin(pi rho_s / 6)``), which
+        skew leaves nearly unchanged. Raises ValueError for a material with too few probes."""
+        from scipy import stats
+
+        specs = {}
+        for material in materials:
+            rows = frame[frame["M"].astype(str) == material]
+            if len(rows) < 10:
+                raise ValueError(f"{len(rows)} probe(s) of {material}: expected at least 10 "
+                                 "to fit its readings")
+            features = {}
+            for name, column in (("texture", "E"), ("compliance", "C")):
+                x = np.asarray(rows[column], float)
+                x = x[np.isfinite(x)]
+                if len(x) < 10 or np.std(x) == 0:
+                    raise ValueError(f"the {name} of {material}: expected at least 10 probes "
+                                     "that differ")
+                shape, loc, scale = stats.skewnorm.fit(x)
+                features[name] = FeatureSpec(loc=float(loc), scale=float(scale),
+                                             skew=float(shape))
+            both = rows[["E", "C"]].astype(float).dropna()
+            rho_s = float(stats.spearmanr(both["E"], both["C"]).statistic)
+            rho = float(np.clip(2 * np.sin(np.pi * rho_s / 6), -0.99, 0.99))
+            specs[material] = MaterialSpec(texture=features["texture"],
+                                           compliance=features["compliance"],
+                                           correlation=0.0 if not np.isfinite(rho) else rho,
+                                           why="fitted to the recordings")
+        name = path.name if path is not None else "recordings"
+        spec = SensorModelSpec(name=f"fitted to {name}", materials=specs,
+                               description="per material, a skew-normal per feature fitted by "
+                               "maximum likelihood, and their rank correlation")
+        return cls(spec, materials)  # its file is the recordings, kept with the scenario's
 
     def record(self, per_material: int, seed: int, extra_noise: float = 0.0) -> dict[str, list]:
         """A training set: ``per_material`` probes of each material, each material from its own

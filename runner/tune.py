@@ -309,6 +309,8 @@ def _manifest(search: Search) -> dict:
                 files[f"{which} {i} {program}"] = scenario.program_path(program)
             if scenario.sensor_model is not None and scenario.sensor_model.path is not None:
                 files[f"{which} {i} sensor"] = scenario.sensor_model.path
+            for role, recorded in scenario.recordings_paths().items():
+                files[f"{which} {i} {role}"] = recorded
     return {"tune": search.tune.model_dump(), "seed": search.spec.seed,
             "iterations": search.iterations,
             "files": {k: Path(v).read_text(encoding="utf-8") for k, v in sorted(files.items())}}
