@@ -548,7 +548,9 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
         lines += ["", ", ".join(f"{t} ({names[scenario.task_material(t)]}): recognised "
                                 f"{100 * rate[t]:.1f}%, final Gamma per border cell "
                                 f"{per[t]:.1f} mm" for t in tasks) + "."]
-        if worst_task == hardest and len({round(r, 3) for r in rate.values()}) > 1:
+        if len({round(float(r), 3) for r in rate.values()}) == 1:
+            pass  # every task's material recognised alike: perception does not order them
+        elif worst_task == hardest:
             lines.append(f"The least accurately followed task, {worst_task}, is also the one "
                          "whose material is least recognised, as the paper explains its T3.")
         else:
