@@ -123,9 +123,11 @@ class SensorModel:
         """A sensor model fitted to a lab's recordings (a DataFrame of columns M, E, C): per
         material, each feature's skew-normal by maximum likelihood (``scipy.stats.skewnorm.fit``:
         its shape is this model's ``skew``, its location and scale ``loc`` and ``scale``), and
-        the correlation of the two features' symmetric parts, estimated by the correlation of
-        their ranks (Spearman's, turned into the Normal's: ``2 sin(pi rho_s / 6)``), which
-        skew leaves nearly unchanged. Raises ValueError for a material with too few probes."""
+        the correlation of the two features' symmetric parts: the features' correlation (from
+        their ranks, Spearman's turned into the Normal's, ``2 sin(pi rho_s / 6)``) divided by
+        what the skewed parts take from it (each feature's variance is ``scale^2 (1 - 2
+        delta^2 / pi)``, of which the symmetric part carries ``scale^2 (1 - delta^2)``).
+        Raises ValueError for a material with too few probes."""
         from scipy import stats
 
         specs = {}
@@ -146,7 +148,10 @@ class SensorModel:
                                              skew=float(shape))
             both = rows[["E", "C"]].astype(float).dropna()
             rho_s = float(stats.spearmanr(both["E"], both["C"]).statistic)
-            rho = float(np.clip(2 * np.sin(np.pi * rho_s / 6), -0.99, 0.99))
+            observed = 2 * np.sin(np.pi * rho_s / 6)
+            delta2 = [(f.skew ** 2) / (1 + f.skew ** 2) for f in features.values()]
+            carried = np.sqrt(np.prod([(1 - d) / (1 - 2 * d / np.pi) for d in delta2]))
+            rho = float(np.clip(observed / carried, -0.99, 0.99))
             specs[material] = MaterialSpec(texture=features["texture"],
                                            compliance=features["compliance"],
                                            correlation=0.0 if not np.isfinite(rho) else rho,

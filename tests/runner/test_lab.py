@@ -136,3 +136,137 @@ def test_verdicts_the_runs_could_not_settle_say_so_and_others_do_not():
     many = findings(statistics_table(_results(0.01, 0.08, runs=60), _spec(60), {"T1": 10}),
                     _spec(60))
     assert not any("too few" in verdict for _, _, verdict in many)
+
+
+# a lab's recordings ---------------------------------------------------------------------------
+
+RECORDED = """\
+scenario: 1
+name: recorded
+programs:
+  perception: {{recordings: recordings.csv}}
+  shape: {models}/pi_obj.yaml
+  target: {models}/pi_tar.yaml
+grid: {{shape: [20, 30], cell: 0.01}}
+background: cork
+templates:
+  square: [[-0.04, -0.04], [0.04, -0.04], [0.04, 0.04], [-0.04, 0.04]]
+objects:
+  - {{template: square, material: steel, at: [0.08, 0.08], rotation: 10}}
+  - {{template: square, material: felt, at: [0.1, 0.21]}}
+tasks:
+  follow_steel: steel
+  follow_felt: felt
+sensor:
+  recordings: recordings.csv
+"""
+OURS = {"wood": "cork", "plush": "felt", "silicone": "steel"}
+
+
+def recorded(tmp_path: Path, edit: tuple[str, str] = ("", "")) -> Path:
+    import pandas as pd
+
+    probes = pd.read_csv(MODELS / "data" / "probes.csv")
+    probes = probes[probes.M.isin(list(OURS))].replace({"M": OURS})
+    probes.rename(columns={"M": "material", "E": "texture", "C": "compliance"}).to_csv(
+        tmp_path / "recordings.csv", index=False)
+    path = tmp_path / "recorded.yaml"
+    text = RECORDED.format(models=MODELS)
+    assert not edit[0] or edit[0] in text
+    path.write_text(text.replace(*edit) if edit[0] else text)
+    return path
+
+
+def test_a_scenario_learns_its_perception_from_its_recordings(tmp_path, capsys):
+    scenario = load_scenario(recorded(tmp_path))
+    assert scenario.materials == ("cork", "felt", "steel")
+    # as bayesprog learn would write it, with the lab's columns and materials
+    assert main(["learn", str(MODELS / "pi_per.yaml"), str(tmp_path / "recordings.csv"), "-o",
+                 str(tmp_path / "per.yaml"), "--column", "material=M", "--column", "texture=E",
+                 "--column", "compliance=C", "--states-from-data", "M"]) == 0
+    import bayesprog
+
+    learned = bayesprog.load(tmp_path / "per.yaml")
+    for term in ("P(E | M)", "P(C | M)"):
+        for name in ("mean", "sigma"):
+            np.testing.assert_allclose(scenario.perception.term(term).params[name].array,
+                                       learned.term(term).params[name].array, rtol=1e-3)
+    assert scenario.perception.learned[-1].data == "recordings.csv"
+
+
+def test_the_sensor_fitted_to_the_recordings_draws_like_them(tmp_path):
+    import pandas as pd
+
+    scenario = load_scenario(recorded(tmp_path))
+    data = pd.read_csv(tmp_path / "recordings.csv")
+    model = scenario.sensor_model
+    assert model is not None
+    for i, material in enumerate(scenario.materials):
+        rows = data[data.material == material]
+        z = np.random.default_rng(i).standard_normal((4000, 4))
+        texture, compliance = model.draw(np.full(4000, i), z)
+        for drawn, column in ((texture, "texture"), (compliance, "compliance")):
+            x = rows[column].to_numpy()
+            # each feature: scipy's maximum-likelihood skew-normal, and draws the data agree with
+            shape, loc, scale = stats.skewnorm.fit(x)
+            spec = getattr(model.spec.materials[material], column)
+            assert (spec.skew, spec.loc, spec.scale) == pytest.approx((shape, loc, scale))
+            assert stats.ks_2samp(x, drawn).pvalue > 0.001, (material, column)
+        rank = stats.spearmanr(rows.texture, rows.compliance).statistic
+        assert stats.spearmanr(texture, compliance).statistic == pytest.approx(rank, abs=0.08)
+
+
+def test_a_sensor_model_is_recovered_from_its_own_recordings():
+    from runner.sensor import SensorModel, load_sensor_model
+
+    truth = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml")
+    import pandas as pd
+
+    frame = pd.DataFrame(truth.record(3000, seed=3))
+    fitted = SensorModel.from_recordings(frame, truth.materials)
+    for material in ("wood", "plush", "feather"):
+        a, b = truth.spec.materials[material], fitted.spec.materials[material]
+        for feature in ("texture", "compliance"):
+            x, y = getattr(a, feature), getattr(b, feature)
+            # a skew-normal's mean and spread (its three parameters trade off one another)
+            assert stats.skewnorm(y.skew, y.loc, y.scale).mean() == pytest.approx(
+                stats.skewnorm(x.skew, x.loc, x.scale).mean(), abs=0.05 * x.scale)
+            assert stats.skewnorm(y.skew, y.loc, y.scale).std() == pytest.approx(
+                stats.skewnorm(x.skew, x.loc, x.scale).std(), rel=0.05)
+    # and the two readings go together as they do (the correlation of the symmetric parts is
+    # poorly determined where both features are strongly skewed; what they draw is not)
+    for i, material in enumerate(truth.materials):
+        z = np.random.default_rng(i).standard_normal((6000, 4))
+        drawn = [stats.spearmanr(*m.draw(np.full(6000, i), z)).statistic for m in (truth, fitted)]
+        assert drawn[1] == pytest.approx(drawn[0], abs=0.06), material
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (("perception: {recordings: recordings.csv}", "perception: {recordings: none.csv}"),
+     "recorded.yaml:4:28: recordings 'none.csv': no such file"),
+    (("perception: {recordings: recordings.csv}",
+      "perception: {recordings: recordings.csv, columns: {mat: M}}"),
+     "recorded.yaml:4:28: recordings 'recordings.csv': no column for M"),
+    (("background: cork", "background: oak"), "unknown material 'oak': expected one of cork, "
+                                              "felt, steel"),
+])
+def test_a_labs_recordings_are_checked_at_their_line(tmp_path, capsys, edit, expected):
+    path = recorded(tmp_path, edit)
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err, err
+
+
+def test_an_experiment_runs_on_a_labs_recordings_and_reports_where_they_came_from(tmp_path):
+    path = recorded(tmp_path)
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text(f"experiment: 1\nname: lab\nrunner: haptic\nscenario: {path}\n"
+                          "tasks: [follow_steel]\nconfigurations: [full, without_S]\nruns: 3\n"
+                          "iterations: 8\nseed: 1\n")
+    assert main(["run", str(experiment), "--out", str(tmp_path / "out"), "-q",
+                 "--no-animation"]) == 0
+    report = (tmp_path / "out" / "report" / "report.md").read_text()
+    assert "learned from 900 probes of `recordings.csv`" in report
+    assert "sensor model `fitted to recordings.csv`" in report
+    manifest = json.loads((tmp_path / "out" / "experiment.json").read_text())
+    assert {"perception_recordings", "sensor_recordings"} <= set(manifest["files"])
