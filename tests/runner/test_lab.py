@@ -270,3 +270,11 @@ def test_an_experiment_runs_on_a_labs_recordings_and_reports_where_they_came_fro
     assert "sensor model `fitted to recordings.csv`" in report
     manifest = json.loads((tmp_path / "out" / "experiment.json").read_text())
     assert {"perception_recordings", "sensor_recordings"} <= set(manifest["files"])
+
+
+def test_the_shipped_lab_example_is_checked_whole(capsys):
+    files = [MODELS / "scenarios" / "lab_recorded.yaml", MODELS / "experiments" / "lab_recorded.yaml"]
+    assert main(["validate", *map(str, files)]) == 0
+    scenario = load_scenario(files[0])
+    assert scenario.materials == ("cork", "felt", "steel") and scenario.warnings == []
+    assert list(scenario.spec.tasks) == ["follow_steel", "follow_felt"]
