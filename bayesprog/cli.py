@@ -84,12 +84,12 @@ def _plugin_validate(file: str, kind: str) -> list[str] | None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from bayesprog.files import file_kind
+    from bayesprog.files import KINDS, file_kind
 
     problems = 0
     for file in args.files:
         kind = file_kind(file) if Path(file).is_file() else None
-        if kind not in (None, "program"):
+        if kind is not None and kind != KINDS["bayesprog"]:  # not a program: a plugin's file
             try:
                 warnings = _plugin_validate(file, kind)
             except SpecError as exc:

@@ -488,16 +488,18 @@ def _recordings_frame(path: Path, name: str, columns: Mapping[str, str], located
                       where: tuple) -> tuple[Path, Any, dict[str, str]]:
     """The recordings ``name`` (relative to the scenario at ``path``): the file, a DataFrame of
     its columns M, E, C, and the columns it reads under another name; a problem at ``where``."""
-    from bayesprog.learning.data import DataError, read_frame
+    import pandas as pd
 
     file = (path.parent / name).resolve()
     problem = reference_problem(file, "recordings", name) if not file.is_file() else None
     if problem:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: {problem}")])
     try:
-        frame, _, _, _ = read_frame(str(file))
-    except DataError as exc:
-        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}")]) from None
+        frame = (pd.read_parquet(file) if file.suffix.lower() in (".parquet", ".pq")
+                 else pd.read_csv(file, sep=None, engine="python"))
+    except (OSError, ValueError, UnicodeDecodeError, ImportError) as exc:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: cannot read it as "
+                                            f"CSV or Parquet: {exc}")]) from None
     rename = {c: v for c, v in columns.items() if c in frame.columns and c != v}
     frame = frame.rename(columns=rename)
     missing = [v for v in ("M", "E", "C") if v not in frame.columns]

@@ -115,7 +115,6 @@ objects:
 tasks:
   T1: silicone
   T2: wood
-  T3: plush
 """
     path = tmp_path / "tiny.yaml"
     path.write_text(text, encoding="utf-8")
@@ -133,7 +132,6 @@ INTERIOR_SILICONE = {(2, 1), (2, 2), (3, 1), (3, 2)}
 INTERIOR_BORDERS = {
     "T1": INTERIOR_SILICONE,
     "T2": {(1, 1), (1, 2), (4, 1), (4, 2), (2, 0), (3, 0), (2, 3), (3, 3)},
-    "T3": set(),
 }
 # The same square in the corner: cells ix in {0, 1}, iy in {0, 1}. Cell (0, 0) only touches
 # silicone and the edge of the grid, which is not another material: it is not a border cell.
@@ -142,7 +140,6 @@ CORNER_SILICONE = {(0, 0), (0, 1), (1, 0), (1, 1)}
 CORNER_BORDERS = {
     "T1": {(0, 1), (1, 0), (1, 1)},
     "T2": {(2, 0), (2, 1), (0, 2), (1, 2)},
-    "T3": set(),
 }
 
 

@@ -158,7 +158,8 @@ def test_farthest_points_pick_the_farthest_each_time():
                                       "height": float("inf")}}, "ball": {"sphere": 0.03}}},
      r"small_volume.yaml:\d+:\d+: .*finite number"),
     ({"template_points": 2000}, r"small_volume.yaml:\d+:\d+: .*less than or equal to 1500"),
-    ({"objects": [{"template": "box", "material": "plush", "at": [1.0, 1.0, 1.0]}]},
+    ({"objects": [{"template": "box", "material": "plush", "at": [1.0, 1.0, 1.0]}],
+      "tasks": {"T1": "plush", "T3": "wood"}},
      r"small_volume.yaml:\d+:\d+: this object \(plush\) holds no cell's centre"),
     ({"templates": {"box": {"cube": [0.06, 0.045, 0.045]}, "ball": {"spere": 0.03}}},
      r"small_volume.yaml:\d+:\d+: unknown key 'cube': expected box, circle, ellipse, "
