@@ -382,20 +382,7 @@ def test_a_density_answers_a_number_for_a_number_and_arrays_for_arrays():
 
 # 6. tables printed, read back as DataFrames; learned values to the digits the data support ----
 
-STUDENT = """\
-bayesprog: 1
-variables:
-  D: {states: [easy, hard]}
-  I: {states: [low, high]}
-  G: {states: [A, B, C]}
-decomposition:
-  - {term: P(D), form: table, table: [0.6, 0.4]}
-  - {term: P(I), form: table, table: [0.7, 0.3]}
-  - term: P(G | I, D)
-    form: table
-    table: {low: {easy: [0.3, 0.4, 0.3], hard: [0.05, 0.25, 0.7]},
-            high: {easy: [0.9, 0.08, 0.02], hard: [0.5, 0.3, 0.2]}}
-"""
+STUDENT = (ROOT / "models" / "examples" / "student.yaml").read_text()
 G_TABLE = [[[0.3, 0.4, 0.3], [0.05, 0.25, 0.7]], [[0.9, 0.08, 0.02], [0.5, 0.3, 0.2]]]
 
 

@@ -16,20 +16,7 @@ import pytest
 HEAVY = ("numpy", "scipy", "networkx", "matplotlib", "pandas", "pydantic", "pgmpy", "yaml",
          "ruamel", "opt_einsum", "pyarrow")
 
-STUDENT = """\
-bayesprog: 1
-variables:
-  D: {states: [easy, hard]}
-  I: {states: [low, high]}
-  G: {states: [A, B, C]}
-decomposition:
-  - {term: P(D), form: table, table: [0.6, 0.4]}
-  - {term: P(I), form: table, table: [0.7, 0.3]}
-  - term: P(G | I, D)
-    form: table
-    table: {low: {easy: [0.3, 0.4, 0.3], hard: [0.05, 0.25, 0.7]},
-            high: {easy: [0.9, 0.08, 0.02], hard: [0.5, 0.3, 0.2]}}
-"""
+STUDENT = (Path(__file__).parents[1] / "models" / "examples" / "student.yaml").read_text()
 
 
 def loaded_after(code: str, cwd: Path | None = None) -> set[str]:

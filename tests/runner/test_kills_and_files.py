@@ -131,30 +131,29 @@ _FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                  suppress_health_check=[HealthCheck.too_slow])
 
 
-@_FUZZ
-@given(_edited(_SCENARIO))
-def test_generated_scenarios_load_or_are_refused_at_a_place(data):
-    path = MODELS / "scenarios" / f".fuzz_{os.getpid()}.yaml"
+def _loads_or_is_refused(folder: Path, data: dict, load) -> None:
+    """``data`` written as a file beside the shipped ones (for their relative paths): it loads,
+    or is refused with a bayesprog error (a message at its place), never anything else."""
+    path = folder / f".fuzz_{os.getpid()}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     try:
-        load_scenario(path)
+        load(path)
     except BayesprogError as exc:
         assert str(exc)
     finally:
         path.unlink()
+
+
+@_FUZZ
+@given(_edited(_SCENARIO))
+def test_generated_scenarios_load_or_are_refused_at_a_place(data):
+    _loads_or_is_refused(MODELS / "scenarios", data, load_scenario)
 
 
 @_FUZZ
 @given(_edited(_EXPERIMENT))
 def test_generated_experiments_load_or_are_refused_at_a_place(data):
-    path = MODELS / "experiments" / f".fuzz_{os.getpid()}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    try:
-        load_experiment(path)
-    except BayesprogError as exc:
-        assert str(exc)
-    finally:
-        path.unlink()
+    _loads_or_is_refused(MODELS / "experiments", data, load_experiment)
 
 
 # kills at random moments -------------------------------------------------------------------
