@@ -278,3 +278,20 @@ def test_the_shipped_lab_example_is_checked_whole(capsys):
     scenario = load_scenario(files[0])
     assert scenario.materials == ("cork", "felt", "steel") and scenario.warnings == []
     assert list(scenario.spec.tasks) == ["follow_steel", "follow_felt"]
+
+
+def test_the_notebook_speaks_the_labs_task_names(tmp_path):
+    from runner.notebook import Results, step_view
+
+    path = recorded(tmp_path)
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text(f"experiment: 1\nname: lab\nrunner: haptic\nscenario: {path}\n"
+                          "tasks: [follow_felt]\nconfigurations: [full, without_S]\nruns: 2\n"
+                          "iterations: 6\nseed: 1\n")
+    assert main(["run", str(experiment), "--out", str(tmp_path / "out"), "-q", "--no-report"]) == 0
+    results = Results(tmp_path / "out")
+    assert set(results.table()["task"]) == {"follow_felt"}
+    view = step_view(tmp_path / "out", task="follow_felt", steps=3)
+    assert "follow_felt" in view._repr_html_()
+    with pytest.raises(Exception, match="expected one of follow_steel, follow_felt"):
+        step_view(tmp_path / "out", task="T1", steps=3)
