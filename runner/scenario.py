@@ -467,20 +467,27 @@ def load_scenario(path: str | Path) -> Scenario:
 
 
 def _clipped(scenario: Scenario, located: Any) -> list:
-    """Objects of a 2-D layout that reach past the grid's edge (they are clipped to it), each
-    named at its place in the file."""
-    if scenario.dims != 2:
-        return []
-    low = np.zeros(2)
+    """Objects that reach past the grid's edge (they are clipped to it), each named at its
+    place in the file: a polygon's corners, or points spread over a solid's surface."""
+    low = np.zeros(scenario.dims)
     high = np.asarray(scenario.spec.grid.shape, float) * scenario.spec.grid.cell
+    if scenario.dims == 2:
+        shapes = [(material, polygon, "corners") for material, polygon in scenario.polygons()]
+    else:
+        shapes = []
+        for obj in scenario.spec.objects:
+            solid = scenario.spec.templates[obj.template]  # type: ignore[index]
+            assert isinstance(solid, SolidSpec)
+            points = solid.surface(200) @ yaw(obj.rotation).T + np.asarray(obj.at)
+            shapes.append((obj.material, points, "surface points"))
     out = []
-    for i, (material, polygon) in enumerate(scenario.polygons()):
-        outside = np.any((polygon < low - 1e-12) | (polygon > high + 1e-12), axis=1)
+    for i, (material, points, what) in enumerate(shapes):
+        outside = np.any((points < low - 1e-12) | (points > high + 1e-12), axis=1)
         if outside.any():
             out.append(located.diagnostic(
                 ("objects", i), f"warning: object {i + 1} ({material}) reaches past the edge of "
                 f"the grid ({_extent(scenario.spec)} metres): {int(outside.sum())} of its "
-                f"{len(polygon)} corners are outside; it is clipped to the grid"))
+                f"{len(points)} {what} are outside; it is clipped to the grid"))
     return out
 
 

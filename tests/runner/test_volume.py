@@ -402,3 +402,16 @@ def test_tune_on_volumes_draws_them_from_above(tmp_path, capsys):
     assert visits.size == 26 * 18 * 10 and visits.sum() == 2 * 15
     for name in ("tune.png", "tune-visits.png"):
         assert (tmp_path / "out" / name).stat().st_size > 5_000
+
+
+def test_a_solid_past_the_volumes_edge_is_clipped_with_a_warning_at_its_line(tmp_path):
+    inside = load_scenario(_small_volume(tmp_path))
+    assert inside.warnings == []
+    path = _small_volume(tmp_path, objects=[
+        {"template": "box", "material": "plush", "at": [0.01, 0.05, 0.06]},
+        {"template": "ball", "material": "silicone", "at": [0.1, 0.13, 0.06]}])
+    scenario = load_scenario(path)
+    assert len(scenario.warnings) == 1
+    warning = str(scenario.warnings[0])
+    assert "small_volume.yaml:" in warning and "warning: object 1 (plush) reaches past" in warning
+    assert "surface points are outside; it is clipped to the grid" in warning
