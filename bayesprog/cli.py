@@ -12,7 +12,7 @@ import argparse
 import json
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -69,13 +69,7 @@ def _kind_hint(file: str) -> str | None:
 def _plugin_validate(file: str, kind: str) -> list[str] | None:
     """The warnings of a file of another kind than a program, checked by the runner plugin
     that knows that kind (its module's ``validate(path, kind)``); None when none does."""
-    from importlib.metadata import entry_points
-
-    for ep in sorted(entry_points(group="bayesprog.runners"), key=lambda ep: ep.name):
-        try:
-            plugin = ep.load()
-        except Exception:  # a broken plugin is reported by the command line's set-up
-            continue
+    for _, plugin in _plugins(quiet=True):
         check = getattr(plugin, "validate", None)
         found = check(file, kind) if check is not None else None
         if found is not None:
@@ -522,24 +516,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _plugin_commands(sub: argparse._SubParsersAction) -> None:
-    """The commands runner plugins add (their module's ``add_commands(subparsers)``); a plugin
-    that cannot be loaded adds none, and says why on stderr."""
+def _plugins(quiet: bool = False) -> Iterator[tuple[str, Any]]:
+    """The runner plugins of the ``bayesprog.runners`` entry point group, by name, loaded; one
+    that cannot be loaded is left out, and says why on stderr unless ``quiet``."""
     from importlib.metadata import entry_points
 
     for ep in sorted(entry_points(group="bayesprog.runners"), key=lambda ep: ep.name):
         try:
             plugin = ep.load()
         except Exception as exc:  # a broken plugin must not take the framework's CLI down
-            print(f"bayesprog: runner {ep.name!r} not loaded: {exc}", file=sys.stderr)
+            if not quiet:
+                print(f"bayesprog: runner {ep.name!r} not loaded: {exc}", file=sys.stderr)
             continue
+        yield ep.name, plugin
+
+
+def _plugin_commands(sub: argparse._SubParsersAction) -> None:
+    """The commands runner plugins add (their module's ``add_commands(subparsers)``); a plugin
+    that cannot be loaded adds none, and says why on stderr."""
+    for name, plugin in _plugins():
         add = getattr(plugin, "add_commands", None)
         if add is None:
             continue
         try:
             add(sub)
         except argparse.ArgumentError as exc:  # e.g. a command the framework has already
-            print(f"bayesprog: runner {ep.name!r}: {exc}", file=sys.stderr)
+            print(f"bayesprog: runner {name!r}: {exc}", file=sys.stderr)
 
 
 def _version() -> str:
