@@ -565,6 +565,34 @@ def _terminate(signum: int, frame: Any) -> None:
     raise _Terminated()
 
 
+def _deliver_again(unraisable: Any) -> None:
+    """``sys.unraisablehook`` while a command runs. Python cannot raise from a finaliser or a
+    weakref callback: a Ctrl-C or SIGTERM that lands in one would be printed as "Exception
+    ignored in ..." and lost, and the command would go on. Such a stop is sent to the main
+    thread again a moment later, once the finaliser has returned, to be raised where the command
+    is (a signal that lands in a finaliser again is sent again); anything else is reported as
+    Python does."""
+    import signal
+    import threading
+
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        signum = signal.SIGINT
+    elif isinstance(unraisable.exc_value, _Terminated):
+        signum = signal.SIGTERM
+    else:
+        sys.__unraisablehook__(unraisable)
+        return
+    # a real signal, not a flag: it also wakes a main thread blocked in a system call
+    again = threading.Timer(_AGAIN_AFTER, signal.pthread_kill,
+                            (threading.main_thread().ident, signum))
+    again.daemon = True
+    again.start()
+
+
+#: seconds after which a stop that landed in a finaliser is sent again
+_AGAIN_AFTER = 0.01
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 ok, 2 user error, 130 interrupted,
     141 when the output's reader closed the pipe, as ``bayesprog query ... | head``, 143 when
@@ -574,6 +602,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    previous_hook = sys.unraisablehook
+    if main_thread:
+        sys.unraisablehook = _deliver_again
     try:
         return _main(argv)
     except _Terminated:
@@ -589,6 +620,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
+            sys.unraisablehook = previous_hook
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -782,3 +782,40 @@ def test_a_second_yaml_document_and_a_limit_below_one_are_refused(tmp_path, caps
     assert "expected one document, found a second" in capsys.readouterr().err
     assert main(["query", str(SPRINKLER), "P(Rain)", "--limit", "0"]) == 2
     assert "--limit: expected at least 1 row, found 0" in capsys.readouterr().err
+
+
+_FINALISER = """
+import signal, sys, time
+from bayesprog import cli
+signal.signal(signal.SIGTERM, cli._terminate)
+sys.unraisablehook = cli._deliver_again
+class Stopped:
+    def __del__(self):
+        raise {raised}
+try:
+    Stopped()
+    time.sleep(1.5)
+    print("went on")
+except KeyboardInterrupt:
+    print("interrupted")
+except cli._Terminated:
+    print("terminated")
+"""
+
+
+@pytest.mark.parametrize("raised, seen", [("KeyboardInterrupt", "interrupted"),
+                                          ("cli._Terminated()", "terminated")])
+def test_a_stop_that_lands_in_a_finaliser_is_not_lost(raised, seen):
+    """Ctrl-C or SIGTERM raised inside a finaliser or weakref callback (where Python can only
+    print "Exception ignored") still stops the command, where it is, without a traceback."""
+    done = subprocess.run([sys.executable, "-c", _FINALISER.format(raised=raised)],
+                          capture_output=True, text=True, timeout=30)
+    assert done.stdout.strip() == seen
+    assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr
+
+
+def test_other_errors_in_finalisers_are_still_reported():
+    done = subprocess.run([sys.executable, "-c", _FINALISER.format(raised="ValueError('x')")],
+                          capture_output=True, text=True, timeout=30)
+    assert done.stdout.strip() == "went on"
+    assert "Exception ignored" in done.stderr and "ValueError" in done.stderr
