@@ -17,7 +17,7 @@
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+__version__ = "0.5.0"
 
 #: Where each public name lives. They are imported when first used, so that ``import
 #: bayesprog`` costs little (a command-line question pays only for what it asks; the notebook

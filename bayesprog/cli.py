@@ -1,5 +1,5 @@
 """The ``bayesprog`` command line: validate, show, graph, query, sample, learn, import, export,
-schema. An application adds its own commands: every runner plugin found through the
+schema, examples. An application adds its own commands: every runner plugin found through the
 ``bayesprog.runners`` entry point group is asked for them (its ``add_commands(subparsers)``).
 
 User errors print ``bayesprog: ...`` (or ``FILE:LINE:COL: ...`` lines) on stderr and exit with
@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import sys
+import textwrap
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,9 +31,12 @@ class _UserError(Exception):
     pass
 
 
-def _load(path: str) -> Program:
+def _load(name: str) -> Program:
+    """The program file ``name``, or the bundled program of that name."""
+    from bayesprog.bundled import resolve
     from bayesprog.program import load
 
+    path = str(resolve(name, "program"))
     try:
         return load(path)
     except SpecError:
@@ -41,7 +45,8 @@ def _load(path: str) -> Program:
             raise _UserError(hint) from None
         raise
     except FileNotFoundError:
-        raise _UserError(f"cannot read {path}: no such file") from None
+        raise _UserError(f"cannot read {path}: no such file, and no bundled program of that "
+                         "name (bayesprog examples lists them)") from None
     except IsADirectoryError:
         raise _UserError(f"cannot read {path}: it is a directory") from None
     except UnicodeDecodeError:
@@ -78,10 +83,12 @@ def _plugin_validate(file: str, kind: str) -> list[str] | None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from bayesprog.bundled import resolve
     from bayesprog.files import KINDS, file_kind
 
     problems = 0
-    for file in args.files:
+    for name in args.files:
+        file = str(resolve(name))
         kind = file_kind(file) if Path(file).is_file() else None
         if kind is not None and kind != KINDS["bayesprog"]:  # not a program: a plugin's file
             try:
@@ -115,6 +122,44 @@ def cmd_validate(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"{file}: ok")
     return EXIT_USER_ERROR if problems else 0
+
+
+def cmd_examples(args: argparse.Namespace) -> int:
+    from bayesprog.bundled import find, listing, root
+
+    entries = listing()
+    # the name that designates each one: its short name where that finds it, else its path
+    names = [e.short if find(e.short) == e.path else e.name for e in entries]
+    if args.json:
+        print(json.dumps([{"name": n, "kind": e.kind, "path": str(e.path),
+                           "description": e.description} for n, e in zip(names, entries,
+                                                                         strict=True)],
+                         indent=2))
+        return 0
+    width = max(len(n) for n in names)
+    print(f"bundled models, in {root()}")
+    print("(run or query one by its name; bayesprog examples copy NAME DIR copies it out)")
+    kind = None
+    for name, entry in zip(names, entries, strict=True):
+        if entry.kind != kind:
+            kind = entry.kind
+            print(f"\n{kind}s:" if kind != "data" else "\ndata:")
+        description = textwrap.shorten(entry.description, 96 - width, placeholder="...")
+        print(f"  {name:<{width}}  {description}")
+    return 0
+
+
+def cmd_examples_copy(args: argparse.Namespace) -> int:
+    from bayesprog.bundled import copy
+
+    folder = Path(args.folder)
+    if folder.exists() and not folder.is_dir():
+        raise _UserError(f"{folder}: not a folder")
+    written = copy(args.name, folder, force=args.force)
+    print(f"copied {args.name} into {folder}:")
+    for path in written:
+        print(f"  {path}")
+    return 0
 
 
 def cmd_show(args: argparse.Namespace) -> int:
@@ -297,6 +342,10 @@ def cmd_sample(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".csv", ".parquet"):
         raise _UserError(f"-o {args.output}: expected a .csv or .parquet file")
+    if out.suffix.lower() == ".parquet":
+        from bayesprog.extras import require
+
+        require("pyarrow", "parquet", f"writing {args.output}")
     program = _ablated(_load(args.file), args.ablate)
     inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
     evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
@@ -317,7 +366,10 @@ def cmd_sample(args: argparse.Namespace) -> int:
 def cmd_learn(args: argparse.Namespace) -> int:
     if args.max_iter < 1:
         raise _UserError(f"--max-iter: expected at least 1, found {args.max_iter}")
+    from bayesprog.bundled import resolve
+
     program = _load(args.file)
+    args.data = str(resolve(args.data, "data"))
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
     if not (args.tol >= 0 and np.isfinite(args.tol)):
@@ -395,14 +447,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("show", help="print a program in Bayesian-programming notation")
-    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
+                   "one (bayesprog examples)")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help='show the program with this term uniform, e.g. "P(S | M)"; repeatable '
                    "(default: none)")
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("graph", help="draw the graphical model (.dot, .png, .pdf, .svg)")
-    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
+                   "one (bayesprog examples)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="the drawing: .dot (Graphviz text), .png, .pdf or .svg")
     p.add_argument("--question", help="shade the known variables of this question (a name of "
@@ -410,7 +464,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_graph)
 
     p = sub.add_parser("query", help='ask a question, e.g. "P(A B | C=c1, D=0.3)"')
-    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
+                   "one (bayesprog examples)")
     p.add_argument("question", help="a named question of the file, or P(searched | known)")
     p.add_argument("--map", action="store_true",
                    help="the joint argmax instead of the posterior (default: the posterior)")
@@ -452,7 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_query)
 
     p = sub.add_parser("sample", help="draw joint samples of a program to CSV or Parquet")
-    p.add_argument("file", metavar="FILE", help="a program file")
+    p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
+                   "one (bayesprog examples)")
     p.add_argument("-n", type=int, required=True, metavar="N", help="number of draws")
     p.add_argument("-o", "--output", required=True, metavar="OUT.csv|.parquet",
                    help="one column per variable, states by name; its format from the "
@@ -507,6 +563,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help="write the program with this term uniform; repeatable (default: none)")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("examples", help="list the bundled models (the paper's experiment, "
+                       "example programs), or copy one out to edit")
+    p.add_argument("--json", action="store_true",
+                   help="the list as JSON: name, kind, path, description (default: a table)")
+    p.set_defaults(func=cmd_examples)
+    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    c = actions.add_parser("copy", help="copy a bundled model, with every file it names, "
+                           "into a folder")
+    c.add_argument("name", metavar="NAME", help="a name that bayesprog examples lists")
+    c.add_argument("folder", metavar="DIR", help="the folder to copy into (made if missing); "
+                   "the files keep their layout, so relative references still hold")
+    c.add_argument("--force", action="store_true",
+                   help="overwrite files that exist (default: refuse)")
+    c.set_defaults(func=cmd_examples_copy)
 
     p = sub.add_parser("schema", help="print the JSON Schema of program files")
     p.add_argument("-o", "--output", metavar="FILE",

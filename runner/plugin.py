@@ -126,11 +126,14 @@ def results(out: Path, table: Path) -> int:
 def _experiment_file(path: Path) -> Path:
     """``path`` as an experiment file of this runner, or a clear error."""
     from bayesprog import load_yaml
+    from bayesprog.bundled import resolve
 
+    path = resolve(str(path), "experiment")
     try:
         located, _ = load_yaml(path.read_text(encoding="utf-8"), str(path))
     except FileNotFoundError:
-        raise BayesprogError(f"cannot read {path}: no such file") from None
+        raise BayesprogError(f"cannot read {path}: no such file, and no bundled experiment of "
+                             "that name (bayesprog examples lists them)") from None
     except UnicodeDecodeError:
         raise BayesprogError(f"cannot read {path}: expected UTF-8 text (an experiment file)") \
             from None
@@ -170,8 +173,12 @@ def _say(warnings: list) -> None:
 
 
 def _scenario_path(target: Path) -> Path:
+    from bayesprog.bundled import resolve
+
+    target = resolve(str(target), "scenario")
     if not target.exists():
-        raise BayesprogError(f"cannot read {target}: no such file or folder")
+        raise BayesprogError(f"cannot read {target}: no such file or folder, and no bundled "
+                             "scenario of that name (bayesprog examples lists them)")
     if target.is_file():
         hint = wrong_kind(target, "scenario", "explore takes a scenario file or a models folder")
         if hint:

@@ -130,8 +130,12 @@ class ObjectSpec(_Strict):
 
 #: the columns of a lab's recordings, by default: the probed material and the two features
 RECORDING_COLUMNS = {"material": "M", "texture": "E", "compliance": "C"}
-#: the perception program whose forms a lab's recordings are learned into, by default
-PERCEPTION_TEMPLATE = Path(__file__).resolve().parents[1] / "models" / "pi_per.yaml"
+def perception_template() -> Path:
+    """The perception program whose forms a lab's recordings are learned into, by default: the
+    bundled ``pi_per``."""
+    from bayesprog.bundled import root
+
+    return root() / "pi_per.yaml"
 
 
 class RecordingsSpec(_Strict):
@@ -323,7 +327,7 @@ class Scenario:
         named = getattr(self.spec.programs, which)
         if isinstance(named, RecordingsSpec):  # the program its recordings are learned into
             return ((self.path.parent / named.program).resolve() if named.program
-                    else PERCEPTION_TEMPLATE)
+                    else perception_template())
         return (self.path.parent / named).resolve()
 
     def recordings_paths(self) -> dict[str, Path]:
@@ -524,7 +528,7 @@ def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayes
     maximum likelihood (as ``bayesprog learn --states-from-data M`` does)."""
     where = ("programs", "perception", "recordings")
     file, _, rename = _recordings_frame(path, spec.recordings, spec.columns, located, where)
-    template = (path.parent / spec.program).resolve() if spec.program else PERCEPTION_TEMPLATE
+    template = (path.parent / spec.program).resolve() if spec.program else perception_template()
     try:
         return bayesprog.load(template).fit(str(file), columns=rename or None,
                                             states_from_data=["M"]).program

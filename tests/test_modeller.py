@@ -107,10 +107,14 @@ def test_map_and_over_time_together_are_refused(capsys):
 
 
 def _options(parser: argparse.ArgumentParser) -> set[str]:
+    """A command's options, and those of its own sub-commands (``examples copy``)."""
     out = set()
     for action in parser._actions:
         if isinstance(action, argparse._HelpAction):
             continue
+        if isinstance(action, argparse._SubParsersAction):
+            for inner in action.choices.values():
+                out |= _options(inner)
         out.update(action.option_strings)
     return out
 
