@@ -239,3 +239,12 @@ def test_the_site_has_every_page_and_an_api_page_for_the_public_names():
     for name in ("Program", "load", "loads", "Posterior", "MapResult", "Density", "SpecError",
                  "Diagnostic", "register_form", "bundled"):
         assert re.search(rf"^::: bayesprog\.[\w.]*\b{name}$", api, re.M), name
+
+
+def test_python_dash_m_is_the_command_line():
+    done = subprocess.run([sys.executable, "-m", "bayesprog", "--version"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.strip() == f"bayesprog {bayesprog.__version__}"
+    done = subprocess.run([sys.executable, "-m", "bayesprog", "query", "no_such_model", "P(A)"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "bayesprog examples" in done.stderr

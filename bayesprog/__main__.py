@@ -1,0 +1,5 @@
+"""``python -m bayesprog``: the command line, as ``bayesprog``."""
+
+from bayesprog.cli import main
+
+raise SystemExit(main())
