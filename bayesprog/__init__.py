@@ -54,9 +54,17 @@ _WHERE = {
     "loads": "bayesprog.program",
     "show_inference": "bayesprog.display",
     "render_values": "bayesprog.learning.write",
+    "discover": "bayesprog.discovery",
+    "bundled_path": "bayesprog.bundled",
+    "bundled_root": "bayesprog.bundled",
+    "require_extra": "bayesprog.extras",
+    "compare": "bayesprog.learning.evidence",
+    "Discovery": "bayesprog.discovery",
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
+    from bayesprog.bundled import bundled_path, bundled_root
+    from bayesprog.discovery import Discovery, discover
     from bayesprog.display import show_inference
     from bayesprog.errors import (
         BayesprogError,
@@ -67,12 +75,14 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
         short_repr,
     )
     from bayesprog.expressions import Question, canonical
+    from bayesprog.extras import require_extra
     from bayesprog.files import atomic_write, reference_problem, wrong_kind
     from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
     from bayesprog.inference import MapResult, Posterior
     from bayesprog.inference.density import Density
     from bayesprog.language.document import load_document
     from bayesprog.language.loader import Located, load_yaml
+    from bayesprog.learning.evidence import compare
     from bayesprog.learning.write import render_values
     from bayesprog.limits import SizeError, check_size, limit
     from bayesprog.model import Term
@@ -112,16 +122,23 @@ __all__ = [
     "loads",
     "register_form",
     "show_inference",
+    # structure: a decomposition discovered from data, programs compared by their evidence
+    "Discovery",
+    "compare",
+    "discover",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own
     # YAML files read with the same diagnostics (load_yaml, load_document, Located,
     # wrong_kind; reference_problem for the files they name), the same size limits
     # (check_size, SizeError, limit), files written whole (atomic_write), a term's canonical
     # spelling and its parameters (canonical, ParamValue), learned values written into a
-    # program's text (render_values), short reprs in messages
+    # program's text (render_values), short reprs in messages, their bundled files found by
+    # name (bundled_path, bundled_root), a missing extra named (require_extra)
     "Located",
     "ParamValue",
     "SizeError",
     "atomic_write",
+    "bundled_path",
+    "bundled_root",
     "canonical",
     "check_size",
     "limit",
@@ -129,6 +146,7 @@ __all__ = [
     "load_yaml",
     "reference_problem",
     "render_values",
+    "require_extra",
     "short_repr",
     "wrong_kind",
 ]

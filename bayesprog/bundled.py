@@ -1,17 +1,17 @@
-"""The models that come with bayesprog: the paper's programs, scenarios and experiments, its
-sensor model, the example programs and their data.
+"""The models that come with bayesprog: the example programs and their data, and the files of
+the applications built on it (their programs, scenarios, experiments, sensor models).
 
 They are package data of the installed wheel (``bayesprog/models``) and the ``models`` folder of
 a checkout. On the command line a name that is not a file is looked up among them, so that
-``bayesprog run paper`` and ``bayesprog query student "P(I | G=A)"`` work wherever bayesprog is
-installed; ``bayesprog examples`` lists them and ``bayesprog examples copy NAME DIR`` copies one,
-with every file it names, into a folder of one's own to edit.
+``bayesprog query student "P(I | G=A)"``, and an application's ``bayesprog run NAME``, work
+wherever bayesprog is installed; ``bayesprog examples`` lists them and ``bayesprog examples copy
+NAME DIR`` copies one, with every file it names, into a folder of one's own to edit.
 
 >>> from bayesprog import bundled
 >>> bundled.find("student", "program").name
 'student.yaml'
->>> bundled.find("experiments/paper").relative_to(bundled.root()).as_posix()
-'experiments/paper.yaml'
+>>> bundled.find("examples/rain").relative_to(bundled.bundled_root()).as_posix()
+'examples/rain.yaml'
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ SUFFIXES = (".yaml", ".yml", ".csv", ".parquet")
 @dataclass(frozen=True)
 class Bundled:
     """One bundled file: ``name`` is its path under the models root without the ``.yaml``
-    suffix (``experiments/paper``, ``examples/student``, ``pi_per``, ``data/probes.csv``)."""
+    suffix (``examples/student``, ``scenarios/NAME``, ``data/NAME.csv``)."""
 
     name: str
     path: Path
@@ -48,24 +48,24 @@ class Bundled:
 
     @property
     def short(self) -> str:
-        """The name without its folder (``paper``), enough where the kind is known."""
+        """The name without its folder (``student``), enough where the kind is known."""
         return self.name.rsplit("/", 1)[-1]
 
 
 @cache
-def root() -> Path:
+def bundled_root() -> Path:
     """The folder of the bundled models: ``bayesprog/models`` in an installed wheel, the
     checkout's ``models`` folder otherwise."""
     here = Path(__file__).resolve().parent
     for candidate in (here / "models", here.parent / "models"):
-        if (candidate / "pi_per.yaml").is_file():
+        if (candidate / "examples").is_dir():
             return candidate
     raise BayesprogError("the bundled models are missing from this installation (expected "
                          f"{here / 'models'}): reinstall bayesprog")
 
 
 def _name(path: Path) -> str:
-    relative = path.relative_to(root()).as_posix()
+    relative = path.relative_to(bundled_root()).as_posix()
     return relative[: -len(path.suffix)] if path.suffix in (".yaml", ".yml") else relative
 
 
@@ -95,7 +95,7 @@ def _describe(path: Path) -> str:
 def listing() -> tuple[Bundled, ...]:
     """Every bundled file, experiments first, then programs, scenarios, sensor models, data."""
     found = []
-    for path in sorted(root().rglob("*")):
+    for path in sorted(bundled_root().rglob("*")):
         if not path.is_file() or path.suffix not in SUFFIXES:
             continue
         kind = "data" if path.suffix in (".csv", ".parquet") else file_kind(path)
@@ -106,8 +106,8 @@ def listing() -> tuple[Bundled, ...]:
 
 
 def find(name: str, kind: str | None = None) -> Path | None:
-    """The bundled file called ``name`` (its short name, ``paper``, or its name under the
-    root, ``experiments/paper``, with or without ``.yaml``), of ``kind`` when given; None when
+    """The bundled file called ``name`` (its short name, ``student``, or its name under the
+    root, ``examples/student``, with or without ``.yaml``), of ``kind`` when given; None when
     there is none. A short name without a kind is looked for among the experiments first, then
     the programs, scenarios, sensor models and data."""
     text = name[:-5] if name.endswith(".yaml") else name
@@ -119,7 +119,7 @@ def find(name: str, kind: str | None = None) -> Path | None:
     return None
 
 
-def resolve(text: str, kind: str | None = None) -> Path:
+def bundled_path(text: str, kind: str | None = None) -> Path:
     """``text`` as a path when a file or folder of that name exists; otherwise the bundled
     file of that name (and ``kind``); otherwise the path as given (its reader then says that
     it is missing)."""
@@ -151,7 +151,7 @@ def references(path: Path) -> list[Path]:
             if not text.endswith(SUFFIXES) or "\n" in text:
                 continue
             named = (current.parent / text).resolve()
-            if named.is_file() and named.is_relative_to(root().resolve()):
+            if named.is_file() and named.is_relative_to(bundled_root().resolve()):
                 todo.append(named)
     return list(seen)
 
@@ -174,7 +174,7 @@ def copy(name: str, folder: Path, *, force: bool = False) -> list[Path]:
     if source is None:
         raise BayesprogError(f"no bundled model called {name!r} (bayesprog examples lists "
                              "them)")
-    base = root().resolve()
+    base = bundled_root().resolve()
     files = references(source)
     targets = [folder / f.relative_to(base) for f in files]
     existing = [str(t) for t in targets if t.exists()]

@@ -33,10 +33,10 @@ class _UserError(Exception):
 
 def _load(name: str) -> Program:
     """The program file ``name``, or the bundled program of that name."""
-    from bayesprog.bundled import resolve
+    from bayesprog.bundled import bundled_path
     from bayesprog.program import load
 
-    path = str(resolve(name, "program"))
+    path = str(bundled_path(name, "program"))
     try:
         return load(path)
     except SpecError:
@@ -83,12 +83,12 @@ def _plugin_validate(file: str, kind: str) -> list[str] | None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import resolve
+    from bayesprog.bundled import bundled_path
     from bayesprog.files import KINDS, file_kind
 
     problems = 0
     for name in args.files:
-        file = str(resolve(name))
+        file = str(bundled_path(name))
         kind = file_kind(file) if Path(file).is_file() else None
         if kind is not None and kind != KINDS["bayesprog"]:  # not a program: a plugin's file
             try:
@@ -125,7 +125,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import find, listing, root
+    from bayesprog.bundled import bundled_root, find, listing
 
     entries = listing()
     # the name that designates each one: its short name where that finds it, else its path
@@ -137,7 +137,7 @@ def cmd_examples(args: argparse.Namespace) -> int:
                          indent=2))
         return 0
     width = max(len(n) for n in names)
-    print(f"bundled models, in {root()}")
+    print(f"bundled models, in {bundled_root()}")
     print("(run or query one by its name; bayesprog examples copy NAME DIR copies it out)")
     kind = None
     for name, entry in zip(names, entries, strict=True):
@@ -159,6 +159,89 @@ def cmd_examples_copy(args: argparse.Namespace) -> int:
     print(f"copied {args.name} into {folder}:")
     for path in written:
         print(f"  {path}")
+    return 0
+
+
+def _renames(items: Sequence[str]) -> dict[str, str]:
+    columns: dict[str, str] = {}
+    for item in items:
+        column, eq, variable = item.partition("=")
+        if not eq or not column.strip() or not variable.strip():
+            raise _UserError(f"--column {item!r}: expected COLUMN=VARIABLE")
+        if column.strip() in columns:
+            raise _UserError(f"--column {column.strip()} is given twice: expected each column "
+                             "once")
+        columns[column.strip()] = variable.strip()
+    return columns
+
+
+def cmd_discover(args: argparse.Namespace) -> int:
+    from bayesprog.bundled import bundled_path
+    from bayesprog.discovery import discover
+
+    data = str(bundled_path(args.data, "data"))
+    out = Path(args.output)
+    if out.exists() and out.resolve() == Path(data).resolve():
+        raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
+    if out.suffix not in (".yaml", ".yml"):
+        raise _UserError(f"-o {args.output}: expected a .yaml program file")
+    if not np.isfinite(args.significance) or not 0 < args.significance < 1:
+        raise _UserError(f"--significance: expected a number in (0, 1), found "
+                         f"{args.significance}")
+    if not (np.isfinite(args.ess) and args.ess > 0):
+        raise _UserError(f"--ess: expected a number > 0, found {args.ess}")
+    for option, value in (("--max-conditioning", args.max_conditioning),
+                          ("--restarts", args.restarts), ("--tabu", args.tabu),
+                          ("--max-parents", args.max_parents), ("--seed", args.seed)):
+        if value is not None and value < 0:
+            raise _UserError(f"{option}: expected a number >= 0, found {value}")
+    if args.discretise is not None and args.discretise < 2:
+        raise _UserError(f"--discretise: expected a number of bins >= 2, found {args.discretise}")
+    start = _load(args.start) if args.start else None
+    found = discover(data, method=args.method, score=args.score,
+                     equivalent_sample_size=args.ess, test=args.test,
+                     significance=args.significance, max_conditioning=args.max_conditioning,
+                     forbid=args.forbid, require=args.require, tiers=args.tiers,
+                     max_parents=args.max_parents, start=start, restarts=args.restarts,
+                     tabu=args.tabu, seed=args.seed, discretise=args.discretise,
+                     columns=_renames(args.column) or None, name=args.name or out.stem)
+    try:
+        found.save(out)
+    except OSError as exc:
+        raise _UserError(f"cannot write {args.output}: {exc.strerror or exc}") from None
+    record = found.record.structure
+    arcs = sum(len(ps) for ps in found.parents.values())
+    how = (f"score {record.score} {record.score_value:.6g}, {record.iterations} operations"
+           if record.method == "hc" else
+           f"{record.tests} {record.test} tests at {record.significance:g}"
+           + (f", {len(record.oriented_by_choice)} arcs oriented by choice"
+              if record.oriented_by_choice else ""))
+    print(f"wrote {out}: {len(found.parents)} variables, {arcs} arcs ({record.method}, {how}, "
+          f"{record.seconds:.2f} s)")
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from bayesprog.bundled import bundled_path
+    from bayesprog.learning.evidence import compare
+
+    if len(args.files) < 2:
+        raise _UserError("compare: expected one or more programs, then the data file")
+    *files, data = args.files
+    if not np.isfinite(args.ess) or args.ess <= 0:
+        raise _UserError(f"--ess: expected a number > 0, found {args.ess}")
+    programs = [_load(f) for f in files]
+    rows = compare(programs, str(bundled_path(data, "data")), score=args.score,
+                   equivalent_sample_size=args.ess, names=files)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    width = max(len(r["program"]) for r in rows)
+    print(f"{'program':<{width}}  {'log evidence':>14}  {'log BF':>10}  method")
+    for r in rows:
+        print(f"{r['program']:<{width}}  {r['log_evidence']:>14.4f}  "
+              f"{r['log_bayes_factor']:>10.4f}  {r['method']}")
+    print(f"(natural logarithms; {rows[0]['rows']} rows; the Bayes factor is against the best)")
     return 0
 
 
@@ -343,9 +426,9 @@ def cmd_sample(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".csv", ".parquet"):
         raise _UserError(f"-o {args.output}: expected a .csv or .parquet file")
     if out.suffix.lower() == ".parquet":
-        from bayesprog.extras import require
+        from bayesprog.extras import require_extra
 
-        require("pyarrow", "parquet", f"writing {args.output}")
+        require_extra("pyarrow", "parquet", f"writing {args.output}")
     program = _ablated(_load(args.file), args.ablate)
     inputs = {k: _npy(v, "--input") for k, v in _pairs(args.input, "--input").items()}
     evidence = {k: _evidence_value(v) for k, v in _pairs(args.evidence, "--evidence").items()}
@@ -366,23 +449,15 @@ def cmd_sample(args: argparse.Namespace) -> int:
 def cmd_learn(args: argparse.Namespace) -> int:
     if args.max_iter < 1:
         raise _UserError(f"--max-iter: expected at least 1, found {args.max_iter}")
-    from bayesprog.bundled import resolve
+    from bayesprog.bundled import bundled_path
 
     program = _load(args.file)
-    args.data = str(resolve(args.data, "data"))
+    args.data = str(bundled_path(args.data, "data"))
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise _UserError(f"-o {args.output}: that is the data file; expected a new program file")
     if not (args.tol >= 0 and np.isfinite(args.tol)):
         raise _UserError(f"--tol: expected a number >= 0, found {args.tol}")
-    columns = {}
-    for item in args.column:
-        column, eq, variable = item.partition("=")
-        if not eq or not column.strip() or not variable.strip():
-            raise _UserError(f"--column {item!r}: expected COLUMN=VARIABLE")
-        if column.strip() in columns:
-            raise _UserError(f"--column {column.strip()} is given twice: expected each column "
-                             "once")
-        columns[column.strip()] = variable.strip()
+    columns = _renames(args.column)
     fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
                       columns=columns or None, states_from_data=args.states_from_data)
     try:
@@ -549,6 +624,66 @@ def build_parser() -> argparse.ArgumentParser:
                    "states declared)")
     p.set_defaults(func=cmd_learn)
 
+    p = sub.add_parser("discover", help="discover a program's decomposition from data (hill "
+                       "climbing or PC), its tables fitted")
+    p.add_argument("data", metavar="DATA.csv|.parquet",
+                   help="one column per variable (its states are the values found); empty "
+                   "cells are missing values")
+    p.add_argument("-o", "--output", required=True, metavar="PROGRAM.yaml",
+                   help="the discovered program, its tables fitted, with a learned: record")
+    p.add_argument("--method", choices=("hc", "pc"), default="hc",
+                   help="hc: hill climbing on a score; pc: the stable PC algorithm "
+                   "(default: %(default)s)")
+    p.add_argument("--score", choices=("bic", "bdeu", "k2"), default="bic",
+                   help="hc: the score climbed (default: %(default)s)")
+    p.add_argument("--ess", type=float, default=10.0, metavar="X",
+                   help="bdeu: the equivalent sample size of its prior (default: %(default)s)")
+    p.add_argument("--test", choices=("chi2", "g"), default="chi2",
+                   help="pc: the independence test, Pearson's chi-square or the G-test "
+                   "(default: %(default)s)")
+    p.add_argument("--significance", type=float, default=0.01, metavar="A",
+                   help="pc: an edge goes when a test's p-value is at least A (default: "
+                   "%(default)s)")
+    p.add_argument("--max-conditioning", type=int, default=5, metavar="K",
+                   help="pc: the largest conditioning set tested (default: %(default)s)")
+    p.add_argument("--forbid", action="append", default=[], metavar="A->B",
+                   help="no arc from A to B; repeatable (default: none)")
+    p.add_argument("--require", action="append", default=[], metavar="A->B",
+                   help="an arc from A to B in any case; repeatable (default: none)")
+    p.add_argument("--tiers", metavar="FILE",
+                   help="ordered groups of variables, one group per line (or a YAML list of "
+                   "lists): no arc from a later group into an earlier one (default: none)")
+    p.add_argument("--max-parents", type=int, metavar="K",
+                   help="hc: at most K parents per variable (default: no limit but the size "
+                   "of a family's table)")
+    p.add_argument("--start", metavar="PROGRAM.yaml",
+                   help="hc: start from this program's decomposition (default: no arc)")
+    p.add_argument("--restarts", type=int, metavar="N",
+                   help="hc: random restarts, from the best graph perturbed or from the start "
+                   "with ties broken otherwise (default: 5)")
+    p.add_argument("--tabu", type=int, default=100, metavar="N",
+                   help="hc: the last N operations may not be undone (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, metavar="N",
+                   help="hc: seed of the restarts (default: %(default)s)")
+    p.add_argument("--discretise", type=int, metavar="K",
+                   help="cut each column of numbers with more than K values into K bins of "
+                   "equal counts (default: every value is a state)")
+    p.add_argument("--column", action="append", default=[], metavar="COLUMN=VARIABLE",
+                   help="name the variable of column COLUMN otherwise; repeatable")
+    p.add_argument("--name", help="the program's name (default: the output file's stem)")
+    p.set_defaults(func=cmd_discover)
+
+    p = sub.add_parser("compare", help="compare programs by their evidence of a data set "
+                       "(log marginal likelihood, Bayes factors)")
+    p.add_argument("files", nargs="+", metavar="PROGRAM.yaml ... DATA",
+                   help="the programs, then the data (CSV or Parquet) last")
+    p.add_argument("--score", choices=("bdeu", "k2"), default="bdeu",
+                   help="the tables' Dirichlet prior: BDeu or K2 (default: %(default)s)")
+    p.add_argument("--ess", type=float, default=1.0, metavar="X",
+                   help="bdeu: the equivalent sample size of its prior (default: %(default)s)")
+    p.add_argument("--json", action="store_true", help="print the table as JSON")
+    p.set_defaults(func=cmd_compare)
+
     p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")
     p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai",
                    help="a network file (optionally .gz)")
@@ -569,7 +704,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true",
                    help="the list as JSON: name, kind, path, description (default: a table)")
     p.set_defaults(func=cmd_examples)
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    actions = p.add_subparsers(dest="action", metavar="ACTION",
+                               help="copy: copy one out (default: list them)")
     c = actions.add_parser("copy", help="copy a bundled model, with every file it names, "
                            "into a folder")
     c.add_argument("name", metavar="NAME", help="a name that bayesprog examples lists")

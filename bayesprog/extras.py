@@ -2,7 +2,7 @@
 (``pip install "bayesprog[tune]"``) says so in one line when that library is missing, instead
 of failing with an import error.
 
->>> require("math", "parquet", "Parquet files").pi > 3
+>>> require_extra("math", "parquet", "Parquet files").pi > 3
 True
 """
 
@@ -14,7 +14,7 @@ from types import ModuleType
 from bayesprog.errors import BayesprogError
 
 
-def require(module: str, extra: str, feature: str) -> ModuleType:
+def require_extra(module: str, extra: str, feature: str) -> ModuleType:
     """``module`` imported, or a :class:`BayesprogError` that names the extra to install for
     ``feature`` (the command line prints it and exits with status 2)."""
     try:

@@ -61,6 +61,36 @@ class Term:
         return f"soft evidence on {self.child.name}" if self.soft else str(self.expression)
 
 
+class StructureRecord(BaseModel):
+    """How a program's decomposition was discovered from data (``bayesprog discover``)."""
+
+    model_config = ConfigDict(extra="forbid", strict=False)
+
+    method: str = Field(description="hc (hill climbing) or pc (the stable PC algorithm)")
+    score: str | None = Field(None, description="hc: the score climbed (bic, bdeu, k2)")
+    score_value: float | None = Field(None, description="hc: the discovered DAG's score")
+    equivalent_sample_size: float | None = Field(None, description="bdeu: its prior's weight")
+    test: str | None = Field(None, description="pc: the independence test (chi2, g)")
+    significance: float | None = Field(None, description="pc: the level below which a test "
+                                       "keeps an edge")
+    max_conditioning: int | None = Field(None, description="pc: the largest conditioning set")
+    tests: int | None = Field(None, description="pc: the independence tests run")
+    iterations: int | None = Field(None, description="hc: the operations applied")
+    restarts: int | None = Field(None, description="hc: the random restarts")
+    seed: int | None = Field(None, description="hc: the seed of the restarts")
+    families_scored: int | None = Field(None, description="hc: family scores computed (each "
+                                        "once)")
+    seconds: float = Field(description="the search's time")
+    missing: str = Field(description="how missing values were used")
+    constraints: dict[str, Any] = Field(default_factory=dict, description="forbidden and "
+                                        "required arcs, tiers, the parents' limit, the start")
+    oriented_by_choice: list[str] = Field(default_factory=list, description="pc: arcs whose "
+                                          "direction the data left open, chosen without making "
+                                          "a v-structure or a cycle")
+    discretised: dict[str, list[float]] = Field(default_factory=dict, description="columns "
+                                                "binned by --discretise: their bins' edges")
+
+
 class FitRecord(BaseModel):
     """The provenance of one fit, written into the fitted file; its statistics let a later fit
     continue with more data."""
@@ -88,3 +118,5 @@ class FitRecord(BaseModel):
     terms: list[str] = Field(default_factory=list, description="the terms learned")
     statistics: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="per learned term, its sufficient statistics")
+    structure: StructureRecord | None = Field(
+        None, description="when the decomposition itself was discovered from the data: how")

@@ -46,6 +46,7 @@ if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayes
     import pandas as pd
 
     from bayesprog.learning import Estimate
+    from bayesprog.learning.evidence import Evidence
 
 
 class Program:
@@ -387,6 +388,24 @@ class Program:
         return new
 
     # identification --------------------------------------------------------------------------------
+    def evidence(self, data: Any, *, score: str = "bdeu", equivalent_sample_size: float = 1.0,
+                 columns: Mapping[str, str] | None = None) -> Evidence:
+        """The log marginal likelihood of ``data`` under this program's decomposition: exact
+        for discrete tables and complete data (the BDeu closed form with
+        ``equivalent_sample_size``, or ``score="k2"``), the BIC approximation otherwise; the
+        answer's ``method`` says which (see :func:`bayesprog.compare`).
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads("bayesprog: 1\nvariables: {A: {states: [a0, a1]}}\n"
+        ...                     "decomposition: [{term: P(A), form: table, table: [0.5, 0.5]}]")
+        >>> round(p.evidence({"A": ["a0", "a0", "a1"]}, score="k2").log_evidence, 6)
+        -2.484907
+        """
+        from bayesprog.learning.evidence import evidence
+
+        return evidence(self, data, score=score, equivalent_sample_size=equivalent_sample_size,
+                        columns=columns)
+
     def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
             states_from_data: Sequence[str] = ()) -> Fit:

@@ -125,10 +125,9 @@ def results(out: Path, table: Path) -> int:
 
 def _experiment_file(path: Path) -> Path:
     """``path`` as an experiment file of this runner, or a clear error."""
-    from bayesprog import load_yaml
-    from bayesprog.bundled import resolve
+    from bayesprog import bundled_path, load_yaml
 
-    path = resolve(str(path), "experiment")
+    path = bundled_path(str(path), "experiment")
     try:
         located, _ = load_yaml(path.read_text(encoding="utf-8"), str(path))
     except FileNotFoundError:
@@ -173,9 +172,9 @@ def _say(warnings: list) -> None:
 
 
 def _scenario_path(target: Path) -> Path:
-    from bayesprog.bundled import resolve
+    from bayesprog import bundled_path
 
-    target = resolve(str(target), "scenario")
+    target = bundled_path(str(target), "scenario")
     if not target.exists():
         raise BayesprogError(f"cannot read {target}: no such file or folder, and no bundled "
                              "scenario of that name (bayesprog examples lists them)")

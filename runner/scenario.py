@@ -133,9 +133,9 @@ RECORDING_COLUMNS = {"material": "M", "texture": "E", "compliance": "C"}
 def perception_template() -> Path:
     """The perception program whose forms a lab's recordings are learned into, by default: the
     bundled ``pi_per``."""
-    from bayesprog.bundled import root
+    from bayesprog import bundled_root
 
-    return root() / "pi_per.yaml"
+    return bundled_root() / "pi_per.yaml"
 
 
 class RecordingsSpec(_Strict):

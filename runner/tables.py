@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import BayesprogError, atomic_write
-from bayesprog.extras import require
+from bayesprog import BayesprogError, atomic_write, require_extra
 from runner.executors import progress_bar
 from runner.experiment import CUES, load_results, stored_experiment
 from runner.figures import centre_cm
@@ -85,10 +84,10 @@ def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:
         raise BayesprogError(f"-o {path}: expected a .parquet or .csv file, found "
                              f"{path.suffix or 'no suffix'}")
     if path.suffix.lower() in (".parquet", ".pq"):  # said before the table is built
-        require("pyarrow", "parquet", f"writing {path}")
+        require_extra("pyarrow", "parquet", f"writing {path}")
     table = runs_table(out)
     if path.suffix.lower() in (".parquet", ".pq"):
-        require("pyarrow", "parquet", f"writing {path}")
+        require_extra("pyarrow", "parquet", f"writing {path}")
         buffer = io.BytesIO()
         table.to_parquet(buffer, index=False)
         data = buffer.getvalue()

@@ -725,9 +725,9 @@ def plot_visits(search: Search, result: dict, path: Path) -> None:
 def tune(experiment: Path, out: Path, trials: int | None = None, workers: int = 1,
          quiet: bool = False) -> int:
     """The command: run or resume the search, write its outputs, print where."""
-    from bayesprog.extras import require
+    from bayesprog import require_extra
 
-    require("optuna", "tune", "bayesprog tune")
+    require_extra("optuna", "tune", "bayesprog tune")
     search = load_search(experiment)
     if trials is not None and trials < 1:
         raise BayesprogError(f"--trials: expected at least 1, found {trials}")

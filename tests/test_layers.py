@@ -17,16 +17,17 @@ PACKAGE = Path(__file__).parents[1] / "bayesprog"
 
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
-    {"errors", "variables", "expressions", "formula", "files", "rich", "limits"},
+    {"errors", "variables", "expressions", "formula", "files", "rich", "limits", "bundled",
+     "extras"},
     {"forms"},
     {"model"},
     {"language"},
     {"inference"},
     {"learning"},
     {"program", "dynamic"},
-    {"compile", "draw", "show", "display", "__init__"},
+    {"compile", "draw", "show", "display", "discovery", "__init__"},
     {"io"},
-    {"cli"},
+    {"cli", "__main__"},
 ]
 
 

@@ -60,8 +60,8 @@ def test_a_name_finds_the_model_of_the_kind_a_command_expects():
 def test_a_file_of_that_name_wins_over_a_bundled_model(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "student").write_text("not a program\n")
-    assert bundled.resolve("student", "program") == Path("student")
-    assert bundled.resolve("rain", "program") == MODELS / "examples" / "rain.yaml"
+    assert bundled.bundled_path("student", "program") == Path("student")
+    assert bundled.bundled_path("rain", "program") == MODELS / "examples" / "rain.yaml"
 
 
 def test_the_listing_names_each_model_by_a_name_that_finds_it(capsys):

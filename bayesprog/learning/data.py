@@ -74,9 +74,9 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
     hexdigest = hashlib.sha256(raw).hexdigest()
     suffix = path.suffix.lower()
     if suffix in (".parquet", ".pq"):
-        from bayesprog.extras import require
+        from bayesprog.extras import require_extra
 
-        require("pyarrow", "parquet", f"reading {path}")
+        require_extra("pyarrow", "parquet", f"reading {path}")
         try:
             frame = pd.read_parquet(path)
         except Exception as exc:  # pyarrow raises several types for a file that is not Parquet

@@ -168,6 +168,11 @@ def _keep(old: Any, new: Any) -> Any:
 def _record(record: FitRecord) -> CommentedMap:
     out = CommentedMap()
     for key, value in record.model_dump().items():
+        if key == "structure":
+            if value is not None:
+                out[key] = CommentedMap((k, _flow(v)) for k, v in value.items()
+                                        if v is not None and v != {} and v != [])
+            continue
         if key == "statistics":
             stats = CommentedMap()
             for label, named in value.items():

@@ -1,0 +1,428 @@
+"""Discovering a program's decomposition from data.
+
+:func:`discover` reads a data set (as :meth:`Program.fit` does), takes each column's states from
+it, finds a DAG over the columns (hill climbing on a score, or the PC algorithm; see
+:mod:`bayesprog.learning.structure`), writes it as a program of tables, fits the tables as
+``bayesprog learn`` does and records how, under ``learned:``. Programs are compared by their
+evidence in :mod:`bayesprog.learning.evidence`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bayesprog.learning.data import DataError, _missing, read_frame
+from bayesprog.learning.structure import (
+    MAX_FAMILY_CELLS,
+    SCORES,
+    TESTS,
+    Constraints,
+    Scores,
+    StructureError,
+    check_dag,
+    hill_climb,
+    orient,
+    pc_skeleton,
+    topological,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from bayesprog.program import Program
+
+METHODS = ("hc", "pc")
+#: hill climbing's random restarts when none are asked for
+RESTARTS = 5
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+_ARC = re.compile(r"^\s*([^\s>-][^>]*?)\s*->\s*(\S.*?)\s*$")
+
+
+@dataclass
+class Coded:
+    """A data set coded for structure learning: each column's states (as written, sorted, or
+    bins), the rows as state indices (-1 where missing), and the rows as state names."""
+
+    source: str
+    sha256: str
+    names: list[str]
+    states: list[list[str]]
+    codes: np.ndarray
+    frame: pd.DataFrame
+    bins: dict[str, list[float]] = field(default_factory=dict)
+
+    @property
+    def card(self) -> list[int]:
+        return [len(s) for s in self.states]
+
+    @property
+    def missing_rows(self) -> int:
+        return int((self.codes < 0).any(axis=1).sum())
+
+
+def _name_of(value: Any) -> str:
+    """A cell's value as a state's name, as written: ``3.0`` read from Parquet is ``3``."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        return str(int(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    return str(value).strip()
+
+
+def _number(text: str) -> float | None:
+    try:
+        x = float(text)
+    except ValueError:
+        return None
+    return x if math.isfinite(x) else None
+
+
+def code_data(data: Any, *, discretise: int | None = None,
+              columns: Mapping[str, str] | None = None) -> Coded:
+    """Read ``data`` (a CSV or Parquet file, a DataFrame, a mapping of columns) and code every
+    column as a discrete variable: its states are the values found, as written (sorted by value
+    when all are numbers, else alphabetically); with ``discretise=K``, a column of numbers with
+    more than K distinct values is cut into K bins of equal counts (named ``"[a, b)"``, as the
+    language's discretised variables). A column that cannot be a variable is refused, named."""
+    import pandas as pd
+
+    frame, source, digest, _ = read_frame(data)
+    if columns:
+        missing = [c for c in columns if c not in frame.columns]
+        if missing:
+            raise DataError(f"{source}: no column {missing[0]!r} to rename (columns: "
+                            f"{', '.join(map(str, frame.columns))})")
+        frame = frame.rename(columns=dict(columns))
+    names = [str(c) for c in frame.columns]
+    if not names:
+        raise DataError(f"{source}: no column: expected one column per variable")
+    if len(frame) == 0:
+        raise DataError(f"{source}: no row: expected one row per observation")
+    if len(set(names)) != len(names):
+        dup = next(c for c in names if names.count(c) > 1)
+        raise DataError(f"{source}: column {dup!r} appears twice")
+    if discretise is not None and (isinstance(discretise, bool) or not isinstance(
+            discretise, (int, np.integer)) or discretise < 2):
+        raise DataError(f"discretise: expected a number of bins >= 2, found {discretise!r}")
+    states: list[list[str]] = []
+    codes = np.full((len(frame), len(names)), -1, dtype=np.int64)
+    named = {}
+    bins: dict[str, list[float]] = {}
+    for j, column in enumerate(names):
+        if not _NAME.match(column):
+            raise DataError(f"{source}: column {j + 1} {column!r} cannot name a variable: "
+                            "expected a letter or _ then letters, digits, _ . - (rename it, or "
+                            "--column)")
+        values = frame[column].to_numpy(dtype=object)
+        present = np.array([not _missing(v) for v in values], dtype=bool)
+        texts = np.array([_name_of(v) if p else "" for v, p in zip(values, present,
+                                                                    strict=True)], dtype=object)
+        found = sorted(set(texts[present]))
+        count = int(present.sum())
+        if count == 0:
+            raise DataError(f"{source}: column {column!r} has no value in any of its "
+                            f"{len(values)} rows")
+        numbers = [_number(t) for t in found]
+        numeric = all(x is not None for x in numbers)
+        if discretise is not None and numeric and len(found) > discretise:
+            x = np.array([float(t) for t in texts[present]])
+            edges = np.unique(np.quantile(x, np.linspace(0, 1, discretise + 1)))
+            inner = edges[1:-1]
+            index = np.searchsorted(inner, x, side="right")
+            labels = [f"[{edges[i]:.6g}, {edges[i + 1]:.6g}" + (")" if i < len(edges) - 2
+                                                                  else "]")
+                      for i in range(len(edges) - 1)]
+            codes[present, j] = index
+            column_states = labels
+            bins[column] = [float(e) for e in edges]
+            texts[present] = [labels[i] for i in index]
+        else:
+            if numeric:
+                found = sorted(found, key=lambda t: (float(t), t))
+            lookup = {s: i for i, s in enumerate(found)}
+            codes[present, j] = [lookup[t] for t in texts[present]]
+            column_states = found
+        if len(column_states) == 1:
+            raise DataError(f"{source}: column {column!r} holds one value, "
+                            f"{column_states[0]!r}, in all its {count} rows: a constant "
+                            "tells nothing of the others (drop the column)")
+        if len(column_states) == count and count > 2:
+            hint = " or --discretise it" if numeric else ""
+            raise DataError(f"{source}: column {column!r} has a different value in each of its "
+                            f"{count} rows: every state seen once, an identifier rather than "
+                            f"a variable (drop the column{hint})")
+        states.append(column_states)
+        named[column] = [t if p else None for t, p in zip(texts, present, strict=True)]
+    coded_frame = pd.DataFrame(named, columns=names, dtype=object)
+    return Coded(source, digest, names, states, codes, coded_frame, bins)
+
+
+# constraints from text ---------------------------------------------------------------------
+
+def _arcs(given: Iterable[str | tuple[str, str]], names: Sequence[str],
+          option: str) -> set[tuple[int, int]]:
+    out = set()
+    index = {n: i for i, n in enumerate(names)}
+    for item in given:
+        if isinstance(item, str):
+            match = _ARC.match(item)
+            if match is None:
+                raise StructureError(f"{option} {item!r}: expected an arc A->B")
+            pair = (match.group(1), match.group(2))
+        else:
+            pair = (str(item[0]), str(item[1]))
+        for name in pair:
+            if name not in index:
+                raise StructureError(f"{option} {pair[0]}->{pair[1]}: no variable {name!r} "
+                                     f"(the data's columns: {', '.join(names)})")
+        if pair[0] == pair[1]:
+            raise StructureError(f"{option} {pair[0]}->{pair[1]}: an arc joins two variables")
+        out.add((index[pair[0]], index[pair[1]]))
+    return out
+
+
+def read_tiers(tiers: Any, names: Sequence[str]) -> list[int]:
+    """Each variable's tier from a list of groups (earliest first), or a YAML/text file of
+    them: one group per line (names separated by commas or spaces), or a YAML list of lists.
+    Variables in no group come after every tier."""
+    where = "tiers"
+    if isinstance(tiers, (str, Path)):
+        path = Path(tiers)
+        where = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise StructureError(f"--tiers {path}: cannot read it: {exc.strerror or exc}") \
+                from None
+        if path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            groups = yaml.safe_load(text)
+        else:
+            groups = [re.split(r"[,\s]+", line.strip()) for line in text.splitlines()
+                      if line.strip() and not line.lstrip().startswith("#")]
+    else:
+        groups = tiers
+    if not isinstance(groups, list) or not all(isinstance(g, list) for g in groups):
+        raise StructureError(f"{where}: expected ordered groups of variables (a list of lists, "
+                             "or one group per line)")
+    index = {n: i for i, n in enumerate(names)}
+    tier = [len(groups)] * len(names)
+    seen: dict[str, int] = {}
+    for t, group in enumerate(groups):
+        for name in group:
+            name = str(name)
+            if name not in index:
+                raise StructureError(f"{where}: tier {t + 1} names {name!r}, which is no "
+                                     f"column of the data ({', '.join(names)})")
+            if name in seen:
+                raise StructureError(f"{where}: {name} is in tiers {seen[name] + 1} and {t + 1}")
+            seen[name] = t
+            tier[index[name]] = t
+    return tier
+
+
+# discovery ---------------------------------------------------------------------------------
+
+@dataclass
+class Discovery:
+    """What :func:`discover` found: the fitted program, its file's text, the parents of each
+    variable, and the record written under ``learned:``."""
+
+    program: Program
+    text: str
+    parents: dict[str, list[str]]
+    record: Any
+
+    def save(self, path: str | Path) -> Path:
+        from bayesprog.files import atomic_write
+
+        path = Path(path)
+        atomic_write(path, self.text.encode("utf-8"))
+        return path
+
+
+def discover(data: Any, *, method: str = "hc", score: str = "bic",
+             equivalent_sample_size: float = 10.0, test: str = "chi2",
+             significance: float = 0.01, max_conditioning: int = 5,
+             forbid: Iterable[str | tuple[str, str]] = (),
+             require: Iterable[str | tuple[str, str]] = (), tiers: Any = None,
+             max_parents: int | None = None, start: Any = None, restarts: int | None = None,
+             tabu: int = 100, seed: int = 0, discretise: int | None = None,
+             columns: Mapping[str, str] | None = None, name: str | None = None,
+             max_iter: int = 200, tol: float = 1e-8) -> Discovery:
+    """Discover a program's decomposition from ``data`` and fit its tables.
+
+    ``method`` is ``"hc"`` (hill climbing on ``score``: ``"bic"``, ``"bdeu"`` with
+    ``equivalent_sample_size``, or ``"k2"``; with a tabu list of ``tabu`` operations and
+    ``restarts`` random restarts (5 by default) seeded by ``seed``, from the empty graph or from ``start``, a
+    program or its file, whose decomposition it begins with) or ``"pc"`` (the stable PC with
+    the ``"chi2"`` or ``"g"`` test at ``significance``, conditioning sets of at most
+    ``max_conditioning`` variables). Constraints: arcs to ``forbid`` and to ``require``
+    (``"A->B"``), ``tiers`` (ordered groups: no arc into an earlier tier), ``max_parents``
+    (hc). Missing values are used per family (available-case). The tables are then fitted as
+    :meth:`Program.fit` fits them (EM when values are missing, ``max_iter``, ``tol``).
+    """
+    import bayesprog
+
+    if method not in METHODS:
+        raise StructureError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    if score not in SCORES:
+        raise StructureError(f"score {score!r}: expected one of {', '.join(SCORES)}")
+    if test not in TESTS:
+        raise StructureError(f"test {test!r}: expected one of {', '.join(TESTS)}")
+    if method == "pc" and (max_parents is not None or start is not None or restarts):
+        option = ("max_parents" if max_parents is not None else "start" if start is not None
+                  else "restarts")
+        raise StructureError(f"{option} applies to hill climbing (method hc), not to pc")
+    if max_parents is not None and (isinstance(max_parents, bool) or max_parents < 0):
+        raise StructureError(f"max_parents: expected a number >= 0, found {max_parents!r}")
+    restarts = RESTARTS if restarts is None else restarts
+    if restarts < 0 or tabu < 0 or max_conditioning < 0:
+        raise StructureError("restarts, tabu and max_conditioning: expected numbers >= 0")
+    coded = code_data(data, discretise=discretise, columns=columns)
+    names = coded.names
+    rules = Constraints(len(names), _arcs(forbid, names, "--forbid"),
+                        _arcs(require, names, "--require"),
+                        read_tiers(tiers, names) if tiers is not None else None, max_parents)
+    both = rules.forbidden & rules.required
+    if both:
+        u, v = sorted(both)[0]
+        raise StructureError(f"the arc {names[u]}->{names[v]} is both forbidden (--forbid) and "
+                             "required (--require)")
+    required_parents: list[set[int]] = [set() for _ in names]
+    for u, v in rules.required:
+        required_parents[v].add(u)
+    if topological(required_parents) is None:
+        cycle = " , ".join(f"{names[u]}->{names[v]}" for u, v in sorted(rules.required))
+        raise StructureError(f"the required arcs make a cycle ({cycle})")
+    scores = Scores(coded.codes, coded.card, score, equivalent_sample_size)
+    check_dag(required_parents, rules, scores, names)
+    constraints: dict[str, Any] = {}
+    if rules.forbidden:
+        constraints["forbid"] = sorted(f"{names[u]}->{names[v]}" for u, v in rules.forbidden)
+    if rules.required:
+        constraints["require"] = sorted(f"{names[u]}->{names[v]}" for u, v in rules.required)
+    if rules.tiers is not None:
+        groups: dict[int, list[str]] = {}
+        for n_, t in zip(names, rules.tiers, strict=True):
+            groups.setdefault(t, []).append(n_)
+        constraints["tiers"] = [groups[t] for t in sorted(groups)]
+    if max_parents is not None:
+        constraints["max_parents"] = int(max_parents)
+    clock = time.perf_counter()
+    structure: dict[str, Any]
+    if method == "hc":
+        start_parents = _start(start, names) if start is not None else None
+        if start is not None:
+            constraints["start"] = str(getattr(start, "path", None) or start)
+        climb = hill_climb(scores, rules, start=start_parents, tabu_length=tabu,
+                           restarts=restarts, seed=seed, names=names)
+        parents = [list(ps) for ps in climb.parents]
+        structure = dict(method="hc", score=score, score_value=climb.score,
+                         equivalent_sample_size=(equivalent_sample_size if score == "bdeu"
+                                                 else None),
+                         iterations=climb.iterations, restarts=restarts, seed=seed,
+                         families_scored=climb.families_scored)
+    else:
+        skeleton = pc_skeleton(coded.codes, coded.card, rules, test=test,
+                               significance=significance, max_conditioning=max_conditioning)
+        oriented = orient(skeleton, rules)
+        parents = [list(ps) for ps in oriented.parents]
+        structure = dict(method="pc", test=test, significance=significance,
+                         max_conditioning=max_conditioning, tests=skeleton.tests,
+                         oriented_by_choice=[f"{names[a]} -> {names[b]}"
+                                             for a, b in oriented.chosen])
+    structure["seconds"] = round(time.perf_counter() - clock, 3)
+    missing = coded.missing_rows
+    structure["missing"] = ("none" if missing == 0 else
+                            f"available-case: each family scored (each test run) on the rows "
+                            f"where all its variables are observed; {missing} of "
+                            f"{len(coded.frame)} rows miss a value")
+    structure["constraints"] = constraints
+    structure["discretised"] = coded.bins
+    for v, ps in enumerate(parents):
+        cells = scores.cells(v, ps)
+        if cells > MAX_FAMILY_CELLS:
+            raise StructureError(f"the family of {names[v]} would have {cells:,} cells")
+    title = name or "discovered"
+    # the tables' prior: the score's own (BDeu of that weight, or K2's one count per cell), and
+    # for BIC and PC a BDeu prior of weight 1, so that a parent configuration the data never
+    # show has a uniform row rather than none
+    prior = (equivalent_sample_size if method == "hc" and score == "bdeu" else 1.0)
+    text = _program_text(coded, parents, title, method, prior,
+                         k2=method == "hc" and score == "k2")
+    skeleton_program = bayesprog.loads(text, f"<{title}>")
+    fit = skeleton_program.fit(coded.frame, max_iter=max_iter, tol=tol)
+    from bayesprog.model import StructureRecord
+
+    record = fit.record.model_copy(update=dict(
+        data=coded.source, sha256=coded.sha256, structure=StructureRecord(**structure)))
+    fit.estimate.record = record
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        draft = Path(folder) / "discovered.yaml"
+        draft.write_text(text, encoding="utf-8")
+        fitted_text = fit.text(draft)
+    program = bayesprog.loads(fitted_text, f"<{title}>")
+    return Discovery(program, fitted_text,
+                     {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record)
+
+
+def _start(start: Any, names: Sequence[str]) -> list[set[int]]:
+    """The parents of each column in a starting program (its terms over the data's columns)."""
+    import bayesprog
+    from bayesprog.program import Program
+
+    program = start if isinstance(start, Program) else bayesprog.load(start)
+    index = {n: i for i, n in enumerate(names)}
+    parents: list[set[int]] = [set() for _ in names]
+    for term in program.terms:
+        child = term.child.name
+        if child not in index:
+            raise StructureError(f"--start: the starting program's variable {child} has no "
+                                 "column in the data: the structure is discovered over "
+                                 "observed variables only (a hidden variable is out of scope; "
+                                 f"the data's columns: {', '.join(names)})")
+        for p in term.parents:
+            if p.name not in index:
+                raise StructureError(f"--start: {term.label} names {p.name}, which has no "
+                                     "column in the data (a hidden variable is out of scope)")
+            parents[index[child]].add(index[p.name])
+    return parents
+
+
+def _program_text(coded: Coded, parents: Sequence[Sequence[int]], title: str,
+                  method: str, prior: float, k2: bool = False) -> str:
+    names = coded.names
+    lines = ["bayesprog: 1", f"name: {json.dumps(title)}",
+             f"description: {json.dumps(f'Discovered from {coded.source} by {method}')}",
+             "variables:"]
+    for column, states in zip(names, coded.states, strict=True):
+        listed = ", ".join(json.dumps(s) for s in states)
+        lines.append(f"  {json.dumps(column)}: {{states: [{listed}]}}")
+    lines.append("decomposition:")
+    order = topological([set(ps) for ps in parents])
+    assert order is not None
+    for v in order:
+        ps = sorted(parents[v])
+        term = f"P({names[v]} | {', '.join(names[p] for p in ps)})" if ps else f"P({names[v]})"
+        r = len(coded.states[v])
+        row = ", ".join([f"{1 / r:.6g}"] * (r - 1) + [f"{1 - (r - 1) * float(f'{1 / r:.6g}'):.6g}"])
+        q = int(np.prod([len(coded.states[p]) for p in ps], dtype=float))
+        counts = 1.0 if k2 else prior / (q * r)
+        lines.append(f"  - {{term: {json.dumps(term)}, form: table, table: [{row}], "
+                     f"learn: {{pseudo_counts: {counts:.6g}}}}}")
+    return "\n".join(lines) + "\n"
