@@ -216,8 +216,7 @@ def cmd_discover(args: argparse.Namespace) -> int:
            f"{record.tests} {record.test} tests at {record.significance:g}"
            + (f", {len(record.oriented_by_choice)} arcs oriented by choice"
               if record.oriented_by_choice else ""))
-    print(f"wrote {out}: {len(found.parents)} variables, {arcs} arcs ({record.method}, {how}, "
-          f"{record.seconds:.2f} s)")
+    print(f"wrote {out}: {len(found.parents)} variables, {arcs} arcs ({record.method}, {how})")
     return 0
 
 

@@ -238,12 +238,14 @@ def read_tiers(tiers: Any, names: Sequence[str]) -> list[int]:
 @dataclass
 class Discovery:
     """What :func:`discover` found: the fitted program, its file's text, the parents of each
-    variable, and the record written under ``learned:``."""
+    variable, the record written under ``learned:``, and the data as the program reads them
+    (each value the name of its state: a binned number its bin's)."""
 
     program: Program
     text: str
     parents: dict[str, list[str]]
     record: Any
+    data: pd.DataFrame
 
     def save(self, path: str | Path) -> Path:
         from bayesprog.files import atomic_write
@@ -378,7 +380,8 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
         fitted_text = fit.text(draft)
     program = bayesprog.loads(fitted_text, f"<{title}>")
     return Discovery(program, fitted_text,
-                     {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record)
+                     {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
+                     coded.frame)
 
 
 def _start(start: Any, names: Sequence[str]) -> list[set[int]]:
@@ -404,6 +407,14 @@ def _start(start: Any, names: Sequence[str]) -> list[set[int]]:
     return parents
 
 
+#: names that YAML 1.1 reads as booleans or null: quoted where they are keys
+_AMBIGUOUS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null", "~"}
+
+
+def _key(name: str) -> str:
+    return json.dumps(name) if name.lower() in _AMBIGUOUS else name
+
+
 def _program_text(coded: Coded, parents: Sequence[Sequence[int]], title: str,
                   method: str, prior: float, k2: bool = False) -> str:
     names = coded.names
@@ -412,7 +423,7 @@ def _program_text(coded: Coded, parents: Sequence[Sequence[int]], title: str,
              "variables:"]
     for column, states in zip(names, coded.states, strict=True):
         listed = ", ".join(json.dumps(s) for s in states)
-        lines.append(f"  {json.dumps(column)}: {{states: [{listed}]}}")
+        lines.append(f"  {_key(column)}: {{states: [{listed}]}}")
     lines.append("decomposition:")
     order = topological([set(ps) for ps in parents])
     assert order is not None

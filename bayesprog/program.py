@@ -396,7 +396,7 @@ class Program:
         answer's ``method`` says which (see :func:`bayesprog.compare`).
 
         >>> import bayesprog
-        >>> p = bayesprog.loads("bayesprog: 1\nvariables: {A: {states: [a0, a1]}}\n"
+        >>> p = bayesprog.loads("bayesprog: 1\\nvariables: {A: {states: [a0, a1]}}\\n"
         ...                     "decomposition: [{term: P(A), form: table, table: [0.5, 0.5]}]")
         >>> round(p.evidence({"A": ["a0", "a0", "a1"]}, score="k2").log_evidence, 6)
         -2.484907

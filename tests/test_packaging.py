@@ -237,7 +237,7 @@ def test_the_site_has_every_page_and_an_api_page_for_the_public_names():
     assert sorted(pages) == sorted(written)
     api = "\n".join((docs / p).read_text() for p in pages if p.startswith("api/"))
     for name in ("Program", "load", "loads", "Posterior", "MapResult", "Density", "SpecError",
-                 "Diagnostic", "register_form", "bundled"):
+                 "Diagnostic", "register_form", "bundled", "discover", "compare"):
         assert re.search(rf"^::: bayesprog\.[\w.]*\b{name}$", api, re.M), name
 
 

@@ -320,6 +320,16 @@ def test_contradictory_or_bad_constraints_are_user_errors(asia, tmp_path, capsys
     assert not (tmp_path / "x.yaml").exists()
 
 
+def test_a_family_beyond_the_size_limit_is_refused_before_the_search(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    frame = pd.DataFrame({f"V{i}": rng.choice(["a", "b"], 50) for i in range(24)})
+    frame.to_csv(tmp_path / "wide.csv", index=False)
+    requires = [x for i in range(1, 24) for x in ("--require", f"V{i}->V0")]
+    code, out, err = run(capsys, "discover", tmp_path / "wide.csv", "-o", tmp_path / "x.yaml",
+                         *requires)
+    assert code == 2 and "family of V0" in err and "16,777,216 cells" in err
+
+
 def test_tiers_against_a_required_arc_are_refused(asia, tmp_path):
     frame, _ = asia
     with pytest.raises(bayesprog.BayesprogError, match="forbidden"):
