@@ -125,10 +125,25 @@ def _topological(model: Any) -> list[str]:
     return list(nx.topological_sort(graph))
 
 
+class _Dumper12(yaml.SafeDumper):
+    """PyYAML's dumper with YAML 1.2's booleans (``true``/``false`` only): a name such as
+    ``yes`` or ``off``, which the program loader reads as written, is written unquoted."""
+
+
+_Dumper12.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeDumper.yaml_implicit_resolvers.items()}
+for _first in "tTfF":
+    _Dumper12.yaml_implicit_resolvers.setdefault(_first, []).append(
+        ("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")))
+
+
 def dump_document(doc: dict[str, Any]) -> str:
-    """YAML text of a document: block style for structure, flow style for the number rows."""
-    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100,
-                          allow_unicode=True)
+    """YAML text of a document: block style for structure, flow style for the number rows;
+    names written as they are (``yes``, ``on``: YAML 1.2 words), quoted only where a YAML 1.2
+    reader would take them for something else (``true``, ``null``, ``1.0``)."""
+    return yaml.dump(doc, Dumper=_Dumper12, sort_keys=False, default_flow_style=None,
+                     width=100, allow_unicode=True)
 
 
 def import_network(path: str | Path, out: str | Path) -> Path:

@@ -1,9 +1,12 @@
 """Strict YAML loading that remembers where every value came from.
 
 PyYAML follows YAML 1.1: ``no`` and ``on`` become booleans, ``1e-3`` stays a string and a
-duplicate key silently wins. Program files are read with YAML 1.2 core rules instead, duplicate
-keys and unquoted YAML 1.1 booleans are reported, and every value keeps its line and column so
-that later checks can point at it.
+duplicate key silently wins. Program files are read with YAML 1.2 core rules instead: ``yes``,
+``no``, ``on``, ``off``, ``y``, ``n`` are words, only ``true``/``false`` are booleans and only
+``null``/``~`` is null; duplicate keys are reported; every value keeps its line and column so
+that later checks can point at it, and a plain scalar that YAML reads as a number, a boolean or
+null keeps its text too (:attr:`Located.texts`), so that where a name stands (a key, a state)
+the name is the text as written: ``1.50``, ``true``, ``null``.
 """
 
 from __future__ import annotations
@@ -24,7 +27,6 @@ _INT = re.compile(r"^[-+]?[0-9]+$")
 _FLOAT = re.compile(r"^[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?$")
 _INF = re.compile(r"^[-+]?\.(inf|Inf|INF)$")
 _NAN = re.compile(r"^\.(nan|NaN|NAN)$")
-_YAML11_BOOL = re.compile(r"^(y|Y|yes|Yes|YES|n|N|no|No|NO|on|On|ON|off|Off|OFF)$")
 
 
 @dataclass
@@ -181,8 +183,8 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
             out: dict[Any, Any] = {}
             for key_node, value_node in node.value:
                 key = build(key_node, path + ("<key>",))
-                if isinstance(key, (int, float)) and not isinstance(key, bool):
-                    key = key_node.value  # a key is a name: a number as written (1.50, 0x1F)
+                if key is None or isinstance(key, (bool, int, float)):
+                    key = key_node.value  # a key is a name, as written (1.50, true, null)
                 if not isinstance(key, (str, int, float)):
                     problems.append(located.diagnostic(path + ("<key>",), "expected a plain key"))
                     continue
@@ -213,18 +215,9 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
         assert isinstance(node, yaml.ScalarNode)
         if node.style:  # quoted or block scalar: always a string (plain: None, or "" from libyaml)
             return node.value
-        if _YAML11_BOOL.match(node.value):
-            problems.append(
-                located.diagnostic(
-                    path,
-                    f"ambiguous unquoted {node.value!r} (a boolean in YAML 1.1): "
-                    f"quote it (\"{node.value}\") for a name, or write true/false",
-                )
-            )
-            return node.value
         value = _plain_scalar(node.value)
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            located.texts[path] = node.value  # where a name stands, the number as written
+        if not isinstance(value, str) and node.value:
+            located.texts[path] = node.value  # where a name stands, the value as written
         return value
 
     try:

@@ -136,8 +136,9 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
 
 
 _PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
-#: words that YAML 1.1 readers take for booleans or null: written quoted
-_AMBIGUOUS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null"}
+#: words that a YAML 1.2 reader takes for booleans or null: written quoted (``yes``, ``on``
+#: are words, written as they are)
+_AMBIGUOUS = {"true", "false", "null", "~"}
 
 
 def _key(var: Discrete, state: str) -> Any:
