@@ -61,8 +61,21 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     if program.time is None:
         raise QuestionError(f"a {question.kind} question needs a program that repeats per step "
                             "(a time: section)")
-    previous, state = program.time
     expr = question.expression
+    states = [state for _, state in program.time]
+    if len(program.time) > 1:
+        outside = [v for v in expr.left if v not in states]
+        if outside or (question.kind == "sequence" and set(expr.left) != set(states)):
+            wanted = (f"P({' '.join(states)} | ...)" if question.kind == "sequence"
+                      else f"P({' or '.join(states)} | ...)")
+            raise QuestionError(f"a {question.kind} question searches the state: expected "
+                                f"{wanted}, found {expr}")
+        if soft:
+            raise QuestionError("soft evidence is not taken by questions over steps")
+        steps, per_step = _steps(expect_mapping(evidence, "evidence",
+                                                "variable names to values"))
+        return _joint(program, question, per_step, steps, inputs, method, options)
+    (previous, state), = program.time
     if expr.left != (state,):
         raise QuestionError(f"a {question.kind} question searches the state: expected "
                             f"P({state} | ...), found {expr}")
@@ -162,4 +175,126 @@ def _posterior(question: Question, program: Any, state: str, probabilities: np.n
         batch_shape=shape,
         ablated=program.ablated,
         method=kind,
+    )
+
+
+def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
+           inputs: Mapping[str, Any] | None, method: str | None,
+           options: Mapping[str, Any]) -> Posterior | MapResult:
+    """A question over steps of a program with several state variables: the recursions over
+    their joint state. Each step's ``log P(x_t, y_t | x_t-1)`` for every joint state before
+    (a batch of that many rows) is one question of the step program with the states one step
+    earlier given and their terms uniform; the forward, backward and Viterbi recursions then
+    run in log space on those matrices."""
+    pairs = program.time
+    previous = [p for p, _ in pairs]
+    states = [s for _, s in pairs]
+    cards = [program.variables[s].card for s in states]
+    size = int(np.prod(cards))
+    expr = question.expression
+    step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
+    index = np.unravel_index(np.arange(size), cards)  # each joint state's indices
+    first = program.ask(f"P({' '.join(previous)})").probabilities.reshape(-1)
+    batch: tuple[int, ...] | None = None
+    logs = []
+    for t in range(steps):
+        known = {k: np.asarray(v[t], dtype=object) for k, v in per_step.items()}
+        if batch is None:
+            batch = np.broadcast_shapes(*(a.shape for a in known.values())) if known else ()
+        # joint states before x the sequences of the batch
+        shape = (size, *batch)
+        given = {p: np.broadcast_to(np.asarray(i).reshape((size,) + (1,) * len(batch)), shape)
+                 for p, i in zip(previous, index, strict=True)}
+        given.update({k: np.broadcast_to(a, shape) for k, a in known.items()})
+        q = Question(Expression(tuple(states), tuple(previous) + tuple(expr.right),
+                                dict(expr.values)))
+        answer = step.ask(q, given, inputs=inputs, method=method,
+                          samples=options.get("samples"))
+        with np.errstate(divide="ignore"):
+            # log P(x, y_t | x_before) = log P(x | x_before, y_t) + log P(x_before, y_t) + log S
+            logm = (np.log(answer.probabilities.reshape(shape + (size,)))
+                    + (answer.log_evidence + np.log(size))[..., None])
+        logs.append(np.moveaxis(logm, 0, -2))  # batch..., before, after
+    assert batch is not None
+    with np.errstate(divide="ignore"):
+        log_first = np.broadcast_to(np.log(first), batch + (size,))
+    forward, log_evidence = [], []
+    alpha = log_first
+    for t in range(steps):
+        joint = scipy.special.logsumexp(alpha[..., :, None] + logs[t], axis=-2)
+        total = scipy.special.logsumexp(joint, axis=-1)
+        log_evidence.append(total)
+        with np.errstate(invalid="ignore"):
+            alpha = joint - total[..., None]
+        forward.append(alpha)
+    searched = list(expr.left)
+    if question.kind in ("filter", "smooth"):
+        if question.kind == "filter":
+            marginals = forward
+        else:
+            beta = np.zeros(batch + (size,))
+            marginals = [forward[-1]]
+            for t in range(steps - 1, 0, -1):
+                beta = scipy.special.logsumexp(logs[t] + beta[..., None, :], axis=-1)
+                both = forward[t - 1] + beta
+                marginals.append(both - scipy.special.logsumexp(both, axis=-1, keepdims=True))
+            marginals = marginals[::-1]
+        probabilities = np.exp(np.stack(marginals)).reshape((steps, *batch, *cards))
+        keep = [states.index(v) for v in searched]
+        drop = tuple(1 + len(batch) + i for i in range(len(states)) if i not in keep)
+        probabilities = probabilities.sum(axis=drop)
+        # the searched variables in the question's order
+        order = sorted(keep)
+        probabilities = np.moveaxis(
+            probabilities, [1 + len(batch) + order.index(i) for i in keep],
+            [1 + len(batch) + j for j in range(len(keep))])
+        shape = probabilities.shape[:1 + len(batch)]
+        kind = question.kind
+        return Posterior(
+            question=f"{expr}   ({'filtered' if kind == 'filter' else 'smoothed'}, "
+                     f"{_steps_text(steps)})",
+            variables=tuple(searched),
+            names={v: program.variables[v].states for v in searched},
+            values={v: program.variables[v].typed_states for v in searched},
+            probabilities=probabilities,
+            log_evidence=np.broadcast_to(np.stack(log_evidence), shape).copy(),
+            batch_shape=shape,
+            ablated=program.ablated,
+            method=kind,
+        )
+    # the most likely joint sequence (the joint state before the first step summed out)
+    delta = log_first
+    pointers = []
+    log_best = np.zeros(batch)
+    for t in range(steps):
+        scores = delta[..., :, None] + logs[t]
+        pointers.append(np.argmax(scores, axis=-2))
+        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
+        top = np.max(delta, axis=-1, keepdims=True)
+        log_best = log_best + top[..., 0]
+        delta = delta - top
+    path = [np.argmax(delta, axis=-1)]
+    for t in range(steps - 1, 0, -1):
+        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
+    joint_path = np.stack(path[::-1])  # [T, batch...]
+    per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]
+    order = [states.index(v) for v in searched]
+    indices = per_variable[..., order]
+    total = np.sum(np.stack(log_evidence), axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        probability = np.exp(log_best - total)
+    smooth = _joint(program, Question(Expression(expr.left, expr.right, dict(expr.values)),
+                                      kind="smooth"), per_step, steps, inputs, method, options)
+    assert isinstance(smooth, Posterior)
+    return MapResult(
+        question=f"{expr}   (the most likely sequence, {_steps_text(steps)})",
+        variables=tuple(searched),
+        names={v: program.variables[v].states for v in searched},
+        indices=indices,
+        probability=np.where(np.isfinite(total), probability, 0.0),
+        ties=np.ones(batch, int),
+        zero_evidence=~np.isfinite(total),
+        posterior=smooth,
+        ablated=program.ablated,
+        kind="sequence",
     )

@@ -80,7 +80,7 @@ class Program:
         path: Path | None = None,
         ablated: tuple[str, ...] = (),
         learned: Sequence[FitRecord] = (),
-        time: tuple[str, str] | None = None,
+        time: tuple[tuple[str, str], ...] | None = None,
     ):
         self.variables = variables
         self.terms = terms
@@ -92,7 +92,7 @@ class Program:
         self.ablated = ablated
         #: the fits that set the parameters (provenance and statistics), oldest first
         self.learned = list(learned)
-        #: (previous, state) when the decomposition is one time step, else None
+        #: the (previous, state) pairs when the decomposition is one time step, else None
         self.time = time
         self.inference_cache = inference.InferenceCache()
         self._parsed: dict[str, Question] = {}  # question texts asked before, parsed

@@ -178,8 +178,8 @@ def render(program: Program) -> str:
             note = f"  -- {decl.description}" if decl.description else ""
             lines.append(f"      {name} : shape {list(decl.axes) + list(decl.event)}{note}")
     if program.time is not None:
-        previous, state = program.time
-        lines.append(f"    Time: one step of a sequence; {previous} is {state} one step earlier")
+        earlier = ", ".join(f"{previous} is {state}" for previous, state in program.time)
+        lines.append(f"    Time: one step of a sequence; {earlier} one step earlier")
     terms = [t for t in program.terms if not t.soft]
     joint = " ".join(program.variables)
     lines += ["    Decomposition",

@@ -49,8 +49,8 @@ class Checked:
     questions: dict[str, tuple[Expression, str, str]]
     ablate: list[Expression]
     problems: list[Diagnostic]
-    #: (previous, state) of a program that repeats per time step, else None
-    time: tuple[str, str] | None = None
+    #: the (previous, state) pairs of a program that repeats per time step, else None
+    time: tuple[tuple[str, str], ...] | None = None
 
 
 def build_variable(name: str, spec: Any) -> Variable:
@@ -597,9 +597,10 @@ class _Checker:
         return out
 
     def check_time(self, terms: list[Term], questions: dict[str, tuple[Expression, str, str]]
-                   ) -> tuple[str, str] | None:
-        """The time section: PREVIOUS and STATE discrete with the same states, PREVIOUS
-        without parents; questions over steps search STATE."""
+                   ) -> tuple[tuple[str, str], ...] | None:
+        """The time section: each PREVIOUS and its STATE discrete with the same states, PREVIOUS
+        without parents in a step; questions over steps search state variables (a sequence
+        question all of them)."""
         spec = self.doc.time
         over_time = [(name, q) for name, q in questions.items()
                      if q[1] in ("filter", "smooth", "sequence")]
@@ -608,38 +609,70 @@ class _Checker:
                 self.error(("questions", name), f"question {name!r}: a {kind} question needs "
                            "a program that repeats per step (a time: section)", at_key=True)
             return None
-        (previous, state), = spec.previous.items()
-        where = ("time", "previous", previous)
-        problems = []
-        for name in (previous, state):
-            var = self.variables.get(name)
-            if var is None or not var.is_discrete:
-                problems.append(f"expected a declared discrete variable, found "
-                                f"{'nothing' if var is None else 'a continuous one'} named "
-                                f"{name!r}")
-        if not problems:
-            a, b = self.variables[previous], self.variables[state]
-            if a.states != b.states:  # type: ignore[union-attr]
-                problems.append(f"{previous} and {state} must have the same states, found "
-                                f"{a.describe_states()} and {b.describe_states()}")  # type: ignore[union-attr]
-            own = next((t for t in terms if not t.soft and t.child.name == previous), None)
-            if own is not None and own.parents:
-                problems.append(f"{previous}, the state one step earlier, has no parents in "
-                                f"a step; found {own.label}")
-            if not any(previous in {p.name for p in t.parents} for t in terms
-                       if t.child.name == state):
-                problems.append(f"the term of {state} should depend on {previous} (the "
-                                "transition)")
-        for problem in problems:
-            self.error(where, f"time: {problem}", at_key=True)
-        if problems:
+        pairs = []
+        failed = False
+        previous_names = set(spec.previous)
+        for previous, state in spec.previous.items():
+            where = ("time", "previous", previous)
+            problems = []
+            for name in (previous, state):
+                var = self.variables.get(name)
+                if var is None or not var.is_discrete:
+                    problems.append(f"expected a declared discrete variable, found "
+                                    f"{'nothing' if var is None else 'a continuous one'} named "
+                                    f"{name!r}")
+            if state in previous_names:
+                problems.append(f"{state} is a state one step earlier itself: expected a state "
+                                "of this step")
+            if not problems:
+                a, b = self.variables[previous], self.variables[state]
+                if a.states != b.states:  # type: ignore[union-attr]
+                    problems.append(f"{previous} and {state} must have the same states, found "
+                                    f"{a.describe_states()} and {b.describe_states()}")  # type: ignore[union-attr]
+                own = next((t for t in terms if not t.soft and t.child.name == previous), None)
+                if own is not None and any(p.name not in previous_names for p in own.parents):
+                    problems.append(f"{previous}, the state one step earlier, has no parents "
+                                    f"in a step but the other states one step earlier; found "
+                                    f"{own.label}")
+            for problem in problems:
+                self.error(where, f"time: {problem}", at_key=True)
+            failed = failed or bool(problems)
+            pairs.append((previous, state))
+        if failed:
             return None
+        states = [state for _, state in pairs]
+        if len(set(states)) != len(states):
+            self.error(("time", "previous"), "time: each state variable once, found "
+                       f"{', '.join(states)}", at_key=True)
+            return None
+        for previous, state in pairs:
+            ancestors = self._ancestors(terms, state)
+            if not ancestors & previous_names:
+                self.error(("time", "previous", previous), f"time: the term of {state} should "
+                           "depend on the states one step earlier (the transition)", at_key=True)
+                return None
         for name, (expr, kind, _) in over_time:
-            if expr.left != (state,):
+            outside = [v for v in expr.left if v not in states]
+            if outside or (kind == "sequence" and len(states) > 1
+                           and set(expr.left) != set(states)):
+                wanted = (f"P({' '.join(states)} | ...)" if kind == "sequence"
+                          else f"P({' or '.join(states)} | ...)")
                 self.error(("questions", name), f"question {name!r}: a {kind} question "
-                           f"searches the state: expected P({state} | ...), found {expr}",
-                           at_key=True)
-        return previous, state
+                           f"searches the state: expected {wanted}, found {expr}", at_key=True)
+        return tuple(pairs)
+
+    @staticmethod
+    def _ancestors(terms: list[Term], name: str) -> set[str]:
+        """The variables ``name``'s term depends on, directly or through others of the step."""
+        parents = {t.child.name: [p.name for p in t.parents] for t in terms if not t.soft}
+        seen: set[str] = set()
+        todo = list(parents.get(name, []))
+        while todo:
+            current = todo.pop()
+            if current not in seen:
+                seen.add(current)
+                todo += parents.get(current, [])
+        return seen
 
     def check_ablate(self, terms: list[Term]) -> list[Expression]:
         out = []

@@ -236,9 +236,9 @@ class TimeSpec(_Strict):
     """A program that repeats per time step: its decomposition is one step."""
 
     previous: dict[str, str] = Field(
-        min_length=1, max_length=1, description="{PREVIOUS: STATE}: the variable PREVIOUS is "
-        "the state variable STATE one step earlier; the term of PREVIOUS is the belief before "
-        "the first step")
+        min_length=1, description="{PREVIOUS: STATE, ...}: each variable PREVIOUS is the state "
+        "variable STATE one step earlier (one pair per discrete state variable); the terms of "
+        "the PREVIOUS variables are the belief before the first step")
 
 
 class Document(_Strict):
