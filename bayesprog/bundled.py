@@ -114,7 +114,10 @@ def find(name: str, kind: str | None = None) -> Path | None:
     kinds = [kind] if kind is not None else list(ORDER)
     for wanted in kinds:
         for entry in listing():
-            if entry.kind == wanted and text in (entry.name, entry.short):
+            # a data file by its name with or without its suffix (probes, probes.csv)
+            bare = {entry.name.rsplit(".", 1)[0], entry.short.rsplit(".", 1)[0]} \
+                if entry.kind == "data" else set()
+            if entry.kind == wanted and (text in (entry.name, entry.short) or text in bare):
                 return entry.path
     return None
 

@@ -197,8 +197,12 @@ def cmd_discover(args: argparse.Namespace) -> int:
             raise _UserError(f"{option}: expected a number >= 0, found {value}")
     if args.discretise is not None and args.discretise < 2:
         raise _UserError(f"--discretise: expected a number of bins >= 2, found {args.discretise}")
+    for option, value in (("--score", args.score), ("--start", args.start),
+                          ("--max-parents", args.max_parents), ("--restarts", args.restarts)):
+        if args.method == "pc" and value is not None:
+            raise _UserError(f"{option} applies to hill climbing (--method hc), not to pc")
     start = _load(args.start) if args.start else None
-    found = discover(data, method=args.method, score=args.score,
+    found = discover(data, method=args.method, score=args.score or "bic",
                      equivalent_sample_size=args.ess, test=args.test,
                      significance=args.significance, max_conditioning=args.max_conditioning,
                      forbid=args.forbid, require=args.require, tiers=args.tiers,
@@ -238,8 +242,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     width = max(len(r["program"]) for r in rows)
     print(f"{'program':<{width}}  {'log evidence':>14}  {'log BF':>10}  method")
     for r in rows:
+        factor = r["log_bayes_factor"] if abs(r["log_bayes_factor"]) >= 5e-5 else 0.0
         print(f"{r['program']:<{width}}  {r['log_evidence']:>14.4f}  "
-              f"{r['log_bayes_factor']:>10.4f}  {r['method']}")
+              f"{factor:>10.4f}  {r['method']}")
     print(f"(natural logarithms; {rows[0]['rows']} rows; the Bayes factor is against the best)")
     return 0
 
@@ -633,8 +638,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("hc", "pc"), default="hc",
                    help="hc: hill climbing on a score; pc: the stable PC algorithm "
                    "(default: %(default)s)")
-    p.add_argument("--score", choices=("bic", "bdeu", "k2"), default="bic",
-                   help="hc: the score climbed (default: %(default)s)")
+    p.add_argument("--score", choices=("bic", "bdeu", "k2"),
+                   help="hc: the score climbed (default: bic)")
     p.add_argument("--ess", type=float, default=10.0, metavar="X",
                    help="bdeu: the equivalent sample size of its prior (default: %(default)s)")
     p.add_argument("--test", choices=("chi2", "g"), default="chi2",

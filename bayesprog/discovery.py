@@ -43,6 +43,8 @@ if TYPE_CHECKING:
 METHODS = ("hc", "pc")
 #: hill climbing's random restarts when none are asked for
 RESTARTS = 5
+#: the most states a column of numbers takes as they are (more: discretise it)
+MAX_NUMBER_STATES = 50
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 _ARC = re.compile(r"^\s*([^\s>-][^>]*?)\s*->\s*(\S.*?)\s*$")
 
@@ -162,6 +164,11 @@ def code_data(data: Any, *, discretise: int | None = None,
             raise DataError(f"{source}: column {column!r} has a different value in each of its "
                             f"{count} rows: every state seen once, an identifier rather than "
                             f"a variable (drop the column{hint})")
+        if numeric and discretise is None and len(column_states) > MAX_NUMBER_STATES:
+            raise DataError(f"{source}: column {column!r} holds {len(column_states)} different "
+                            f"numbers: as states, each would be seen about "
+                            f"{count / len(column_states):.1f} times (discretise it into bins: "
+                            "--discretise K)")
         states.append(column_states)
         named[column] = [t if p else None for t, p in zip(texts, present, strict=True)]
     coded_frame = pd.DataFrame(named, columns=names, dtype=object)
@@ -178,7 +185,9 @@ def _arcs(given: Iterable[str | tuple[str, str]], names: Sequence[str],
         if isinstance(item, str):
             match = _ARC.match(item)
             if match is None:
-                raise StructureError(f"{option} {item!r}: expected an arc A->B")
+                hint = (" (quote the arc, --forbid 'A->B': a shell reads > as a redirection)"
+                        if item.rstrip().endswith("-") else "")
+                raise StructureError(f"{option} {item!r}: expected an arc A->B{hint}")
             pair = (match.group(1), match.group(2))
         else:
             pair = (str(item[0]), str(item[1]))
@@ -307,7 +316,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     for u, v in rules.required:
         required_parents[v].add(u)
     if topological(required_parents) is None:
-        cycle = " , ".join(f"{names[u]}->{names[v]}" for u, v in sorted(rules.required))
+        cycle = ", ".join(f"{names[u]}->{names[v]}" for u, v in sorted(rules.required))
         raise StructureError(f"the required arcs make a cycle ({cycle})")
     scores = Scores(coded.codes, coded.card, score, equivalent_sample_size)
     check_dag(required_parents, rules, scores, names)

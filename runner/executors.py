@@ -51,9 +51,9 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
         stop_pool(pool)
         deaths += 1
         if deaths > max_deaths:
-            raise BayesprogError(f"worker processes died {deaths} times in a row (killed, or "
-                                 "out of memory?): the finished chunks are kept; run again to "
-                                 "resume")
+            raise BayesprogError(f"worker processes died {deaths} times in a row (killed, out "
+                                 "of memory, or failing as they start: see the errors above): "
+                                 "the finished chunks are kept; run again to resume")
         print(f"a worker process died: {len(left)} chunk(s) left go to new workers",
               file=sys.stderr)
 

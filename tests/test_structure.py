@@ -310,6 +310,8 @@ def test_hill_climbing_starts_from_a_program(asia, tmp_path):
     (["--method", "pc", "--max-parents", "2"], "applies to hill climbing"),
     (["--significance", "1.5", "--method", "pc"], "--significance"),
     (["--discretise", "1"], "--discretise"),
+    (["--forbid", "asia-"], "quote the arc"),
+    (["--method", "pc", "--score", "bdeu"], "--score applies to hill climbing"),
 ])
 def test_contradictory_or_bad_constraints_are_user_errors(asia, tmp_path, capsys, args, said):
     frame, _ = asia
@@ -350,6 +352,22 @@ def test_columns_that_cannot_be_variables_are_refused(tmp_path, capsys, column, 
     frame.to_csv(tmp_path / "d.csv", index=False)
     code, out, err = run(capsys, "discover", tmp_path / "d.csv", "-o", tmp_path / "x.yaml")
     assert code == 2 and "'Bad'" in err and said in err and "Traceback" not in err
+
+
+def test_a_column_of_many_numbers_asks_to_be_binned():
+    rng = np.random.default_rng(3)
+    frame = pd.DataFrame({"T": np.round(rng.normal(20, 5, 400), 1),
+                          "R": rng.choice(["dry", "wet"], 400)})
+    with pytest.raises(bayesprog.BayesprogError, match="different numbers.*--discretise"):
+        bayesprog.discover(frame)
+    assert len(bayesprog.discover(frame, discretise=4).program.variables["T"].states) == 4
+
+
+def test_bundled_data_is_found_by_its_name(tmp_path, capsys):
+    code, out, err = run(capsys, "discover", "probes", "-o", tmp_path / "p.yaml",
+                         "--discretise", "3")
+    assert code == 0, err
+    assert bayesprog.load(tmp_path / "p.yaml").learned[0].data.endswith("probes.csv")
 
 
 def test_a_hidden_variable_is_refused_clearly(tmp_path, asia):

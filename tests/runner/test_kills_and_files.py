@@ -273,3 +273,16 @@ def test_a_worker_still_starting_dies_with_its_parent(tmp_path, after):
     running = [p for p in alive if _status(p) != psutil.STATUS_ZOMBIE]  # dead, not yet reaped
     assert not running and _marked(mark) == [], imported
     assert "Traceback" not in err.decode()
+
+
+def test_a_folder_named_like_the_package_where_the_run_starts_does_not_hide_it(tmp_path):
+    """Workers start with ``python -c``, which would put the current folder first on their
+    path: a ``runner/`` folder there (a checkout's, say) must not replace the installed one."""
+    decoy = tmp_path / "runner"
+    decoy.mkdir()
+    (decoy / "__init__.py").write_text("raise ImportError('the decoy was imported')\n")
+    done = subprocess.run([BAYESPROG, "run", str(_tiny(tmp_path)), "--out", str(tmp_path / "out"),
+                           "--workers", "2", "-q", "--no-report"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "decoy" not in done.stderr and (tmp_path / "out" / "chunks").is_dir()
