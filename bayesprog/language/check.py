@@ -645,9 +645,10 @@ class _Checker:
             self.error(("time", "previous"), "time: each state variable once, found "
                        f"{', '.join(states)}", at_key=True)
             return None
+        built = {t.child.name for t in terms if not t.soft}
         for previous, state in pairs:
             ancestors = self._ancestors(terms, state)
-            if not ancestors & previous_names:
+            if state in built and not ancestors & previous_names:
                 self.error(("time", "previous", previous), f"time: the term of {state} should "
                            "depend on the states one step earlier (the transition)", at_key=True)
                 return None
