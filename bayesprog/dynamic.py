@@ -28,6 +28,7 @@ import scipy
 from bayesprog.errors import QuestionError, expect_mapping
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
+from bayesprog.inference.density import Density
 
 KINDS = ("filter", "smooth", "sequence")
 
@@ -56,13 +57,19 @@ def _steps(evidence: dict[str, Any]) -> tuple[int, dict[str, list[Any]]]:
 
 def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | None,
               inputs: Mapping[str, Any] | None, soft: Mapping[str, Any] | None,
-              method: str | None, options: Mapping[str, Any]) -> Posterior | MapResult:
+              method: str | None, options: Mapping[str, Any]) -> Posterior | MapResult | Density:
     """The answer of a ``filter``, ``smooth`` or ``sequence`` question (see the module)."""
     if program.time is None:
         raise QuestionError(f"a {question.kind} question needs a program that repeats per step "
                             "(a time: section)")
     expr = question.expression
     states = [state for _, state in program.time]
+    if not program.variables[states[0]].is_discrete:
+        if soft:
+            raise QuestionError("soft evidence is not taken by questions over steps")
+        steps, per_step = _steps(expect_mapping(evidence, "evidence",
+                                                "variable names to values"))
+        return _kalman(program, question, per_step, steps, inputs)
     if len(program.time) > 1:
         outside = [v for v in expr.left if v not in states]
         if outside or (question.kind == "sequence" and set(expr.left) != set(states)):
@@ -298,3 +305,130 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
         ablated=program.ablated,
         kind="sequence",
     )
+
+
+def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
+            inputs: Mapping[str, Any] | None) -> Density:
+    """A question over steps of a program whose states are real: the Kalman filter (``filter``)
+    and the Rauch-Tung-Striebel smoother (``smooth``), exact for a linear-Gaussian step.
+
+    The step's model is read from the program itself, by Gaussian algebra: the states and
+    observations of a step given the states before, ``(x_t, y_t) | x_t-1 ~ N(c + G x_t-1, S)``
+    (asked with ``x_t-1`` at 0 and at each unit vector), and the belief before the first step
+    ``N(m_0, P_0)``. Each step conditions the joint Gaussian of ``(x_t-1, x_t, y_t)`` on
+    ``y_t``; the smoother runs back through the joints of ``(x_t-1, x_t)`` the filter kept, so
+    an observation may also depend on the state before."""
+    expr = question.expression
+    if question.kind == "sequence":
+        raise QuestionError("a sequence question searches discrete states: for real states the "
+                            "most likely sequence of a linear-Gaussian program is the smoothed "
+                            "means (ask a smooth question)")
+    previous = [p for p, _ in program.time]
+    states = [s for _, s in program.time]
+    observed = list(expr.right)
+    for name in observed:
+        if program.variables[name].is_discrete:
+            raise QuestionError(f"a filter over real states observes real variables: {name} is "
+                                "discrete (a particle filter would take it; not available yet)")
+    d, m = len(states), len(observed)
+
+    def gaussian(question_text: str, evidence: dict[str, Any], program_: Any) -> Density:
+        try:
+            answer = program_.ask(question_text, evidence, inputs=inputs, method="gaussian")
+        except QuestionError as exc:
+            raise QuestionError(f"a filter over real states needs a linear-Gaussian step "
+                                f"(normal terms, means affine in their parents): {exc}") \
+                from None
+        assert isinstance(answer, Density) and answer.means is not None
+        if answer.means.shape[1] != 1:
+            raise QuestionError("a filter over real states needs one Gaussian per step: a "
+                                "discrete variable of the step mixes several")
+        return answer
+
+    start = gaussian(f"P({' '.join(previous)})", {}, program)
+    assert start.means is not None and start.covariances is not None
+    m0 = start.means[0, 0]
+    p0 = start.covariances[0, 0]
+    step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
+    # the states before at 0, at each unit vector, and at a few more points that check that
+    # the step is linear in them (a formula such as sin(X_before) is not)
+    probes = np.random.default_rng(0).normal(scale=3.0, size=(3, d))
+    rows = np.vstack([np.zeros(d), np.eye(d), probes])
+    given = {p: rows[:, i] for i, p in enumerate(previous)}
+    model = gaussian(f"P({' '.join(states + observed)} | {', '.join(previous)})", given, step)
+    means = model.means[:, 0]  # type: ignore[index]
+    c = means[0]
+    g = (means[1:d + 1] - c).T  # (d + m) x d
+    noise = model.covariances[0, 0]  # type: ignore[index]
+    scale = 1.0 + np.abs(means).max()
+    if (np.abs(means[d + 1:] - (c + probes @ g.T)).max() > 1e-9 * scale
+            or np.abs(model.covariances[:, 0] - noise).max() > 1e-9 * (1 + np.abs(noise).max())):  # type: ignore[index]
+        raise QuestionError("a filter over real states needs a linear-Gaussian step: the means "
+                            f"of {', '.join(states + observed)} are not affine in "
+                            f"{', '.join(previous)} (a non-linear formula; a particle filter "
+                            "would take it, not available yet)")
+    y_all = np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
+    batch = y_all.shape[1:-1]
+    mean = np.broadcast_to(m0, batch + (d,)).copy()
+    cov = np.broadcast_to(p0, batch + (d, d)).copy()
+    filtered, joints, log_evidence = [], [], []
+    y_index = np.arange(2 * d, 2 * d + m)
+    for t in range(steps):
+        # the joint of (x_t-1, x_t, y_t) given y_1..t-1
+        mu = np.concatenate([mean, c + np.einsum("ij,...j->...i", g, mean)], axis=-1)
+        cross = np.einsum("...ij,kj->...ik", cov, g)  # cov(x_t-1, (x_t, y_t))
+        lower = np.einsum("ij,...jk,lk->...il", g, cov, g) + noise
+        sigma = _blocks(cov, cross, lower)
+        keep = np.arange(2 * d)
+        s_yy = sigma[..., y_index[:, None], y_index]
+        s_ky = sigma[..., keep[:, None], y_index]
+        gain = np.linalg.solve(s_yy, np.swapaxes(s_ky, -1, -2))  # m x 2d per batch
+        gain = np.swapaxes(gain, -1, -2)
+        innovation = y_all[t] - mu[..., y_index]
+        joint_mean = mu[..., keep] + np.einsum("...ij,...j->...i", gain, innovation)
+        joint_cov = sigma[..., keep[:, None], keep] - np.einsum("...ij,...kj->...ik", gain, s_ky)
+        _, logdet = np.linalg.slogdet(s_yy)
+        quad = np.einsum("...i,...i->...", innovation,
+                         np.linalg.solve(s_yy, innovation[..., None])[..., 0])
+        log_evidence.append(-0.5 * (quad + logdet + m * np.log(2 * np.pi)))
+        joints.append((joint_mean, joint_cov))
+        mean = joint_mean[..., d:]
+        cov = joint_cov[..., d:, d:]
+        filtered.append((mean, cov))
+    if question.kind == "smooth":
+        smooth_mean, smooth_cov = filtered[-1]
+        out = [(smooth_mean, smooth_cov)]
+        for t in range(steps - 1, 0, -1):
+            joint_mean, joint_cov = joints[t]  # (x_t-1, x_t) given y_1..t
+            before_mean, after_mean = joint_mean[..., :d], joint_mean[..., d:]
+            before_cov = joint_cov[..., :d, :d]
+            cross = joint_cov[..., :d, d:]
+            after_cov = joint_cov[..., d:, d:]
+            j = np.swapaxes(np.linalg.solve(after_cov, np.swapaxes(cross, -1, -2)), -1, -2)
+            smooth_mean = before_mean + np.einsum("...ij,...j->...i", j,
+                                                  smooth_mean - after_mean)
+            smooth_cov = before_cov + np.einsum("...ij,...jk,...lk->...il", j,
+                                                smooth_cov - after_cov, j)
+            out.append((smooth_mean, smooth_cov))
+        chosen = out[::-1]
+    else:
+        chosen = filtered
+    order = [states.index(v) for v in expr.left]
+    means_t = np.stack([mu for mu, _ in chosen])[..., order]  # T, batch..., k
+    covs_t = np.stack([sg for _, sg in chosen])[..., order, :][..., :, order]
+    shape = (steps,) + batch
+    rows_n = int(np.prod(shape))
+    kind = question.kind
+    return Density(
+        f"{expr}   ({'filtered' if kind == 'filter' else 'smoothed'}, {_steps_text(steps)})",
+        tuple(expr.left), shape, np.stack(log_evidence).reshape(shape), ablated=program.ablated,
+        method="kalman" if kind == "filter" else "kalman-rts",
+        weights=np.ones((rows_n, 1)), means=means_t.reshape(rows_n, 1, len(order)),
+        covariances=covs_t.reshape(rows_n, 1, len(order), len(order)))
+
+
+def _blocks(top_left: np.ndarray, top_right: np.ndarray, bottom_right: np.ndarray) -> np.ndarray:
+    """``[[A, B], [B^T, C]]`` for batches of blocks."""
+    upper = np.concatenate([top_left, top_right], axis=-1)
+    lower = np.concatenate([np.swapaxes(top_right, -1, -2), bottom_right], axis=-1)
+    return np.concatenate([upper, lower], axis=-2)

@@ -209,12 +209,17 @@ def format_density(result: Density) -> str:
     """Mean, sd, quantiles and MAP of each searched real variable (one block per batch row)."""
     how = {"gaussian": "exact, Gaussian algebra",
            "grid": "on a grid of " + ", ".join(f"{n} bins for {v}"
-                                               for v, n in result.resolution.items())}
+                                               for v, n in result.resolution.items()),
+           "kalman": "exact, Kalman filter", "kalman-rts": "exact, Rauch-Tung-Striebel"}
     out = [f"{result.question}" + _ablated(result.ablated)
            + (f"   ({how.get(result.method, result.method)})" if result.method else "")]
     summary = result.summary()
+    over_time = result.method in ("kalman", "kalman-rts")
     for pos in np.ndindex(*result.batch_shape):
-        if pos:
+        if over_time:
+            rest = f", batch row [{', '.join(map(str, pos[1:]))}]" if pos[1:] else ""
+            out.append(f"  step {pos[0] + 1}{rest}")
+        elif pos:
             out.append(f"  batch row [{', '.join(map(str, pos))}]")
         for v, s in summary.items():
             def num(x: np.ndarray, stat: str | None = None, v: str = v,

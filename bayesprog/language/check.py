@@ -617,18 +617,22 @@ class _Checker:
             problems = []
             for name in (previous, state):
                 var = self.variables.get(name)
-                if var is None or not var.is_discrete:
-                    problems.append(f"expected a declared discrete variable, found "
-                                    f"{'nothing' if var is None else 'a continuous one'} named "
-                                    f"{name!r}")
+                if var is None:
+                    problems.append(f"expected a declared variable, found nothing named {name!r}")
             if state in previous_names:
                 problems.append(f"{state} is a state one step earlier itself: expected a state "
                                 "of this step")
             if not problems:
                 a, b = self.variables[previous], self.variables[state]
-                if a.states != b.states:  # type: ignore[union-attr]
+                if a.is_discrete != b.is_discrete:
+                    problems.append(f"{previous} and {state} must be of one kind, found one "
+                                    "discrete and one real")
+                elif a.is_discrete and a.states != b.states:  # type: ignore[union-attr]
                     problems.append(f"{previous} and {state} must have the same states, found "
                                     f"{a.describe_states()} and {b.describe_states()}")  # type: ignore[union-attr]
+                elif not a.is_discrete and (a.low, a.high) != (b.low, b.high):  # type: ignore[union-attr]
+                    problems.append(f"{previous} and {state} must have the same support, found "
+                                    f"[{a.low}, {a.high}] and [{b.low}, {b.high}]")  # type: ignore[union-attr]
                 own = next((t for t in terms if not t.soft and t.child.name == previous), None)
                 if own is not None and any(p.name not in previous_names for p in own.parents):
                     problems.append(f"{previous}, the state one step earlier, has no parents "
@@ -641,6 +645,12 @@ class _Checker:
         if failed:
             return None
         states = [state for _, state in pairs]
+        kinds = {self.variables[s].is_discrete for s in states}
+        if len(kinds) > 1:
+            self.error(("time", "previous"), "time: the states over time are all discrete or "
+                       "all real (a filter over a discrete and a real state together is out of "
+                       "reach)", at_key=True)
+            return None
         if len(set(states)) != len(states):
             self.error(("time", "previous"), "time: each state variable once, found "
                        f"{', '.join(states)}", at_key=True)
