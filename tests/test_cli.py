@@ -115,8 +115,6 @@ questions:
 
 # (line, column, words) of every problem of BAD, computed from the text above
 BAD_PROBLEMS = [
-    (4, BAD.splitlines()[3].index("yes") + 1, ("'yes'",)),
-    (4, BAD.splitlines()[3].index("no") + 1, ("'no'",)),
     (6, BAD.splitlines()[5].index("[0.2") + 1, ("summing to 1",)),
     (7, BAD.splitlines()[6].index("P(Grass") + 1, ("undeclared variable 'Rian'",)),
     (9, BAD.splitlines()[8].index("P(Rain") + 1, ("unknown state 'maybe'",)),
