@@ -1011,3 +1011,16 @@ decomposition:
         program.ask("P(M | E)", {"E": float("nan")})
     message = str(info.value)
     assert "E" in message and "[-inf, inf]" not in message, message
+
+
+@pytest.mark.parametrize("written, bad", [('"2*X + W"', "W"), ("3*X + foo(X)", "foo"),
+                                          ("'X + + * 2'", "*")])
+def test_a_formula_error_points_at_its_character(written, bad):
+    text = ("bayesprog: 1\nvariables:\n  X: {continuous: [-.inf, .inf]}\n"
+            "  Y: {continuous: [-.inf, .inf]}\ndecomposition:\n"
+            "  - {term: P(X), form: normal, mean: 0.0, sigma: 1.0}\n"
+            f"  - {{term: P(Y | X), form: normal, sigma: 0.5, mean: {written}}}\n")
+    diags = diagnostics(text)
+    assert len(diags) == 1
+    line = text.splitlines()[6]
+    assert (diags[0].line, diags[0].column) == (7, line.index(bad, line.index("mean")) + 1)

@@ -8,6 +8,7 @@ contraction otherwise, and to use a newly registered method when it is the cheap
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -536,3 +537,38 @@ def test_first_question_gives_way_when_the_tables_underflow():
     expected = np.exp(log_joint - np.logaddexp.reduce(log_joint))
     np.testing.assert_allclose(answer.probabilities, expected, rtol=1e-12)
     np.testing.assert_allclose(answer.log_evidence, np.logaddexp.reduce(log_joint), rtol=1e-12)
+
+
+def test_lbp_gives_the_evidence_by_the_bethe_approximation_exact_on_a_tree():
+    """On a tree the Bethe log Z is the exact log-probability of the evidence; on a loopy
+    program it is an approximation, and the answer says so."""
+    import bayesprog as bp
+
+    models = Path(__file__).parents[1] / "models" / "examples"
+    student = bp.load(models / "student.yaml")
+    evidence = {"G": np.array(["A", "B", "C", "A"])}
+    exact = student.ask("P(I | G)", evidence)
+    lbp = student.ask("P(I | G)", evidence, method="lbp")
+    np.testing.assert_allclose(lbp.log_evidence, exact.log_evidence, atol=1e-10)
+    assert lbp.evidence == "Bethe approximation"
+    assert lbp.to_json()["log_evidence_method"] == "Bethe approximation"
+    assert "log_evidence_method" not in exact.to_json()
+    # a loop A - B - D - C - A of weak dependencies: the Bethe error is of second order in the
+    # coupling (a wrong energy or entropy term would be off by the whole evidence)
+    loop = bp.loads("""
+bayesprog: 1
+variables: {A: {states: [a0, a1]}, B: {states: [b0, b1]}, C: {states: [c0, c1]},
+            D: {states: [d0, d1]}}
+decomposition:
+  - {term: P(A), form: table, table: [0.3, 0.7]}
+  - {term: P(B | A), form: table, table: {a0: [0.55, 0.45], a1: [0.5, 0.5]}}
+  - {term: P(C | A), form: table, table: {a0: [0.4, 0.6], a1: [0.45, 0.55]}}
+  - term: "P(D | B, C)"
+    form: table
+    table: {b0: {c0: [0.2, 0.8], c1: [0.25, 0.75]}, b1: {c0: [0.3, 0.7], c1: [0.22, 0.78]}}
+""")
+    for value in ("d0", "d1"):
+        exact = loop.ask(f"P(A | D={value})")
+        lbp = loop.ask(f"P(A | D={value})", method="lbp")
+        assert abs(float(lbp.log_evidence - exact.log_evidence)) < 1e-3
+        assert abs(float(lbp.log_evidence - exact.log_evidence)) > 0  # not exact: a loop

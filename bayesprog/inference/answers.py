@@ -68,6 +68,8 @@ class Posterior:
     ess: np.ndarray | None = None
     iterations: int | None = None
     residual: float | None = None
+    #: how ``log_evidence`` was computed when it is not exact (``lbp``: "Bethe approximation")
+    evidence: str | None = None
     #: the rows without an answer (the evidence that bears on it has probability zero), when
     #: ``log_evidence`` is not computed yet; None: the rows where it is -inf
     impossible: np.ndarray | None = field(default=None, repr=False)
@@ -108,6 +110,8 @@ class Posterior:
         if self.iterations is not None:
             out["iterations"] = self.iterations
             out["residual"] = self.residual
+        if self.evidence is not None:
+            out["log_evidence_method"] = self.evidence
         return out
 
 

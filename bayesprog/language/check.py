@@ -419,7 +419,12 @@ class _Checker:
             try:
                 formula = parse_formula(str(value), names=list(parents) + list(inputs))
             except FormulaError as exc:
-                self.error(where, f"{what}: {exc}")
+                # at the offending character of the formula, inside its string
+                line, column = self.located.where(where)
+                if isinstance(value, str) and "\\" not in value:
+                    column += exc.offset + (1 if tuple(where) in self.located.quoted else 0)
+                self.problems.append(Diagnostic(self.located.file, line, column,
+                                                f"{what}: {exc}"))
                 failed = True
                 return 0.0
             for name in formula.names:

@@ -39,6 +39,8 @@ class Located:
     key_positions: dict[Path, tuple[int, int]] = field(default_factory=dict)
     #: the text of each number, as written (``1.50``), for where a name stands
     texts: dict[Path, str] = field(default_factory=dict)
+    #: the paths of values written in quotes on one line (their text starts a column later)
+    quoted: set[Path] = field(default_factory=set)
 
     def where(self, path: Path) -> tuple[int, int]:
         """Line and column of ``path``, or of its closest located ancestor."""
@@ -214,6 +216,8 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     def build_scalar(node: yaml.Node, path: Path) -> Any:
         assert isinstance(node, yaml.ScalarNode)
         if node.style:  # quoted or block scalar: always a string (plain: None, or "" from libyaml)
+            if node.style in ("'", '"') and node.start_mark.line == node.end_mark.line:
+                located.quoted.add(path)
             return node.value
         value = _plain_scalar(node.value)
         if not isinstance(value, str) and node.value:

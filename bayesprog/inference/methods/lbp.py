@@ -3,7 +3,8 @@ factors (sliced by the evidence) and its unobserved discrete variables, every ev
 once, until the largest change of a message falls under a tolerance. Exact on programs whose
 factor graph is a tree; on loopy ones a fixed point of the Bethe approximation, with no bound on
 its error. Answers the marginal of one searched variable, or of searched variables that share a
-factor; reports its iterations and last change (``residual``)."""
+factor; reports its iterations and last change (``residual``), and the evidence's probability
+by the Bethe approximation of ``log Z`` (exact on a tree; ``evidence`` says so)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,8 @@ class LoopyBeliefPropagation(Method):
     def posterior(self, plan: QuestionPlan) -> Posterior:
         program, bound, searched = plan.program, plan.bound, plan.searched
         rows = bound.size
-        operands, _ = rescaled(question_factors(program, plan.terms, bound), rows, merge=False)
+        operands, offset = rescaled(question_factors(program, plan.terms, bound), rows,
+                                    merge=False)
         # every table with the batch axis of rows, in the probability domain, largest value 1
         tables = [(f.axes, np.broadcast_to(f.log if f.batched else f.log[np.newaxis],
                                            (rows,) + f.log.shape[f.batched:]))
@@ -68,9 +70,36 @@ class LoopyBeliefPropagation(Method):
         with np.errstate(invalid="ignore", divide="ignore"):
             probs = probs / total.reshape((-1,) + (1,) * len(cards))
         zero = ~(total > 0)
-        log_z = np.where(zero, -np.inf, np.nan)  # lbp estimates no evidence
+        log_z = np.where(zero, -np.inf, offset + _bethe(tables, variables, beliefs, rows))
         return answer(plan, np.where(zero.reshape((-1,) + (1,) * len(cards)), 0.0, probs), log_z,
-                      method=self.name, iterations=done, residual=residual)
+                      method=self.name, iterations=done, residual=residual,
+                      evidence="Bethe approximation")
+
+
+def _bethe(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list[str],
+           beliefs: dict[str, Any], rows: int) -> np.ndarray:
+    """The Bethe approximation of ``log Z`` (the evidence's log-probability, less the tables'
+    rescaling) at the fixed point: the factors' average energies and entropies, less the
+    variables' entropies counted once per factor beyond the first. Exact on a tree."""
+    total = np.zeros(rows)
+    degree = dict.fromkeys(variables, 0)
+    for i, (axes, table) in enumerate(tables):
+        for a in axes:
+            degree[a] += 1
+        if not axes:
+            continue
+        b = beliefs["factor"](i, axes).reshape(rows, -1)
+        b = b / b.sum(axis=1, keepdims=True)
+        f = np.broadcast_to(table, (rows,) + table.shape[1:]).reshape(rows, -1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            terms = np.where(b > 0, b * (np.log(f) - np.log(b)), 0.0)
+        total += terms.sum(axis=1)
+    for v in variables:
+        b = beliefs["var"][v].reshape(rows, -1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            entropy = -np.where(b > 0, b * np.log(b), 0.0).sum(axis=1)
+        total -= (degree[v] - 1) * entropy
+    return total
 
 
 #: Messages are kept above this, so that a variable's message to a factor (the product of its
