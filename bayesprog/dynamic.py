@@ -66,7 +66,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     states = [state for _, state in program.time]
     if not program.variables[states[0]].is_discrete:
         if soft:
-            raise QuestionError("soft evidence is not taken by questions over steps")
+            raise QuestionError("soft evidence is taken by questions over discrete states; a "
+                                "Kalman filter observes real values")
         steps, per_step = _steps(expect_mapping(evidence, "evidence",
                                                 "variable names to values"))
         return _kalman(program, question, per_step, steps, inputs)
@@ -77,18 +78,15 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
                       else f"P({' or '.join(states)} | ...)")
             raise QuestionError(f"a {question.kind} question searches the state: expected "
                                 f"{wanted}, found {expr}")
-        if soft:
-            raise QuestionError("soft evidence is not taken by questions over steps")
-        steps, per_step = _steps(expect_mapping(evidence, "evidence",
-                                                "variable names to values"))
-        return _joint(program, question, per_step, steps, inputs, method, options)
+        steps, per_step = _steps_of(evidence, soft)
+        soft_steps = _soft_steps(program, soft, steps)
+        return _joint(program, question, per_step, steps, inputs, method, options, soft_steps)
     (previous, state), = program.time
     if expr.left != (state,):
         raise QuestionError(f"a {question.kind} question searches the state: expected "
                             f"P({state} | ...), found {expr}")
-    if soft:
-        raise QuestionError("soft evidence is not taken by questions over steps")
-    steps, per_step = _steps(expect_mapping(evidence, "evidence", "variable names to values"))
+    steps, per_step = _steps_of(evidence, soft)
+    soft_steps = _soft_steps(program, soft, steps)
     known = expr.right
     step = program.ablate(str(program.term_of(previous).expression))
     card = program.variables[state].card
@@ -96,7 +94,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     def ask(searched: tuple[str, ...], t: int, soft_on: dict[str, np.ndarray]) -> Posterior:
         q = Question(Expression(searched, known, dict(expr.values)))
         return step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
-                        soft=soft_on, method=method, samples=options.get("samples"))
+                        soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
+                        method=method, samples=options.get("samples"))
 
     first = program.ask(f"P({previous})").probabilities  # the belief before the first step
     forward, log_evidence = [], []
@@ -185,9 +184,45 @@ def _posterior(question: Question, program: Any, state: str, probabilities: np.n
     )
 
 
+def _steps_of(evidence: Mapping[str, Any] | None,
+              soft: Mapping[str, Any] | None) -> tuple[int, dict[str, list[Any]]]:
+    """The number of steps and each step's evidence; with soft evidence alone, its steps."""
+    given = expect_mapping(evidence, "evidence", "variable names to values")
+    if not given and soft:
+        first = np.asarray(next(iter(soft.values())), dtype=float)
+        if first.ndim < 2 or len(first) == 0:
+            raise QuestionError("soft evidence over steps: expected one likelihood vector per "
+                                f"step (time first), found shape {list(first.shape)}")
+        return len(first), {}
+    return _steps(given)
+
+
+def _soft_steps(program: Any, soft: Mapping[str, Any] | None,
+                steps: int) -> dict[str, list[np.ndarray]]:
+    """Soft evidence over steps: per variable, one likelihood vector per step (time as the
+    first axis, as the evidence), on what a step observes, not on its states."""
+    if not soft:
+        return {}
+    kept = {name for pair in program.time for name in pair}
+    out = {}
+    for name, value in expect_mapping(soft, "soft", "variable names to likelihoods").items():
+        if name in kept:
+            raise QuestionError(f"soft evidence on {name}: the states over time are what the "
+                                "recursion computes; give soft evidence on what a step "
+                                "observes")
+        array = np.asarray(value, dtype=float)
+        if array.ndim < 2 or len(array) != steps:
+            raise QuestionError(f"soft evidence on {name} over {steps} steps: expected one "
+                                f"likelihood vector per step (time first), found shape "
+                                f"{list(array.shape)}")
+        out[name] = [array[t] for t in range(steps)]
+    return out
+
+
 def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
            inputs: Mapping[str, Any] | None, method: str | None,
-           options: Mapping[str, Any]) -> Posterior | MapResult:
+           options: Mapping[str, Any],
+           soft_steps: dict[str, list[np.ndarray]] | None = None) -> Posterior | MapResult:
     """A question over steps of a program with several state variables: the recursions over
     their joint state. Each step's ``log P(x_t, y_t | x_t-1)`` for every joint state before
     (a batch of that many rows) is one question of the step program with the states one step
@@ -215,7 +250,9 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
         given.update({k: np.broadcast_to(a, shape) for k, a in known.items()})
         q = Question(Expression(tuple(states), tuple(previous) + tuple(expr.right),
                                 dict(expr.values)))
-        answer = step.ask(q, given, inputs=inputs, method=method,
+        likelihoods = {k: np.broadcast_to(v[t], shape + v[t].shape[-1:])
+                       for k, v in (soft_steps or {}).items()}
+        answer = step.ask(q, given, inputs=inputs, method=method, soft=likelihoods or None,
                           samples=options.get("samples"))
         with np.errstate(divide="ignore"):
             # log P(x, y_t | x_before) = log P(x | x_before, y_t) + log P(x_before, y_t) + log S
@@ -291,7 +328,8 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     with np.errstate(over="ignore", invalid="ignore"):
         probability = np.exp(log_best - total)
     smooth = _joint(program, Question(Expression(expr.left, expr.right, dict(expr.values)),
-                                      kind="smooth"), per_step, steps, inputs, method, options)
+                                      kind="smooth"), per_step, steps, inputs, method, options,
+                    soft_steps)
     assert isinstance(smooth, Posterior)
     return MapResult(
         question=f"{expr}   (the most likely sequence, {_steps_text(steps)})",

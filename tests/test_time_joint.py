@@ -173,3 +173,35 @@ def test_what_the_recursions_cannot_answer_is_refused_at_its_place(change, said)
     text = str(info.value)
     assert ("expected P(A B | ...)" in text) or ("must have the same states" in text
                                                  or "each state variable once" in text)
+
+
+def test_soft_evidence_on_what_a_step_observes_equals_enumeration(program):
+    like = np.array([[0.9, 0.2], [0.3, 0.6], [0.5, 0.5], [0.1, 0.7]])  # time, O's states
+    answer = program.ask("P(A B)", soft={"O": like}, kind="smooth")
+    # enumeration: each step's likelihood of O summed over O's states
+    weights = {}
+    for start in itertools.product(range(2), range(3)):
+        for seq in itertools.product(itertools.product(range(2), range(3)), repeat=4):
+            p = PRIOR_A[start[0]] * PRIOR_B[start[0], start[1]]
+            before = start
+            for (a, b), lt in zip(seq, like, strict=True):
+                p *= MOVE_A[before[0], a] * MOVE_B[before[1], a, b] * (SEE[a, b] @ lt)
+                before = (a, b)
+            weights[seq] = weights.get(seq, 0.0) + p
+    for t in range(4):
+        np.testing.assert_allclose(answer.probabilities[t], _marginal(weights, 4, t), atol=1e-12)
+    with pytest.raises(bayesprog.QuestionError, match="soft evidence on A"):
+        program.ask("P(B)", soft={"A": like[:, :2]}, kind="filter")
+
+
+def test_soft_evidence_over_steps_of_one_state_equals_the_hand_recursion():
+    umbrella = bayesprog.load(__import__("pathlib").Path(__file__).parents[1] / "models"
+                              / "examples" / "umbrella.yaml")
+    like = np.array([[0.9, 0.1], [0.6, 0.4], [0.2, 0.8]])
+    answer = umbrella.ask("P(Rain)", soft={"Umbrella": like}, kind="filter")
+    move, see = np.array([[0.7, 0.3], [0.3, 0.7]]), np.array([[0.9, 0.1], [0.2, 0.8]])
+    belief = np.array([0.5, 0.5])
+    for t in range(3):
+        belief = (belief @ move) * (see @ like[t])
+        belief = belief / belief.sum()
+        np.testing.assert_allclose(answer.probabilities[t], belief, atol=1e-12)
