@@ -340,10 +340,14 @@ def cmd_query(args: argparse.Namespace) -> int:
         _no_steps(program, evidence)
     soft = {}
     for name, text in _pairs(args.soft, "--soft").items():
+        if text.endswith(".npy"):  # a batch of likelihoods, or one per step over time
+            soft[name] = np.asarray(_npy(text, "--soft"), dtype=float)
+            continue
         try:
             soft[name] = np.array([float(x) for x in text.split(",")])
         except ValueError:
-            raise _UserError(f"--soft {name}={text}: expected numbers separated by commas") from None
+            raise _UserError(f"--soft {name}={text}: expected numbers separated by commas, or "
+                             "FILE.npy") from None
     if args.samples < 1:
         raise _UserError(f"--samples: expected at least 1, found {args.samples}")
     result = program.ask(
@@ -561,7 +565,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="evidence for a known variable: a state, a number, or FILE.npy "
                    "(an array: a field, or a batch of values); repeatable (default: none)")
     p.add_argument("--soft", action="append", default=[], metavar="VAR=p1,p2,...",
-                   help="soft evidence: one likelihood per state of VAR (default: none)")
+                   help="soft evidence: one likelihood per state of VAR, or VAR=FILE.npy (a "
+                   "batch, or one per step with --over-time) (default: none)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed for breaking MAP ties and for sampling (default: %(default)s)")
     p.add_argument("--method", default="auto",

@@ -205,3 +205,15 @@ def test_soft_evidence_over_steps_of_one_state_equals_the_hand_recursion():
         belief = (belief @ move) * (see @ like[t])
         belief = belief / belief.sum()
         np.testing.assert_allclose(answer.probabilities[t], belief, atol=1e-12)
+
+
+def test_soft_evidence_over_steps_from_the_command_line(tmp_path, capsys):
+    like = np.array([[0.9, 0.1], [0.6, 0.4], [0.2, 0.8]])
+    np.save(tmp_path / "like.npy", like)
+    umbrella = __import__("pathlib").Path(__file__).parents[1] / "models" / "examples" / \
+        "umbrella.yaml"
+    assert main(["query", str(umbrella), "P(Rain)", "--over-time", "filter", "--soft",
+                 f"Umbrella={tmp_path / 'like.npy'}", "--json"]) == 0
+    out = __import__("json").loads(capsys.readouterr().out)
+    expected = bayesprog.load(umbrella).ask("P(Rain)", soft={"Umbrella": like}, kind="filter")
+    np.testing.assert_allclose(out["probabilities"], expected.probabilities, atol=1e-12)
