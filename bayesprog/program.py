@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayes
     import networkx as nx
     import pandas as pd
 
+    from bayesprog.inference.mixed import Joint
     from bayesprog.learning import Estimate
     from bayesprog.learning.evidence import Evidence
 
@@ -260,7 +261,7 @@ class Program:
         method: str | None = None,
         samples: int | None = None,
         bins: int | None = None,
-    ) -> Posterior | MapResult | Density:
+    ) -> Posterior | MapResult | Density | Joint:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
         Parameters
@@ -287,8 +288,9 @@ class Program:
         Returns
         -------
         Posterior with ``probabilities[batch..., states...]``, MapResult for MAP questions,
-        or, for a question on real variables, a Density (``mean``, ``sd``, ``quantile``,
-        ``map``, ``pdf``).
+        for a question on real variables a Density (``mean``, ``sd``, ``quantile``, ``map``,
+        ``pdf``), and for one on discrete and real variables together a Joint (the discrete
+        configurations' ``weights``, the real ones' density given each, its ``map()``).
         """
         q = self.question(question, kind)
         options: dict[str, Any] = {}
@@ -308,6 +310,10 @@ class Program:
             from bayesprog.dynamic import over_time
 
             return over_time(self, q, evidence, inputs, soft, method, options)
+        if len({self.variables[v].is_discrete for v in q.expression.left}) > 1:
+            from bayesprog.inference.mixed import mixed
+
+            return mixed(self, q, evidence, inputs, soft, method, options)
         return inference.ask(self, q, evidence, inputs, soft, rng, method, options)
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,

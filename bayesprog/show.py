@@ -10,6 +10,7 @@ import numpy as np
 from bayesprog.forms import FormulaParam, InputRef, ParamValue
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
+from bayesprog.inference.mixed import Joint
 from bayesprog.model import Term
 from bayesprog.program import Program
 from bayesprog.variables import Continuous, Discrete, Variable
@@ -237,8 +238,37 @@ def format_density(result: Density) -> str:
     return "\n".join(out)
 
 
-def format_result(result: Posterior | MapResult | Density, limit: int = 20) -> str:
+def format_joint(result: Joint) -> str:
+    """Per configuration of the discrete variables: its probability, and the mean and sd of
+    each real variable given it; then the MAP (one block per batch row when batched)."""
+    out = [f"{result.question}" + _ablated(result.ablated) + "   (discrete and real together)"]
+    best = result.map()
+    means = {v: result.mean(v) for v in result.real}
+    sds = {v: result.sd(v) for v in result.real}
+    for pos in np.ndindex(*result.batch_shape):
+        if pos:
+            out.append(f"  batch row [{', '.join(map(str, pos))}]")
+        head = "  ".join(result.discrete)
+        out.append(f"  {head}  probability  " + "  ".join(f"{v} mean  {v} sd" for v in
+                                                          result.real))
+        for config in np.ndindex(*result.cards):
+            names = "  ".join(result.names[v][i] for v, i in zip(result.discrete, config,
+                                                                  strict=True))
+            key = pos + config
+            stats = "  ".join(f"{float(means[v][key]):.6g}  {float(sds[v][key]):.6g}"
+                              for v in result.real)
+            out.append(f"  {names}  {_fmt(float(result.weights[key]))}  {stats}")
+        assignment = ", ".join(f"{v}={np.asarray(best[v])[pos]}" if v in result.discrete
+                               else f"{v}={float(np.asarray(best[v])[pos]):.6g}"
+                               for v in result.variables)
+        out.append(f"  MAP: {assignment} (joint density {float(np.asarray(best['density'])[pos]):.6g})")
+    return "\n".join(out)
+
+
+def format_result(result: Posterior | MapResult | Density | Joint, limit: int = 20) -> str:
     """A readable table (one block per batch row when batched)."""
+    if isinstance(result, Joint):
+        return format_joint(result)
     if isinstance(result, Density):
         return format_density(result)
     if isinstance(result, MapResult) and result.kind == "sequence":

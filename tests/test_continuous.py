@@ -479,10 +479,15 @@ decomposition:
 """)
 
 
-def test_questions_search_one_kind_of_variable():
+def test_a_question_on_both_kinds_is_the_discrete_answer_times_the_real_one():
     p = bayesprog.load(EXAMPLES / "sensor_fusion.yaml")
-    with pytest.raises(QuestionError, match="discrete and real variables together"):
-        p.ask("P(East Fault | GE=1)")
+    joint = p.ask("P(East Fault | GE=1)")
+    np.testing.assert_allclose(joint.weights, p.ask("P(Fault | GE=1)").probabilities,
+                               atol=1e-12)
+    for i, state in enumerate(p.variables["Fault"].states):
+        given = p.ask(f"P(East | Fault={state}, GE=1)")
+        assert joint.mean("East")[i] == pytest.approx(float(given.mean("East")), abs=1e-12)
+        assert joint.sd("East")[i] == pytest.approx(float(given.sd("East")), abs=1e-12)
 
 
 # the command line -------------------------------------------------------------------------------

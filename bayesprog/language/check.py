@@ -729,10 +729,6 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
         if name not in variables:
             return (f"undeclared variable {name!r} in {expr} "
                     f"(declared: {', '.join(variables)})")
-    kinds = {variables[name].is_discrete for name in expr.left}
-    if len(kinds) > 1:
-        return (f"{expr} searches discrete and real variables together; expected one kind "
-                "(ask one question for each)")
     for name in expr.left:
         var = variables[name]
         if isinstance(var, Continuous) and var.index is not None:
