@@ -248,16 +248,20 @@ def format_joint(result: Joint) -> str:
     for pos in np.ndindex(*result.batch_shape):
         if pos:
             out.append(f"  batch row [{', '.join(map(str, pos))}]")
-        head = "  ".join(result.discrete)
-        out.append(f"  {head}  probability  " + "  ".join(f"{v} mean  {v} sd" for v in
-                                                          result.real))
+        widths = [max(len(v), *(len(n) for n in result.names[v])) for v in result.discrete]
+        columns = [f"{v} mean" for v in result.real] + [f"{v} sd" for v in result.real]
+        wide = max(12, *(len(c) for c in columns))
+        out.append("  " + "  ".join(v.ljust(w) for v, w in zip(result.discrete, widths,
+                                                               strict=True))
+                   + "  probability  " + "  ".join(c.ljust(wide) for c in columns).rstrip())
         for config in np.ndindex(*result.cards):
-            names = "  ".join(result.names[v][i] for v, i in zip(result.discrete, config,
-                                                                  strict=True))
+            names = "  ".join(result.names[v][i].ljust(w) for v, i, w in
+                              zip(result.discrete, config, widths, strict=True))
             key = pos + config
-            stats = "  ".join(f"{float(means[v][key]):.6g}  {float(sds[v][key]):.6g}"
-                              for v in result.real)
-            out.append(f"  {names}  {_fmt(float(result.weights[key]))}  {stats}")
+            stats = [f"{float(means[v][key]):.6g}" for v in result.real] + \
+                [f"{float(sds[v][key]):.6g}" for v in result.real]
+            out.append(f"  {names}  {_fmt(float(result.weights[key])).ljust(11)}  "
+                       + "  ".join(x.ljust(wide) for x in stats).rstrip())
         assignment = ", ".join(f"{v}={np.asarray(best[v])[pos]}" if v in result.discrete
                                else f"{v}={float(np.asarray(best[v])[pos]):.6g}"
                                for v in result.variables)
