@@ -147,17 +147,24 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     indices = np.stack(path[::-1])[..., None]  # [T, batch, 1]
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
+    return _sequence(program, expr, (state,), indices, log_best, total, marginals)
+
+
+def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
+              log_best: np.ndarray, total: np.ndarray, posterior: Posterior) -> MapResult:
+    """The answer of a sequence question: the path's state indices ``[T, batch..., k]``, its
+    log-probability with the evidence and the evidence's (``total``), the smoothed marginals."""
     with np.errstate(over="ignore", invalid="ignore"):
         probability = np.exp(log_best - total)
     return MapResult(
-        question=f"{expr}   (the most likely sequence, {_steps_text(steps)})",
-        variables=(state,),
-        names={state: program.variables[state].states},
+        question=f"{expr}   (the most likely sequence, {_steps_text(len(indices))})",
+        variables=variables,
+        names={v: program.variables[v].states for v in variables},
         indices=indices,
         probability=np.where(np.isfinite(total), probability, 0.0),
-        ties=np.ones(batch, int),
+        ties=np.ones(total.shape, int),
         zero_evidence=~np.isfinite(total),
-        posterior=marginals,
+        posterior=posterior,
         ablated=program.ablated,
         kind="sequence",
     )
@@ -324,25 +331,12 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]
     order = [states.index(v) for v in searched]
     indices = per_variable[..., order]
-    total = np.sum(np.stack(log_evidence), axis=0)
-    with np.errstate(over="ignore", invalid="ignore"):
-        probability = np.exp(log_best - total)
+    total = np.broadcast_to(np.sum(np.stack(log_evidence), axis=0), batch)
     smooth = _joint(program, Question(Expression(expr.left, expr.right, dict(expr.values)),
                                       kind="smooth"), per_step, steps, inputs, method, options,
                     soft_steps)
     assert isinstance(smooth, Posterior)
-    return MapResult(
-        question=f"{expr}   (the most likely sequence, {_steps_text(steps)})",
-        variables=tuple(searched),
-        names={v: program.variables[v].states for v in searched},
-        indices=indices,
-        probability=np.where(np.isfinite(total), probability, 0.0),
-        ties=np.ones(batch, int),
-        zero_evidence=~np.isfinite(total),
-        posterior=smooth,
-        ablated=program.ablated,
-        kind="sequence",
-    )
+    return _sequence(program, expr, tuple(searched), indices, log_best, total, smooth)
 
 
 def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
