@@ -13,7 +13,7 @@ import numpy as np
 
 from bayesprog.errors import BayesprogError
 from bayesprog.forms.estimators import TableEstimator
-from bayesprog.learning.structure import Scores, StructureError
+from bayesprog.learning.structure import K2_EXACT, Scores, StructureError
 
 
 @dataclass
@@ -49,7 +49,8 @@ def evidence(program: Any, data: Any, *, score: str = "bdeu",
         names = list(program.variables)
         codes = np.stack([coded.discrete[n] for n in names], axis=1)
         card = [program.variables[n].card for n in names]
-        scores = Scores(codes, card, score, equivalent_sample_size)
+        scores = Scores(codes, card, K2_EXACT if score == "k2" else score,
+                        equivalent_sample_size)
         index = {n: i for i, n in enumerate(names)}
         total = 0.0
         for term in program.terms:

@@ -33,6 +33,9 @@ from bayesprog.errors import BayesprogError
 MAX_FAMILY_CELLS = 1 << 22
 
 SCORES = ("bic", "bdeu", "k2")
+#: the K2 closed form itself (the log marginal likelihood under one count per cell), which
+#: :mod:`bayesprog.learning.evidence` uses; ``"k2"`` is the score as pgmpy computes it
+K2_EXACT = "k2-exact"
 TESTS = ("chi2", "g")
 
 
@@ -48,7 +51,7 @@ class Scores:
 
     def __init__(self, codes: np.ndarray, card: Sequence[int], score: str = "bic",
                  ess: float = 10.0) -> None:
-        if score not in SCORES:
+        if score not in SCORES and score != K2_EXACT:
             raise StructureError(f"score {score!r}: expected one of {', '.join(SCORES)}")
         if not ess > 0:
             raise StructureError(f"equivalent sample size {ess}: expected a number > 0")
@@ -144,9 +147,14 @@ class Scores:
             ll = float(np.sum(counts * np.log(safe / denominators)))
             return ll - 0.5 * np.log(n) * q * (r - 1) if n > 0 else 0.0
         gammaln = scipy.special.gammaln
-        if self.score == "k2":
-            return float(np.sum(gammaln(counts + 1)) - np.sum(gammaln(totals + r))
-                         + q * gammaln(r))
+        if self.score in ("k2", K2_EXACT):
+            # the closed form: a parent configuration without rows adds log Gamma(r) -
+            # log Gamma(0 + r) = 0
+            value = (np.sum(gammaln(counts + 1)) - np.sum(gammaln(totals + r))
+                     + q * gammaln(r))
+            if self.score == "k2":  # as pgmpy: log Gamma(r) more per configuration without rows
+                value += (q - np.count_nonzero(totals)) * gammaln(r)
+            return float(value)
         alpha = self.ess / q  # bdeu
         beta = self.ess / (q * r)
         return float(np.sum(gammaln(counts + beta)) - np.sum(gammaln(totals + alpha))
