@@ -350,6 +350,10 @@ def cmd_query(args: argparse.Namespace) -> int:
                              "FILE.npy") from None
     if args.samples < 1:
         raise _UserError(f"--samples: expected at least 1, found {args.samples}")
+    if args.burn_in < 0 or args.thin < 1:
+        raise _UserError(f"--burn-in: expected at least 0, found {args.burn_in}"
+                         if args.burn_in < 0 else
+                         f"--thin: expected at least 1, found {args.thin}")
     result = program.ask(
         args.question,
         evidence,
@@ -360,6 +364,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         method=None if args.method == "auto" else args.method,
         samples=args.samples,
         bins=args.bins,
+        burn_in=args.burn_in if args.method == "gibbs" else None,
+        thin=args.thin if args.method == "gibbs" else None,
     )
     from bayesprog.show import format_result
 
@@ -570,14 +576,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0,
                    help="seed for breaking MAP ties and for sampling (default: %(default)s)")
     p.add_argument("--method", default="auto",
-                   choices=["auto", "table", "contraction", "gaussian", "lbp", "lw", "grid"],
+                   choices=["auto", "table", "contraction", "gaussian", "lbp", "lw", "gibbs",
+                            "grid"],
                    help="auto: the cheapest exact method (with unknown real variables that are "
                    "not linear-Gaussian: grid); table, contraction, gaussian: exact; lbp: loopy "
-                   "belief propagation; lw: likelihood weighting, with standard errors; grid: "
-                   "unknown real variables on bins, with estimated errors "
-                   "(default: %(default)s)")
+                   "belief propagation; lw: likelihood weighting, with standard errors; gibbs: "
+                   "Gibbs sampling, with standard errors from batch means; grid: unknown real "
+                   "variables on bins, with estimated errors (default: %(default)s)")
     p.add_argument("--samples", type=int, default=10_000,
-                   help="draws per evidence set for --method lw (default: %(default)s)")
+                   help="draws per evidence set for --method lw, kept sweeps for gibbs "
+                   "(default: %(default)s)")
+    p.add_argument("--burn-in", type=int, default=1_000, metavar="N",
+                   help="gibbs: sweeps forgotten before any is kept (default: %(default)s)")
+    p.add_argument("--thin", type=int, default=1, metavar="K",
+                   help="gibbs: keep one sweep in K (default: %(default)s)")
     p.add_argument("--bins", type=int, default=None,
                    help="bins per unknown real variable for the grid method (default: 128; "
                    "the answer uses twice as many and estimates its error from the change)")

@@ -261,6 +261,8 @@ class Program:
         method: str | None = None,
         samples: int | None = None,
         bins: int | None = None,
+        burn_in: int | None = None,
+        thin: int | None = None,
     ) -> Posterior | MapResult | Density | Joint:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
@@ -281,7 +283,10 @@ class Program:
             ``"gaussian"`` (exact), ``"lbp"`` (loopy belief propagation), ``"lw"``
             (likelihood weighting, with ``stderr`` and ``ess`` on the answer) or ``"grid"``
             (unknown real variables on bins, with an estimated ``error``).
-        samples : draws per evidence row for ``method="lw"`` (default 10,000).
+        samples : draws per evidence row for ``method="lw"``, kept sweeps for ``"gibbs"``
+            (default 10,000).
+        burn_in, thin : for ``method="gibbs"``: the sweeps forgotten first (default 1,000), and
+            one sweep kept in ``thin`` (default 1).
         bins : bins per unknown real variable for ``method="grid"`` (default 128; the answer
             is made with twice as many, and its error estimated from the difference).
 
@@ -304,6 +309,13 @@ class Program:
             if isinstance(bins, bool) or not isinstance(bins, numbers.Integral) or bins < 2:
                 raise ArgumentError(f"bins: expected an integer >= 2, found {short_repr(bins)}")
             options["bins"] = int(bins)
+        for key, value, least in (("burn_in", burn_in, 0), ("thin", thin, 1)):
+            if value is not None:
+                if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
+                        or value < least:
+                    raise ArgumentError(f"{key}: expected an integer >= {least}, found "
+                                        f"{short_repr(value)}")
+                options[key] = int(value)
         if method is not None and not isinstance(method, str):
             raise ArgumentError(f"method: expected a method's name, found {short_repr(method)}")
         if q.kind in ("filter", "smooth", "sequence"):

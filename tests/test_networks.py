@@ -246,3 +246,55 @@ def test_unsupported_network_format(tmp_path, capsys):
     other.write_text("x")
     assert main(["import", str(other), "-o", str(tmp_path / "x.yaml")]) == 2
     assert "unsupported network format" in capsys.readouterr().err
+
+
+def _rare_leaves(net: Network) -> dict[str, str]:
+    """Every leaf of the network observed in its least likely state: evidence under which
+    likelihood weighting's draws, which ignore it, nearly all weigh nothing."""
+    import networkx as nx
+
+    graph = nx.DiGraph(list(net.model.edges()))
+    leaves = sorted(v for v in graph.nodes if graph.out_degree(v) == 0)
+    return {v: net.program.variables[v].states[
+        int(np.argmin(net.program.ask(f"P({v})").probabilities))] for v in leaves}
+
+
+def test_gibbs_sampling_answers_unlikely_evidence_as_exact_and_as_pyagrum(networks):
+    net = networks["child"]
+    evidence = _rare_leaves(net)
+    question = f"P(Disease | {', '.join(evidence)})"
+    exact = net.program.ask(question, evidence).probabilities
+    weighted = net.program.ask(question, evidence, method="lw", samples=20_000)
+    assert float(weighted.ess) < 0.01 * 20_000  # likelihood weighting starves here
+    gibbs = net.program.ask(question, evidence, method="gibbs", samples=20_000, burn_in=1_000,
+                            rng=4)
+    assert gibbs.method == "gibbs" and np.isnan(gibbs.log_evidence)
+    assert gibbs.evidence == "not estimated by Gibbs sampling"
+    assert np.all(np.abs(gibbs.probabilities - exact) <= 4 * gibbs.stderr + 0.005)
+    assert float(gibbs.ess) > 20 * float(weighted.ess)
+    engine = gum.GibbsSampling(net.agrum())
+    engine.setEvidence(evidence)
+    engine.setEpsilon(1e-3)
+    engine.setMaxTime(20)
+    engine.makeInference()
+    theirs = np.asarray(engine.posterior("Disease").toarray())
+    assert np.all(np.abs(gibbs.probabilities - theirs) < 0.04)
+    assert np.all(np.abs(theirs - exact) < 0.04)
+
+
+def test_gibbs_sampling_is_seeded_per_row_whatever_the_batch(networks):
+    program = networks["cancer"].program
+    rows = {"Xray": np.array(["positive", "negative", "positive"]),
+            "Dyspnoea": np.array(["True", "True", "False"])}
+    question = "P(Cancer | Xray, Dyspnoea)"
+    batch = program.ask(question, rows, method="gibbs", samples=4_000, burn_in=200, rng=9)
+    again = program.ask(question, rows, method="gibbs", samples=4_000, burn_in=200, rng=9)
+    np.testing.assert_array_equal(batch.probabilities, again.probabilities)
+    # each row's chain has its own generator: a row asked alone is the same row
+    alone = program.ask(question, {k: v[:1] for k, v in rows.items()}, method="gibbs",
+                        samples=4_000, burn_in=200, rng=9)
+    np.testing.assert_array_equal(alone.probabilities[0], batch.probabilities[0])
+    exact = program.ask(question, rows).probabilities
+    assert np.all(np.abs(batch.probabilities - exact) <= 4 * batch.stderr + 0.01)
+    with pytest.raises(bayesprog.BayesprogError, match="thin"):
+        program.ask(question, rows, method="gibbs", thin=0)

@@ -2,6 +2,7 @@
 
 from bayesprog.inference.methods import contraction as _contraction  # noqa: F401  (registers)
 from bayesprog.inference.methods import gaussian as _gaussian  # noqa: F401  (registers)
+from bayesprog.inference.methods import gibbs as _gibbs  # noqa: F401  (registers)
 from bayesprog.inference.methods import grid as _grid  # noqa: F401  (registers)
 from bayesprog.inference.methods import lbp as _lbp  # noqa: F401  (registers)
 from bayesprog.inference.methods import lw as _lw  # noqa: F401  (registers)
