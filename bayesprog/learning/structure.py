@@ -148,11 +148,11 @@ class Scores:
             return ll - 0.5 * np.log(n) * q * (r - 1) if n > 0 else 0.0
         gammaln = scipy.special.gammaln
         if self.score in ("k2", K2_EXACT):
-            # the closed form: a parent configuration without rows adds log Gamma(r) -
-            # log Gamma(0 + r) = 0
+            # the closed form: a parent configuration without rows adds lgamma(r) -
+            # lgamma(0 + r) = 0
             value = (np.sum(gammaln(counts + 1)) - np.sum(gammaln(totals + r))
                      + q * gammaln(r))
-            if self.score == "k2":  # as pgmpy: log Gamma(r) more per configuration without rows
+            if self.score == "k2":  # as pgmpy: lgamma(r) more per configuration without rows
                 value += (q - np.count_nonzero(totals)) * gammaln(r)
             return float(value)
         alpha = self.ess / q  # bdeu
