@@ -577,15 +577,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seed for breaking MAP ties and for sampling (default: %(default)s)")
     p.add_argument("--method", default="auto",
                    choices=["auto", "table", "contraction", "gaussian", "lbp", "lw", "gibbs",
-                            "grid"],
+                            "grid", "pf"],
                    help="auto: the cheapest exact method (with unknown real variables that are "
                    "not linear-Gaussian: grid); table, contraction, gaussian: exact; lbp: loopy "
                    "belief propagation; lw: likelihood weighting, with standard errors; gibbs: "
                    "Gibbs sampling, with standard errors from batch means; grid: unknown real "
-                   "variables on bins, with estimated errors (default: %(default)s)")
+                   "variables on bins, with estimated errors; pf: a particle filter, for a "
+                   "filter question over real states (default: %(default)s)")
     p.add_argument("--samples", type=int, default=10_000,
-                   help="draws per evidence set for --method lw, kept sweeps for gibbs "
-                   "(default: %(default)s)")
+                   help="draws per evidence set for --method lw, kept sweeps for gibbs, "
+                   "particles per sequence for pf (default: %(default)s)")
     p.add_argument("--burn-in", type=int, default=1_000, metavar="N",
                    help="gibbs: sweeps forgotten before any is kept (default: %(default)s)")
     p.add_argument("--thin", type=int, default=1, metavar="K",

@@ -70,6 +70,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
                                 "Kalman filter observes real values")
         steps, per_step = _steps(expect_mapping(evidence, "evidence",
                                                 "variable names to values"))
+        if method == "pf":
+            return _particles(program, question, per_step, steps, inputs, options)
         return _kalman(program, question, per_step, steps, inputs)
     if len(program.time) > 1:
         outside = [v for v in expr.left if v not in states]
@@ -360,17 +362,17 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
     observed = list(expr.right)
     for name in observed:
         if program.variables[name].is_discrete:
-            raise QuestionError(f"a filter over real states observes real variables: {name} is "
-                                "discrete (a particle filter would take it; not available yet)")
+            raise QuestionError(f"a Kalman filter observes real variables: {name} is discrete "
+                                "(ask a particle filter, method='pf')")
     d, m = len(states), len(observed)
 
     def gaussian(question_text: str, evidence: dict[str, Any], program_: Any) -> Density:
         try:
             answer = program_.ask(question_text, evidence, inputs=inputs, method="gaussian")
         except QuestionError as exc:
-            raise QuestionError(f"a filter over real states needs a linear-Gaussian step "
-                                f"(normal terms, means affine in their parents): {exc}") \
-                from None
+            raise QuestionError(f"a Kalman filter needs a linear-Gaussian step (normal terms, "
+                                f"means affine in their parents; else ask a particle filter, "
+                                f"method='pf'): {exc}") from None
         assert isinstance(answer, Density) and answer.means is not None
         if answer.means.shape[1] != 1:
             raise QuestionError("a filter over real states needs one Gaussian per step: a "
@@ -395,10 +397,10 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
     scale = 1.0 + np.abs(means).max()
     if (np.abs(means[d + 1:] - (c + probes @ g.T)).max() > 1e-9 * scale
             or np.abs(model.covariances[:, 0] - noise).max() > 1e-9 * (1 + np.abs(noise).max())):  # type: ignore[index]
-        raise QuestionError("a filter over real states needs a linear-Gaussian step: the means "
-                            f"of {', '.join(states + observed)} are not affine in "
-                            f"{', '.join(previous)} (a non-linear formula; a particle filter "
-                            "would take it, not available yet)")
+        raise QuestionError("a Kalman filter needs a linear-Gaussian step: the means of "
+                            f"{', '.join(states + observed)} are not affine in "
+                            f"{', '.join(previous)} (a non-linear formula): ask a particle "
+                            "filter, method='pf' (--method pf)")
     y_all = np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
     batch = y_all.shape[1:-1]
     mean = np.broadcast_to(m0, batch + (d,)).copy()
@@ -464,3 +466,91 @@ def _blocks(top_left: np.ndarray, top_right: np.ndarray, bottom_right: np.ndarra
     upper = np.concatenate([top_left, top_right], axis=-1)
     lower = np.concatenate([np.swapaxes(top_right, -1, -2), bottom_right], axis=-1)
     return np.concatenate([upper, lower], axis=-2)
+
+
+#: particles per sequence of a particle filter when the question does not say
+PARTICLES = 2_000
+
+
+def _particles(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
+               inputs: Mapping[str, Any] | None, options: Mapping[str, Any]) -> Density:
+    """A filter question over real states answered by a particle filter (the bootstrap
+    filter): particles drawn from the belief before the first step; at each step each particle
+    moves by the step's own terms (drawn as likelihood weighting draws, the states before
+    given), is weighted by the likelihood of what the step observes, and the particles are
+    resampled (systematic resampling) after their weighted summary is kept. Seeded by ``rng``
+    (step ``t``, sequence ``b`` and particle ``i`` use their own streams), whatever the batch.
+    The answer gives each step's weighted mean and covariance of the particles (its density
+    and quantiles are those of the Gaussian with these moments), the effective sample size
+    before resampling (``ess``) and ``log_evidence[t]``, the estimate of
+    ``log p(y_t | y_1..t-1)``."""
+    from bayesprog.inference.answers import seed_of
+    from bayesprog.inference.binding import bind
+    from bayesprog.inference.sampling import draw
+
+    expr = question.expression
+    if question.kind != "filter":
+        raise QuestionError(f"a particle filter answers filter questions, found a "
+                            f"{question.kind} question (smoothing by particles is not "
+                            "available)")
+    previous = [p for p, _ in program.time]
+    states = [s for _, s in program.time]
+    n = int(options.get("samples") or PARTICLES)
+    seed = seed_of(options.get("rng", 0) or 0)
+    observed = list(expr.right)
+    known = {name: np.asarray(per_step[name], dtype=object) for name in observed}
+    batch = np.broadcast_shapes(*(a.shape[1:] for a in known.values())) if known else ()
+    sequences = int(np.prod(batch))
+    particles = np.stack([
+        np.stack([first[p].to_numpy(dtype=float) for p in previous], axis=-1)
+        for first in (program.sample(n, rng=np.random.default_rng([seed, 0, b]))
+                      for b in range(sequences))])  # [sequences, n, states]
+    step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
+    terms = list(step.active_terms)
+    means, covs, ess, log_evidence = [], [], [], []
+    q = Question(Expression(tuple(states), tuple(previous) + tuple(observed),
+                            dict(expr.values)))
+    for t in range(steps):
+        evidence: dict[str, Any] = {p: particles[..., i] for i, p in enumerate(previous)}
+        for name in observed:
+            value = np.broadcast_to(known[name][t], batch).reshape(sequences, 1)
+            evidence[name] = np.broadcast_to(value, (sequences, n))
+        bound = bind(step, q, evidence, inputs, None)
+        gens = [np.random.default_rng([seed, t + 1, b, i]) for b in range(sequences)
+                for i in range(n)]
+        drawn = draw(step, terms, bound, 1, gens)
+        moved = np.stack([np.asarray(drawn.values[s], float).reshape(sequences, n)
+                          for s in states], axis=-1)
+        log_w = drawn.log_weights.reshape(sequences, n)
+        top = np.max(log_w, axis=1, keepdims=True)
+        if not np.all(np.isfinite(top)):
+            raise QuestionError(f"step {t + 1}: every particle has likelihood zero (the "
+                                "observations are impossible under the program, or too few "
+                                "particles: samples=...)")
+        w = np.exp(log_w - top)
+        total = w.sum(axis=1, keepdims=True)
+        w = w / total
+        log_evidence.append((top[:, 0] + np.log(total[:, 0] / n)).reshape(batch))
+        ess.append((1.0 / (w**2).sum(axis=1)).reshape(batch))
+        mean = np.einsum("bn,bnd->bd", w, moved)
+        dev = moved - mean[:, None, :]
+        means.append(mean)
+        covs.append(np.einsum("bn,bnd,bne->bde", w, dev, dev))
+        # systematic resampling, one stream per sequence
+        u = np.array([np.random.default_rng([seed, t + 1, b, n]).random()
+                      for b in range(sequences)])
+        points = (u[:, None] + np.arange(n)) / n
+        picks = np.stack([np.minimum(np.searchsorted(np.cumsum(w[b]), points[b]), n - 1)
+                          for b in range(sequences)])
+        particles = np.take_along_axis(moved, picks[..., None], axis=1)
+    order = [states.index(v) for v in expr.left]
+    shape = (steps,) + batch
+    rows = int(np.prod(shape))
+    mean_t = np.stack(means)[..., order].reshape(rows, 1, len(order))
+    cov_t = np.stack(covs)[..., order, :][..., :, order].reshape(rows, 1, len(order),
+                                                                     len(order))
+    return Density(
+        f"{expr}   (filtered, {_steps_text(steps)})", tuple(expr.left), shape,
+        np.stack(log_evidence).reshape(shape), ablated=program.ablated, method="pf",
+        weights=np.ones((rows, 1)), means=mean_t, covariances=cov_t,
+        ess=np.stack(ess).reshape(shape))

@@ -321,7 +321,7 @@ class Program:
         if q.kind in ("filter", "smooth", "sequence"):
             from bayesprog.dynamic import over_time
 
-            return over_time(self, q, evidence, inputs, soft, method, options)
+            return over_time(self, q, evidence, inputs, soft, method, dict(options, rng=rng))
         if len({self.variables[v].is_discrete for v in q.expression.left}) > 1:
             from bayesprog.inference.mixed import mixed
 

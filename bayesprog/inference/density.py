@@ -53,6 +53,8 @@ class Density:
     #: (the change when every bin is halved), ``{"mean": {var: [batch]}, ...}``
     resolution: dict[str, int] = field(default_factory=dict)
     error: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    #: a particle filter's effective sample size per row (step), before it resampled
+    ess: np.ndarray | None = None
 
     @property
     def kind(self) -> str:
@@ -238,6 +240,8 @@ class Density:
             "ablated": list(self.ablated),
             "method": self.method,
         }
+        if self.ess is not None:
+            out["ess"] = _plain(self.ess.reshape(self.batch_shape))
         if self.resolution:
             out["bins"] = dict(self.resolution)
             out["error"] = {k: {v: _plain(e) for v, e in by.items()}
