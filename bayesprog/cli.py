@@ -791,7 +791,43 @@ class _Terminated(BaseException):
 
 
 def _terminate(signum: int, frame: Any) -> None:
-    raise _Terminated()
+    if not _in_finaliser(frame, signum):
+        raise _Terminated()
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    """Ctrl-C, raised where the command is; but not inside a finaliser (see below)."""
+    if not _in_finaliser(frame, signum):
+        raise KeyboardInterrupt
+
+
+#: the files whose functions run as finalisers: weakref callbacks, multiprocessing's Finalize
+_FINALISERS = ("weakref.py", "multiprocessing/util.py", "multiprocessing\\util.py")
+
+
+def _in_finaliser(frame: Any, signum: int) -> bool:
+    """Whether the signal arrived while a finaliser runs (a ``__del__``, a weakref callback,
+    multiprocessing's cleanup of a lock or a queue). An exception raised there would be printed
+    and lost, and the finaliser cut short (a semaphore left registered, reported as leaked at
+    exit): the signal is then sent again a moment later, once the finaliser has returned."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "__del__" or code.co_filename.endswith(_FINALISERS):
+            _send_again(signum)
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _send_again(signum: int) -> None:
+    import signal
+    import threading
+
+    # a real signal, not a flag: it also wakes a main thread blocked in a system call
+    again = threading.Timer(_AGAIN_AFTER, signal.pthread_kill,
+                            (threading.main_thread().ident, signum))
+    again.daemon = True
+    again.start()
 
 
 def _deliver_again(unraisable: Any) -> None:
@@ -800,22 +836,16 @@ def _deliver_again(unraisable: Any) -> None:
     ignored in ..." and lost, and the command would go on. Such a stop is sent to the main
     thread again a moment later, once the finaliser has returned, to be raised where the command
     is (a signal that lands in a finaliser again is sent again); anything else is reported as
-    Python does."""
+    Python does. (The signal handlers themselves send a stop again when it arrives inside a
+    finaliser; this catches what they cannot see, such as a stop raised by other code.)"""
     import signal
-    import threading
 
     if isinstance(unraisable.exc_value, KeyboardInterrupt):
-        signum = signal.SIGINT
+        _send_again(signal.SIGINT)
     elif isinstance(unraisable.exc_value, _Terminated):
-        signum = signal.SIGTERM
+        _send_again(signal.SIGTERM)
     else:
         sys.__unraisablehook__(unraisable)
-        return
-    # a real signal, not a flag: it also wakes a main thread blocked in a system call
-    again = threading.Timer(_AGAIN_AFTER, signal.pthread_kill,
-                            (threading.main_thread().ident, signum))
-    again.daemon = True
-    again.start()
 
 
 #: seconds after which a stop that landed in a finaliser is sent again
@@ -831,8 +861,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    previous_int = signal.getsignal(signal.SIGINT)
     previous_hook = sys.unraisablehook
     if main_thread:
+        if previous_int is signal.default_int_handler:  # (an ignored Ctrl-C stays ignored)
+            signal.signal(signal.SIGINT, _interrupt)
         sys.unraisablehook = _deliver_again
     try:
         return _main(argv)
@@ -849,6 +882,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_int)
             sys.unraisablehook = previous_hook
 
 

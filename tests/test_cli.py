@@ -817,3 +817,48 @@ def test_other_errors_in_finalisers_are_still_reported():
                           capture_output=True, text=True, timeout=30)
     assert done.stdout.strip() == "went on"
     assert "Exception ignored" in done.stderr and "ValueError" in done.stderr
+
+
+_SIGNAL_IN_FINALISER = """
+import os, signal, sys, time, weakref
+from bayesprog import cli
+signal.signal(signal.SIGTERM, cli._terminate)
+signal.signal(signal.SIGINT, cli._interrupt)
+finished = []
+class Thing:
+    pass
+def callback(_):
+    os.kill(os.getpid(), signal.{name})  # the signal arrives while the callback runs
+    for _ in range(200000):
+        pass
+    finished.append(True)  # the callback is not cut short
+thing = Thing()
+if {how!r} == "finalize":
+    weakref.finalize(thing, callback, None)
+else:
+    def __del__(self):
+        callback(None)
+    Thing.__del__ = __del__
+try:
+    del thing
+    time.sleep(1.5)
+    print("went on")
+except KeyboardInterrupt:
+    print("interrupted", finished)
+except cli._Terminated:
+    print("terminated", finished)
+"""
+
+
+@pytest.mark.parametrize("how", ["finalize", "__del__"])
+@pytest.mark.parametrize("name, seen", [("SIGINT", "interrupted [True]"),
+                                        ("SIGTERM", "terminated [True]")])
+def test_a_signal_inside_a_finaliser_waits_for_it_to_finish(name, seen, how):
+    """The handlers do not raise inside a finaliser (a ``weakref.finalize``, as multiprocessing's
+    cleanups, or a ``__del__``): that would cut it short (a semaphore left registered, a leak
+    reported at exit); the stop comes right after it."""
+    done = subprocess.run([sys.executable, "-c", _SIGNAL_IN_FINALISER.format(name=name,
+                                                                             how=how)],
+                          capture_output=True, text=True, timeout=30)
+    assert done.stdout.strip() == seen, done.stdout + done.stderr
+    assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr
