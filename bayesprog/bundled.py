@@ -44,7 +44,12 @@ class Bundled:
     name: str
     path: Path
     kind: str
-    description: str
+
+    @property
+    def description(self) -> str:
+        """The model's ``description`` (or ``name``); a data file's rows and columns. Read when
+        asked: finding a model by its name reads no description."""
+        return _describe(self.path)
 
     @property
     def short(self) -> str:
@@ -101,7 +106,7 @@ def listing() -> tuple[Bundled, ...]:
         kind = "data" if path.suffix in (".csv", ".parquet") else file_kind(path)
         if kind is None:
             continue
-        found.append(Bundled(_name(path), path, kind, _describe(path)))
+        found.append(Bundled(_name(path), path, kind))
     return tuple(sorted(found, key=lambda b: (ORDER.index(b.kind), b.name)))
 
 
