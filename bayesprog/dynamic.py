@@ -127,29 +127,42 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         return smoothed()
     # the most likely sequence: max-product over the step joints P(PREV X | y_t)
     with np.errstate(divide="ignore"):
-        delta = np.log(np.broadcast_to(first, batch + (card,)))
-    pointers = []
-    log_best = np.zeros(batch)
+        log_first = np.log(np.broadcast_to(first, batch + (card,)))
+    logs = []
     for t in range(steps):
         answer = ask((previous, state), t, {})
         # P(PREV X | y_t) under a uniform PREV, times its evidence and the card:
         # log P(X | PREV) + log P(y_t | X)
         scale = (answer.log_evidence + np.log(card))[..., None, None]
         with np.errstate(divide="ignore"):
-            scores = delta[..., :, None] + np.log(answer.probabilities) + scale
-        pointers.append(np.argmax(scores, axis=-2))
-        # the state before the first step is not part of the sequence: summed out, not maximised
-        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
-        top = np.max(delta, axis=-1, keepdims=True)
-        log_best += top[..., 0]
-        delta = delta - top
-    path = [np.argmax(delta, axis=-1)]
-    for t in range(steps - 1, 0, -1):
-        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
-    indices = np.stack(path[::-1])[..., None]  # [T, batch, 1]
+            logs.append(np.log(answer.probabilities) + scale)
+    path, log_best = _viterbi(log_first, logs)
+    indices = path[..., None]  # [T, batch, 1]
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
     return _sequence(program, expr, (state,), indices, log_best, total, marginals)
+
+
+def _viterbi(log_first: np.ndarray, logs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The most likely sequence of states, ``[T, batch...]``, and its log-probability with the
+    evidence, from the belief before the first step (``[batch..., states]``, logs) and each
+    step's ``log P(x_t, y_t | x_t-1)`` (``[batch..., before, after]``). The state before the
+    first step is not part of the sequence: summed out, not maximised; ties go to the first
+    state."""
+    delta = log_first
+    pointers = []
+    log_best = np.zeros(log_first.shape[:-1])
+    for t, log_step in enumerate(logs):
+        scores = delta[..., :, None] + log_step
+        pointers.append(np.argmax(scores, axis=-2))
+        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
+        top = np.max(delta, axis=-1, keepdims=True)
+        log_best = log_best + top[..., 0]
+        delta = delta - top
+    path = [np.argmax(delta, axis=-1)]
+    for t in range(len(logs) - 1, 0, -1):
+        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
+    return np.stack(path[::-1]), log_best
 
 
 def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
@@ -315,21 +328,8 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             ablated=program.ablated,
             method=kind,
         )
-    # the most likely joint sequence (the joint state before the first step summed out)
-    delta = log_first
-    pointers = []
-    log_best = np.zeros(batch)
-    for t in range(steps):
-        scores = delta[..., :, None] + logs[t]
-        pointers.append(np.argmax(scores, axis=-2))
-        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
-        top = np.max(delta, axis=-1, keepdims=True)
-        log_best = log_best + top[..., 0]
-        delta = delta - top
-    path = [np.argmax(delta, axis=-1)]
-    for t in range(steps - 1, 0, -1):
-        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
-    joint_path = np.stack(path[::-1])  # [T, batch...]
+    # the most likely joint sequence
+    joint_path, log_best = _viterbi(log_first, logs)  # [T, batch...]
     per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]
     order = [states.index(v) for v in searched]
     indices = per_variable[..., order]
