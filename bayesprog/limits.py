@@ -24,6 +24,8 @@ from bayesprog.errors import BayesprogError
 _DEFAULTS = {"states": 2_000_000, "entries": 100_000_000}
 _ENV = {"states": "BAYESPROG_MAX_STATES", "entries": "BAYESPROG_MAX_ENTRIES"}
 _SET: dict[str, int] = {}
+#: how many times set_limits was called (see generation)
+_GENERATION = [0]
 
 
 class SizeError(BayesprogError, ValueError):
@@ -50,6 +52,7 @@ def limit(kind: str) -> int:
 
 def set_limits(states: int | None = None, entries: int | None = None) -> None:
     """Set the limits for this process (None: back to the environment variable or default)."""
+    _GENERATION[0] += 1
     for kind, value in (("states", states), ("entries", entries)):
         if value is None:
             _SET.pop(kind, None)
@@ -58,6 +61,12 @@ def set_limits(states: int | None = None, entries: int | None = None) -> None:
                             f"{value!r}")
         else:
             _SET[kind] = value
+
+
+def generation() -> int:
+    """How many times :func:`set_limits` was called: what was checked against the limits
+    under another generation is checked again."""
+    return _GENERATION[0]
 
 
 def check_size(size: float, what: str, kind: str = "entries", hint: str = "") -> None:

@@ -33,7 +33,7 @@ from bayesprog.expressions import (
 )
 from bayesprog.files import atomic_write
 from bayesprog.forms import ParamValue, get_form
-from bayesprog.inference import MapResult, Posterior
+from bayesprog.inference import MapResult, Posterior, quick
 from bayesprog.inference.density import Density
 from bayesprog.language.check import check_document, question_problem
 from bayesprog.language.document import Document, validate_located
@@ -297,6 +297,16 @@ class Program:
         ``pdf``), and for one on discrete and real variables together a Joint (the discrete
         configurations' ``weights``, the real ones' density given each, its ``map()``).
         """
+        # a question asked again with one state name per known variable: its warm path
+        warm = (type(question) is str and type(evidence) is dict and inputs is None
+                and soft is None and rng is None and samples is None and bins is None
+                and burn_in is None and thin is None and (kind is None or kind == "posterior")
+                and (method is None or type(method) is str))
+        if warm:
+            kept = (question, kind, method, tuple(evidence))  # type: ignore[arg-type]
+            found = quick.answer(self, kept, evidence)  # type: ignore[arg-type]
+            if found is not None:
+                return found
         q = self.question(question, kind)
         options: dict[str, Any] = {}
         if samples is not None:
@@ -326,7 +336,10 @@ class Program:
             from bayesprog.inference.mixed import mixed
 
             return mixed(self, q, evidence, inputs, soft, method, options)
-        return inference.ask(self, q, evidence, inputs, soft, rng, method, options)
+        result = inference.ask(self, q, evidence, inputs, soft, rng, method, options)
+        if warm:
+            quick.learn(self, kept, q, evidence)  # type: ignore[arg-type]
+        return result
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
                   **kw: Any) -> Posterior:

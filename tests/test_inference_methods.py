@@ -283,7 +283,7 @@ def _letters(equation: str) -> dict[int, str]:
 
 
 def test_a_batch_larger_than_the_memory_limit_is_answered_in_slices(monkeypatch):
-    import bayesprog.inference as inference
+    import bayesprog.inference.dispatch as inference
     from bayesprog.limits import SizeError, set_limits
 
     program, tables = chain(4)

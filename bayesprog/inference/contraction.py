@@ -20,7 +20,7 @@ import scipy
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.binding import Bound
-from bayesprog.inference.core import Factor
+from bayesprog.inference.core import ONE_STEP, Factor, equation
 from bayesprog.inference.factors import (
     is_static,
     plain_table,
@@ -190,6 +190,9 @@ def contract_question(plan: QuestionPlan) -> Posterior:
 #: every later question of its layout is. munin1's benchmark question joins 0.4 M; a 12 x 12
 #: grid's 7 M, which a planned contraction answers five times faster.
 FIRST_WORK = 1 << 20
+#: A group of evidence-free tables is folded into one (:meth:`Sliceable._fold`) when that
+#: table holds at most this many times the entries of the group's tables.
+FOLD_GROWTH = 4
 
 
 def _one_row(bound: Bound) -> dict[str, int]:
@@ -268,13 +271,109 @@ class Sliceable:
             order = [term.axes.index(a) for a in fixed + rest]
             self.tables.append((fixed, rest, np.ascontiguousarray(table.transpose(order))))
             self.log_scale += top
+        self._fold(plan)
         self.single: Any = None  # the contraction of one row of evidence, once made
+
+    def _fold(self, plan: QuestionPlan) -> None:
+        """Sum out, once, the variables that only evidence-free tables hold: such tables
+        are joined by those variables into groups, and each group is contracted to one table
+        over the variables it shares with the rest of the question (opt_einsum's constant
+        subexpressions, chosen by variable). A call then contracts the tables the evidence
+        slices with a few folded ones (a question about a variable far from its evidence:
+        one step where it took one per term). A group is left as it is when its folded table
+        would hold more than ``FOLD_GROWTH`` times its tables' entries (and more than
+        ``ONE_STEP``), or more than the memory limit allows."""
+        shared = set(plan.searched) | set(plan.layout.key[4])
+        shared.update(a for fixed, rest, _ in self.tables if fixed for a in rest)
+        shared.update(a for term in self.others for a in term.axes)
+        free = [i for i, (fixed, _, _) in enumerate(self.tables) if not fixed]
+        # groups of evidence-free tables joined by the variables no other table holds
+        group = {i: i for i in free}
+
+        def root(i: int) -> int:
+            while group[i] != i:
+                group[i] = group[group[i]]
+                i = group[i]
+            return i
+
+        holder: dict[str, int] = {}
+        for i in free:
+            for a in self.tables[i][1]:
+                if a in shared:
+                    continue
+                if a in holder:
+                    group[root(i)] = root(holder[a])
+                else:
+                    holder[a] = i
+        members: dict[int, list[int]] = {}
+        for i in free:
+            members.setdefault(root(i), []).append(i)
+        folded: dict[int, tuple[tuple[str, ...], np.ndarray, float]] = {}
+        cap = limit("entries")
+        for first, each in members.items():
+            axes = [a for i in each for a in self.tables[i][1]]
+            if all(a in shared for a in axes):
+                continue  # nothing to sum out
+            kept = tuple(dict.fromkeys(a for a in axes if a in shared))
+            cards = dict(zip(axes, (n for i in each for n in self.tables[i][2].shape),
+                             strict=True))
+            size = math.prod(cards[a] for a in kept)
+            entries = sum(self.tables[i][2].size for i in each)
+            if size > max(FOLD_GROWTH * entries, ONE_STEP) or size > cap:
+                continue
+            operands = [Factor(self.tables[i][1], self.tables[i][2], False) for i in each]
+            eq = equation([f.axes for f in operands], kept)
+            _, info, _ = plan.program.inference_cache.plans.path(
+                eq, [f.log.shape for f in operands])
+            if info.largest_intermediate > cap:
+                continue
+            table = contract(plan.program, operands, kept, False, 1)
+            top = float(table.max()) if table.size else 0.0
+            if not top > 0 or not math.isfinite(top):
+                continue  # (zero everywhere: left to the general path's checks)
+            folded[first] = (kept, np.ascontiguousarray(table / top), math.log(top))
+        if not folded:
+            return
+        dropped = {i for first in folded for i in members[first]}
+        tables = [t for i, t in enumerate(self.tables) if i not in dropped]
+        for kept, table, top in folded.values():
+            tables.append(((), kept, table))
+            self.log_scale += top
+        self.tables = tables
 
     def one_row(self, plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray] | None:
         """The answer to one row of evidence when every term is prepared, in scalars: the
         normalised table ``[1] + cards`` and the log normaliser ``[1]``; None when it needs
         the general path (a probability below what scaled arithmetic resolves)."""
         values = _one_row(plan.bound)
+        if self.single is None:
+            self._plan_single(plan, values)
+        found = self.row(values)
+        if found is None:
+            return None
+        return found[0][np.newaxis], np.array([found[1]])
+
+    def _plan_single(self, plan: QuestionPlan, values: dict[str, int]) -> None:
+        """The contraction of one row of evidence: its runner, and the uniform factors of the
+        searched variables that no table holds."""
+        shapes = [(rest, (table[tuple(values[a] for a in fixed)] if fixed else table).shape)
+                  for fixed, rest, table in self.tables if rest]
+        present = {a for rest, _ in shapes for a in rest}
+        missing = [v for v in plan.searched if v not in present]
+        self.ones = [np.ones(plan.card(v)) for v in missing]
+        if not shapes and not missing:
+            self.single = lambda: np.ones(())  # nothing left to contract
+            return
+        operands = [Factor(rest, np.empty(shape), False) for rest, shape in shapes]
+        operands += [Factor((v,), ones, False) for v, ones in zip(missing, self.ones,
+                                                                   strict=True)]
+        self.single = plan.program.inference_cache.plans.get(operands, plan.searched, False)
+
+    def row(self, values: dict[str, Any]) -> tuple[np.ndarray, float] | None:
+        """One row of evidence (a state index per observed variable) once its contraction is
+        planned: the normalised table over the searched variables (a new array) and the log
+        normaliser; None when it needs the general path (a probability below what scaled
+        arithmetic resolves)."""
         arrays: list[np.ndarray] = []
         scale = 1.0
         for fixed, rest, table in self.tables:
@@ -283,26 +382,11 @@ class Sliceable:
                 arrays.append(sliced)
             else:
                 scale *= float(sliced)
-        if self.single is None:
-            if not arrays and not any(v not in {a for t in self.tables for a in t[1]}
-                                      for v in plan.searched):
-                self.ones = []
-                self.single = lambda: np.ones(())  # nothing left to contract
-                return self.one_row(plan)
-            operands = [Factor(rest, a, False) for (_, rest, _), a in zip(
-                (t for t in self.tables if t[1]), arrays, strict=True)]
-            present = {a for f in operands for a in f.axes}
-            self.ones = [np.ones(plan.card(v)) for v in plan.searched if v not in present]
-            operands += [Factor((v,), ones, False) for v, ones in zip(
-                (v for v in plan.searched if v not in present), self.ones, strict=True)]
-            self.single = plan.program.inference_cache.plans.get(operands, plan.searched,
-                                                                 False)
         table = self.single(*arrays, *self.ones)
         total = float(table.sum())
         if not (TINY < total < math.inf and scale > 0):
             return None
-        return (table / total)[np.newaxis], np.array(
-            [math.log(total) + math.log(scale) + self.log_scale])
+        return table / total, math.log(total) + math.log(scale) + self.log_scale
 
     def operands(self, plan: QuestionPlan) -> tuple[list[Factor], np.ndarray | float]:
         """The rescaled operands for ``plan``'s evidence, and the log of what they were

@@ -423,3 +423,6 @@ class InferenceCache:
     state_lookups: dict[str, dict[str, int]] | None = None
     #: the program's graph as questions walk it (:func:`~bayesprog.inference.relevance.family`)
     family: Any = None
+    #: warm paths of questions asked again (:mod:`~bayesprog.inference.quick`), by question
+    #: text, kind, method and known variables
+    quick: dict[Any, Any] = field(default_factory=dict)

@@ -20,6 +20,8 @@ class Schedule:
     #: when the layout's answer does not depend on the evidence's values: its one row of
     #: probabilities, the log of its normaliser, and the method that made it
     fixed: tuple[np.ndarray, float, str] | None = None
+    #: the same, made by an exact method a question named, by the method's name
+    fixed_by: dict[str, tuple[np.ndarray, float, str]] = field(default_factory=dict)
     #: the methods that apply, cheapest first, with their estimates and the batch size they
     #: were made for, by (registry version, order of magnitude of the batch)
     rankings: dict[Any, tuple[int, list[Any]]] = field(default_factory=dict)

@@ -14,7 +14,7 @@ import numpy as np
 
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.density import Density
-from bayesprog.inference.plan import QuestionPlan
+from bayesprog.inference.plan import Layout, QuestionPlan
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,14 @@ class Method:
         """A layout's first question answered without planning the layout: the normalised
         table ``[1] + cards``, the log normaliser ``[1]`` and the operations it took; None
         when this question needs the planned path (the default)."""
+        return None
+
+    def prepared_row(self, layout: Layout, values: dict[str, int]
+                     ) -> tuple[np.ndarray, float] | None:
+        """One row of evidence (a state index per observed variable) answered from what
+        ``layout`` has prepared, as :meth:`posterior` answers it: the probabilities over the
+        searched variables (a new array) and the log normaliser; None when the row needs
+        :meth:`posterior` (the default)."""
         return None
 
     def posterior(self, plan: QuestionPlan) -> Posterior | Density | None:

@@ -17,7 +17,7 @@ from bayesprog.inference.methods.base import (
     Method,
     register_method,
 )
-from bayesprog.inference.plan import QuestionPlan
+from bayesprog.inference.plan import Layout, QuestionPlan
 
 
 @register_method
@@ -36,6 +36,13 @@ class ContractionMethod(Method):
         computed = len(plan.terms) - prepared + len(plan.bound.soft)
         return Cost(operations=plan.bound.size * operations, memory=plan.bound.size * largest,
                     fixed=PER_CALL + PER_PREPARED * prepared + PER_FACTOR * computed)
+
+    def prepared_row(self, layout: Layout, values: dict[str, int]
+                     ) -> tuple[np.ndarray, float] | None:
+        prepared = layout.prepared.get("contraction")
+        if prepared is None or prepared.single is None or prepared.others:
+            return None
+        return prepared.row(values)
 
     def posterior(self, plan: QuestionPlan) -> Posterior:
         return contract_question(plan)

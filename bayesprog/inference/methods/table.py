@@ -4,7 +4,6 @@ contraction method); every later evidence set is a lookup in it."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +20,7 @@ from bayesprog.inference.methods.base import (
     answer,
     register_method,
 )
-from bayesprog.inference.plan import QuestionPlan
+from bayesprog.inference.plan import Layout, QuestionPlan
 
 #: Largest joint table (entries) that a compiled discrete question keeps.
 TABLE_LIMIT = 1 << 20
@@ -29,11 +28,27 @@ TABLE_LIMIT = 1 << 20
 
 @dataclass
 class CompiledTable:
-    """A compiled discrete question: the joint table over observed + searched variables."""
+    """A compiled discrete question: the joint table over observed + searched variables,
+    kept as each configuration of the observed variables' row of ``P(searched | observed)``
+    (``normalised``) and the log of its normaliser (``log_z``, the log offset included), the
+    rows whose normaliser the scaled arithmetic does not resolve marked (``bad``)."""
 
     observed: tuple[str, ...]
-    table: np.ndarray
-    log_offset: float
+    normalised: np.ndarray
+    log_z: np.ndarray
+    bad: np.ndarray
+
+    @classmethod
+    def of(cls, observed: tuple[str, ...], table: np.ndarray, log_offset: float,
+           searched: int) -> CompiledTable:
+        """From the joint ``table`` (observed axes first, then ``searched`` axes)."""
+        rows = table.reshape(table.shape[: table.ndim - searched] + (-1,))
+        z = rows.sum(axis=-1)
+        bad = ~(z > TINY)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normalised = table / z.reshape(z.shape + (1,) * searched)
+            log_z = np.log(z) + log_offset
+        return cls(observed, np.ascontiguousarray(normalised), log_z, bad)
 
 
 def _observed_and_searched(plan: QuestionPlan) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -53,7 +68,7 @@ def _compile(plan: QuestionPlan) -> CompiledTable:
             offset += top
             operands.append(Factor(t.axes, probabilities, False))
         table = contract(program, operands, observed + searched, False, 1)
-        cached = CompiledTable(observed, np.ascontiguousarray(table), offset)
+        cached = CompiledTable.of(observed, table, offset, len(searched))
         program.inference_cache.tables[key] = cached
     return cached
 
@@ -95,25 +110,27 @@ class TableMethod(Method):
         return Cost(operations=float(bound.size * lookup), memory=max(float(joint), compile_memory),
                     fixed=PER_CALL, setup=setup, floor=not full)
 
+    def prepared_row(self, layout: Layout, values: dict[str, int]
+                     ) -> tuple[np.ndarray, float] | None:
+        compiled = layout.prepared.get("table")
+        if compiled is None:
+            return None
+        index = tuple(values[v] for v in compiled.observed)
+        if compiled.bad[index]:
+            return None
+        return compiled.normalised[index].copy(), float(compiled.log_z[index])
+
     def posterior(self, plan: QuestionPlan) -> Posterior | None:
         compiled = plan.layout.prepared.get("table")
         if compiled is None:
             compiled = plan.layout.prepared["table"] = _compile(plan)
-        bound, searched = plan.bound, plan.searched
+        bound, size = plan.bound, plan.bound.size
         index = tuple(bound.discrete[v] for v in compiled.observed)
-        rows = compiled.table[index] if index else compiled.table
-        if bound.size == 1:  # one row: in scalars
-            total = float(rows.sum())
-            if not total > TINY:
-                return None
-            return answer(plan, (rows / total)[np.newaxis],
-                          np.array([math.log(total) + compiled.log_offset]))
-        cards: tuple[int, ...] = tuple(rows.shape[rows.ndim - len(searched) :])
-        rows = rows.reshape((-1,) + cards)
-        if rows.shape[0] != bound.size:
-            rows = np.broadcast_to(rows, (bound.size,) + cards)
-        z = rows.reshape(bound.size, -1).sum(axis=1)
-        if not np.all(z > TINY):
+        if compiled.bad[index].any():
             return None  # some row needs the exact log-space path
-        probs = rows / z.reshape((-1,) + (1,) * len(cards))
-        return answer(plan, probs, np.log(z) + compiled.log_offset)
+        cards = plan.layout.cards
+        probs = compiled.normalised[index].reshape((-1,) + cards)
+        logs = compiled.log_z[index].reshape(-1)
+        if probs.shape[0] != size:  # evidence broadcast over the batch
+            probs, logs = np.broadcast_to(probs, (size,) + cards), np.broadcast_to(logs, (size,))
+        return answer(plan, probs.copy(), logs.copy())
