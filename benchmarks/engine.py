@@ -336,6 +336,130 @@ def bench_network(name: str, repeats: int, tmp: Path, tables: bool = True) -> di
     return row
 
 
+#: questions per network and per relation of the target to its evidence (none, part or all
+#: of it d-separated from the target)
+QUESTIONS = 4
+RELATIONS = ("none", "part", "all")
+
+
+def relation(graph, target: str, observed: list[str]) -> str:
+    """How many of the observed variables are d-separated from the target given the others
+    (networkx's d-separation, independent of bayesprog's Bayes-ball)."""
+    separated = sum(nx_d_separated(graph, target, v, [o for o in observed if o != v])
+                    for v in observed)
+    return "none" if not separated else "all" if separated == len(observed) else "part"
+
+
+def nx_d_separated(graph, a: str, b: str, given: list[str]) -> bool:
+    import networkx as nx
+
+    return nx.is_d_separator(graph, {a}, {b}, set(given))
+
+
+def bench_questions(name: str, repeats: int, tmp: Path, per: int = QUESTIONS) -> dict:
+    """Warm single queries on questions drawn for the network (a seeded target and 1, 2 or 4
+    observed variables, ``per`` of each relation of the target to its evidence where the
+    network has them), 100 evidence sets each by forward sampling: bayesprog by default and
+    with ``method="contraction"`` named, pyAgrum's LazyPropagation with the target declared
+    and the evidence changed in place; every answer compared with pyAgrum's."""
+    import networkx as nx
+
+    table_method.TABLE_LIMIT = TABLE_LIMIT
+    model, path, _, _, _ = load_network(name, tmp)
+    bn = agrum_net(model)
+    graph = nx.DiGraph(list(model.edges()))
+    graph.add_nodes_from(model.nodes())
+    names = sorted(model.nodes())
+    cpds = {c.variable: c for c in model.get_cpds()}
+    rng = np.random.default_rng(sum(map(ord, name)) + 1)
+    samples = forward_sample(model, 100, rng)
+    chosen: dict[str, list[tuple[str, list[str]]]] = {r: [] for r in RELATIONS}
+    for _ in range(2000):  # draws until each relation has ``per`` questions (or none is left)
+        if all(len(found) >= per for found in chosen.values()):
+            break
+        k = int(rng.choice([1, 2, 4]))
+        picked = rng.choice(len(names), size=k + 1, replace=False)
+        target, observed = names[picked[0]], [names[i] for i in picked[1:]]
+        found = chosen[relation(graph, target, observed)]
+        if len(found) < per and all({target, *observed} != {t, *o} for t, o in found):
+            found.append((target, observed))
+    rows = []
+    for kind, questions in chosen.items():
+        for target, observed in questions:
+            sets = [{v: str(cpds[v].state_names[v][int(samples[v][i])]) for v in observed}
+                    for i in range(100)]
+            question = f"P({target} | {', '.join(observed)})"
+            lazy = gum.LazyPropagation(bn)
+            lazy.addTarget(target)
+            for v, value in sets[0].items():
+                lazy.addEvidence(v, value)
+
+            def agrum(sets=sets, lazy=lazy, target=target):
+                for e in sets:
+                    for v, value in e.items():
+                        lazy.chgEvidence(v, value)
+                    lazy.makeInference()
+                    lazy.posterior(target)
+
+            row = {"network": name, "question": question, "relation": kind,
+                   "us_per_query": {"pyagrum": 1e6 * call_time(agrum, repeats) / len(sets)}}
+            difference = 0.0
+            for mode, method in (("bayesprog", None), ("bayesprog contraction", "contraction")):
+                program = bayesprog.load(path)
+
+                def ours(sets=sets, program=program, question=question, method=method):
+                    for e in sets:
+                        program.ask(question, e, method=method)
+
+                row["us_per_query"][mode] = 1e6 * call_time(ours, repeats) / len(sets)
+                for e in sets[:20]:
+                    answer = program.ask(question, e, method=method)
+                    for v, value in e.items():
+                        lazy.chgEvidence(v, value)
+                    lazy.makeInference()
+                    post = lazy.posterior(target)
+                    labels = [post.variable(0).label(i)
+                              for i in range(post.variable(0).domainSize())]
+                    theirs = [post[labels.index(s)] for s in answer.states[target]]
+                    difference = max(difference,
+                                      float(np.abs(answer.probabilities - theirs).max()))
+                row[f"method {mode}"] = answer.method
+            times = row["us_per_query"]
+            row["ratios"] = {"rate_over_pyagrum": times["pyagrum"] / times["bayesprog"],
+                             "contraction_rate_over_pyagrum": times["pyagrum"]
+                             / times["bayesprog contraction"]}
+            row["max_difference_pyagrum"] = difference
+            rows.append(row)
+    return {"network": name, "questions": rows,
+            "least_rate_over_pyagrum": min(r["ratios"]["rate_over_pyagrum"] for r in rows),
+            "least_contraction_rate_over_pyagrum": min(
+                r["ratios"]["contraction_rate_over_pyagrum"] for r in rows),
+            "max_difference_pyagrum": max(r["max_difference_pyagrum"] for r in rows)}
+
+
+def questions_table(found: list[dict]) -> str:
+    head = (f"{'network':<12} {'questions':>9}  {'none/part/all':>13}  "
+            f"{'least x agrum':>13} {'(contraction)':>13}  {'ours us/q':>18}  "
+            f"{'agrum us/q':>18}  {'max |diff|':>10}")
+    lines = [head, "-" * len(head)]
+    for net in found:
+        rows = net["questions"]
+        kinds = "/".join(str(sum(r["relation"] == k for r in rows)) for k in RELATIONS)
+        ours = [r["us_per_query"]["bayesprog"] for r in rows]
+        theirs = [r["us_per_query"]["pyagrum"] for r in rows]
+        lines.append(
+            f"{net['network']:<12} {len(rows):>9}  {kinds:>13}  "
+            f"{net['least_rate_over_pyagrum']:>13.2f} "
+            f"{net['least_contraction_rate_over_pyagrum']:>13.2f}  "
+            f"{min(ours):>8.1f} - {max(ours):>7.1f}  {min(theirs):>8.1f} - {max(theirs):>7.1f}  "
+            f"{net['max_difference_pyagrum']:>10.1e}")
+    lines.append("Warm single queries on drawn questions (1, 2 or 4 observed variables; none, "
+                 "part or all of them d-separated from the target), 100 evidence sets each; "
+                 "least x agrum: the smallest ratio of our rate to pyAgrum's over the "
+                 "network's questions, by default and with the contraction named.")
+    return "\n".join(lines)
+
+
 def table(rows: list[dict]) -> str:
     head = (f"{'network':<24} {'nodes':>5}  {'cold ms (ours/pgmpy/agrum)':>28} "
             f"{'x agrum':>8} {'built x':>8}  "
@@ -555,6 +679,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--networks", nargs="+", default=NETWORKS)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", default="results/benchmarks/engine.json")
+    parser.add_argument("--questions", type=int, default=QUESTIONS,
+                        help="drawn questions per network and relation of the target to its "
+                        f"evidence (default: {QUESTIONS})")
     parser.add_argument("--grids", nargs="*", type=int, default=GRIDS,
                         help="sizes of the grid networks for the approximate methods "
                         "(none: skip them)")
@@ -572,6 +699,10 @@ def main(argv: list[str] | None = None) -> int:
             for name in args.networks:
                 rows.append(bench_network(name, args.repeats, Path(tmp), tables))
                 print(f"measured {rows[-1]['network']}", file=sys.stderr)
+        asked = []
+        for name in args.networks:
+            asked.append(bench_questions(name, args.repeats, Path(tmp), args.questions))
+            print(f"measured the questions of {name}", file=sys.stderr)
         for n in args.grids:
             approximate.append(bench_approximate(n, min(args.repeats, 3), Path(tmp)))
             print(f"measured the {n} x {n} grid", file=sys.stderr)
@@ -580,6 +711,8 @@ def main(argv: list[str] | None = None) -> int:
                            max(args.repeats, 7), Path(tmp))
         print("measured the cost model", file=sys.stderr)
     print(table(rows))
+    print()
+    print(questions_table(asked))
     if approximate:
         print()
         print(approximate_table(approximate))
@@ -587,7 +720,7 @@ def main(argv: list[str] | None = None) -> int:
     print(cost_model_table(model))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"repeats": args.repeats, "rows": rows,
+    out.write_text(json.dumps({"repeats": args.repeats, "rows": rows, "questions": asked,
                                "approximate": approximate, "cost_model": model}, indent=2))
     print(f"written to {out}")
     return 0
