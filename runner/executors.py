@@ -101,53 +101,73 @@ def _exit_quietly(signum: int, frame: Any) -> None:
 def run_dask(address: str, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
              bar: Any, max_deaths: int, worker_timeout: float) -> None:
     """The units on an existing Dask cluster; a unit whose workers died goes to the others."""
+    with dask_client(address) as client:
+        def save(index: int, result: dict) -> None:
+            store.save(todo[index], result)
+            bar.update(1)
+
+        dask_map(client, address, job, todo, save, max_deaths, worker_timeout,
+                 kept="the finished chunks are kept", name=lambda unit: unit.name)
+
+
+def dask_client(address: str) -> Any:
+    """A client of the Dask scheduler at ``address`` (a clear error when Dask is not installed
+    or the scheduler cannot be reached)."""
     try:
-        from dask.distributed import Client, wait
-        from distributed.client import FutureCancelledError
-        from distributed.scheduler import KilledWorker
+        from dask.distributed import Client
     except ImportError:
         raise BayesprogError("--scheduler needs Dask: pip install 'bayesprog[dask]'") from None
     try:
-        client = Client(address, timeout="10s")
+        return Client(address, timeout="10s")
     except (OSError, ValueError, TypeError) as exc:
         raise BayesprogError(f"--scheduler {address}: cannot reach a Dask scheduler ({exc})") \
             from None
+
+
+def dask_map(client: Any, address: str, function: Callable[[Any], Any], items: list[Any],
+             done: Callable[[int, Any], None], max_deaths: int, worker_timeout: float,
+             kept: str, name: Callable[[Any], str] = str) -> None:
+    """``function`` of every item on the cluster of ``client``, ``done(index, result)`` called
+    as each finishes (in the order they finish); an item whose workers died is submitted
+    again (up to ``max_deaths`` times per item in all), and a cluster without a worker for
+    ``worker_timeout`` seconds stops the work. ``kept`` says, in the errors, what is kept."""
     import time
 
-    with client:
-        futures = {client.submit(job, u, pure=False): u for u in todo}
-        pending, deaths, alone_since = set(futures), 0, None
-        while pending:
+    from dask.distributed import wait
+    from distributed.client import FutureCancelledError
+    from distributed.scheduler import KilledWorker
+
+    futures = {client.submit(function, item, pure=False): i for i, item in enumerate(items)}
+    pending, deaths, alone_since = set(futures), 0, None
+    while pending:
+        try:
+            finished, still = wait(list(pending), timeout=1.0, return_when="FIRST_COMPLETED")
+            pending = set(still)
+        except TimeoutError:  # nothing finished in that second
+            finished = set()
+        for future in finished:
+            index = futures.pop(future)
             try:
-                done, still = wait(list(pending), timeout=1.0, return_when="FIRST_COMPLETED")
-                pending = set(still)
-            except TimeoutError:  # nothing finished in that second
-                done = set()
-            for future in done:
-                unit = futures.pop(future)
-                try:
-                    result = future.result()
-                except (KilledWorker, FutureCancelledError):
-                    # the unit was on workers that died: give it to the others
-                    deaths += 1
-                    if deaths > max_deaths * max(1, len(todo)):
-                        raise BayesprogError(f"--scheduler {address}: workers keep dying on "
-                                             f"{unit.name}; the finished chunks are kept") \
-                            from None
-                    again = client.submit(job, unit, pure=False)
-                    futures[again] = unit
-                    pending.add(again)
-                    continue
-                store.save(unit, result)
-                bar.update(1)
-            if done or client.scheduler_info().get("workers"):
-                alone_since = None
-            elif alone_since is None:
-                alone_since = time.monotonic()
-            elif time.monotonic() - alone_since > worker_timeout:
-                raise BayesprogError(f"--scheduler {address}: no worker for "
-                                     f"{worker_timeout:.0f} s: start workers (dask worker "
-                                     f"{address}); the finished chunks are kept")
+                result = future.result()
+            except (KilledWorker, FutureCancelledError):
+                # the item was on workers that died: give it to the others
+                deaths += 1
+                if deaths > max_deaths * max(1, len(items)):
+                    raise BayesprogError(f"--scheduler {address}: workers keep dying on "
+                                         f"{name(items[index])}; {kept}") from None
+                again = client.submit(function, items[index], pure=False)
+                futures[again] = index
+                pending.add(again)
+                continue
+            done(index, result)
+        if finished or client.scheduler_info().get("workers"):
+            alone_since = None
+        elif alone_since is None:
+            alone_since = time.monotonic()
+        elif time.monotonic() - alone_since > worker_timeout:
+            raise BayesprogError(f"--scheduler {address}: no worker for "
+                                 f"{worker_timeout:.0f} s: start workers (dask worker "
+                                 f"{address}); {kept}")
 
 
 def progress_bar(total: int, what: str, unit: str = "step", done: int = 0,

@@ -42,6 +42,8 @@ class TuneOptions:
     workers: int = 1
     trials: int | None = None
     quiet: bool = False
+    #: a Dask scheduler's address, instead of local processes
+    scheduler: str | None = None
 
 
 @dataclass(frozen=True)
@@ -92,7 +94,7 @@ def tune(experiment: Path, out: Path, options: TuneOptions = TuneOptions()) -> i
     from runner.tune import tune as run_tune
 
     return run_tune(_experiment_file(experiment), out, trials=options.trials,
-                    workers=options.workers, quiet=options.quiet)
+                    workers=options.workers, quiet=options.quiet, scheduler=options.scheduler)
 
 
 def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
@@ -268,7 +270,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     _at_least("--workers", args.workers, 1)
     _at_least("--trials", args.trials, 1)
     return tune(Path(args.experiment), Path(args.out),
-                TuneOptions(workers=args.workers, trials=args.trials, quiet=args.quiet))
+                TuneOptions(workers=args.workers, trials=args.trials, quiet=args.quiet,
+                            scheduler=args.scheduler))
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -362,6 +365,9 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    "before continues the search")
     p.add_argument("--workers", type=int, default=1, metavar="N",
                    help="local processes (default: %(default)s)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="an existing Dask scheduler, instead of local processes (install "
+                   "bayesprog[dask]; default: none)")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar (default: a bar on a terminal)")
     p.set_defaults(func=_cmd_tune)

@@ -270,22 +270,61 @@ def _scenario(path: str) -> Scenario:
     return _SCENARIOS[path]
 
 
-class Evaluator:
-    """:func:`evaluate` over many (scenario, task) pairs, in this process or spread over local
-    worker processes (the numbers do not depend on which)."""
+@dataclass(frozen=True)
+class _Evaluation:
+    """:func:`evaluate` of one candidate, for a (scenario file, task) pair: picklable, as a
+    Dask cluster takes it."""
 
-    def __init__(self, workers: int = 1):
-        self.pool = None
-        if workers > 1:
+    values: Mapping[str, float] | None
+    runs: int
+    iterations: int
+    seed: int
+
+    def __call__(self, pair: tuple[str, str]) -> dict[str, np.ndarray]:
+        return _evaluate_at(pair[0], pair[1], self.values, self.runs, self.iterations,
+                            self.seed)
+
+
+#: How often in a row the workers of a Dask cluster may die on one evaluation (it is then given
+#: to others each time) before the search stops; seconds a cluster may go without any worker.
+MAX_WORKER_DEATHS = 3
+WORKER_TIMEOUT = 60.0
+
+
+class Evaluator:
+    """:func:`evaluate` over many (scenario, task) pairs, in this process, spread over local
+    worker processes, or on an existing Dask cluster (``scheduler``: its address); the
+    numbers do not depend on which."""
+
+    def __init__(self, workers: int = 1, scheduler: str | None = None):
+        self.pool: Any = None
+        self.client: Any = None
+        self.scheduler = scheduler
+        if scheduler is not None:
+            from runner.executors import dask_client
+
+            self.client = dask_client(scheduler)
+        elif workers > 1:
             from runner.executors import process_pool
 
             self.pool = process_pool(workers)
 
     def __call__(self, pairs: list[tuple[Scenario, str]], values: Mapping[str, float] | None,
                  runs: int, iterations: int, seed: int) -> list[dict[str, np.ndarray]]:
-        if self.pool is None:
+        if self.pool is None and self.client is None:
             return [evaluate(s, t, values, runs, iterations, seed) for s, t in pairs]
         values = None if values is None else dict(values)
+        if self.client is not None:
+            from runner.executors import dask_map
+
+            assert self.scheduler is not None
+            found: list[Any] = [None] * len(pairs)
+            dask_map(self.client, self.scheduler,
+                     _Evaluation(values, runs, iterations, seed),
+                     [(str(s.path), t) for s, t in pairs], found.__setitem__,
+                     MAX_WORKER_DEATHS, WORKER_TIMEOUT,
+                     kept="the finished trials are kept", name=lambda pair: " ".join(pair))
+            return found
         futures = [self.pool.submit(_evaluate_at, str(s.path), t, values, runs, iterations, seed)
                    for s, t in pairs]
         return [f.result() for f in futures]
@@ -295,6 +334,8 @@ class Evaluator:
             from runner.executors import stop_pool
 
             stop_pool(self.pool)
+        if self.client is not None:
+            self.client.close()
 
 
 # the search -------------------------------------------------------------------------------------
@@ -370,7 +411,7 @@ def _feasible(trial: Any, min_precision: float | None) -> bool:
 
 
 def run_search(search: Search, out: Path, trials: int | None = None, workers: int = 1,
-               progress: bool | None = None) -> dict:
+               progress: bool | None = None, scheduler: str | None = None) -> dict:
     """Run (or resume) the search in ``out``, then validate its best profiles; returns what
     ``tune.json`` holds and writes it with ``tune.md``, ``tune.png`` and the tuned program."""
     import optuna
@@ -381,7 +422,7 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
     min_precision = search.tune.min_precision
     study = _open_journal(search, out)
     pairs = search.pairs("training")
-    evaluator = Evaluator(workers)
+    evaluator = Evaluator(workers, scheduler)
     try:
         baseline = study.user_attrs.get("baseline")
         if baseline is None:  # the hand-chosen profiles' mean area (and distance) per pair
@@ -723,7 +764,7 @@ def plot_visits(search: Search, result: dict, path: Path) -> None:
 
 
 def tune(experiment: Path, out: Path, trials: int | None = None, workers: int = 1,
-         quiet: bool = False) -> int:
+         quiet: bool = False, scheduler: str | None = None) -> int:
     """The command: run or resume the search, write its outputs, print where."""
     from bayesprog import require_extra
 
@@ -735,7 +776,7 @@ def tune(experiment: Path, out: Path, trials: int | None = None, workers: int = 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", category=UserWarning)  # optuna's experimental notes
             result = run_search(search, out, trials=trials, workers=workers,
-                                progress=False if quiet else None)
+                                progress=False if quiet else None, scheduler=scheduler)
     except KeyboardInterrupt:
         print(f"interrupted: the finished trials are kept in {out / JOURNAL}; run the same "
               "command again to resume", file=sys.stderr)

@@ -96,6 +96,59 @@ def test_the_same_seed_gives_the_same_search_whatever_the_workers(fresh, tmp_pat
     assert other["trials"][1]["params"] != result["trials"][1]["params"]
 
 
+def test_a_search_on_a_dask_cluster_is_the_local_one(fresh, tmp_path):
+    """``--scheduler``: every candidate evaluated on the cluster's workers, the same journal,
+    the same trials and validation as in one process."""
+    from dask.distributed import LocalCluster
+
+    result, _ = fresh
+    search = load_search(write_search(tmp_path))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        on_dask = run_search(search, tmp_path / "out", scheduler=cluster.scheduler_address,
+                             progress=False)
+        assert main(["tune", str(write_search(tmp_path)), "--out", str(tmp_path / "cli"),
+                     "--trials", "2", "--scheduler", cluster.scheduler_address, "-q"]) == 0
+    assert on_dask["trials"] == result["trials"]
+    assert on_dask["validation"] == result["validation"]
+    assert (tmp_path / "out" / tune_module.JOURNAL).exists()
+    written = json.loads((tmp_path / "cli" / "tune.json").read_text())
+    assert written["trials"] == result["trials"][:2]
+
+
+def test_dask_an_evaluation_whose_worker_died_is_run_again(fresh, tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from dask.distributed import LocalCluster
+    from distributed.scheduler import KilledWorker
+
+    result, _ = fresh
+    real = tune_module._evaluate_at
+    killed = tmp_path / "killed"  # a file: the cluster copies the function, and a list with it
+
+    def dies_once(scenario_path, task, *rest):
+        if not killed.exists():
+            killed.write_text(task)
+            raise KilledWorker(task, SimpleNamespace(address="tcp://gone:1"), 3)
+        return real(scenario_path, task, *rest)
+
+    monkeypatch.setattr(tune_module, "_evaluate_at", dies_once)
+    search = load_search(write_search(tmp_path))
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        again = run_search(search, tmp_path / "out", scheduler=cluster.scheduler_address,
+                           progress=False)
+    assert killed.exists()
+    assert again["trials"] == result["trials"]
+
+
+def test_dask_a_scheduler_that_cannot_be_reached_is_reported(tmp_path, capsys):
+    assert main(["tune", str(write_search(tmp_path)), "--out", str(tmp_path / "out"),
+                 "--scheduler", "tcp://127.0.0.1:9", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot reach a Dask scheduler" in err and "Traceback" not in err
+
+
 def test_the_objective_is_the_mean_relative_area_under_gamma(fresh):
     result, out = fresh
     search = load_search(write_search(out.parent))
