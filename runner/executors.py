@@ -15,15 +15,17 @@ from runner.store import ResultStore, Unit
 
 
 def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
-                  bar: Any, max_deaths: int) -> None:
-    """The units on local processes; a pool whose worker dies is replaced and the units it had
-    not finished are computed again (numbers do not depend on which process computes them)."""
+                  bar: Any, max_deaths: int, pool: Any = None) -> None:
+    """The units on local processes (first on ``pool``, when it is given: started while the
+    caller prepared); a pool whose worker dies is replaced and the units it had not finished
+    are computed again (numbers do not depend on which process computes them)."""
     from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     left, deaths = list(todo), 0
     while left:
-        pool = process_pool(min(workers, len(left)))
+        if pool is None:
+            pool = process_pool(min(workers, len(left)))
         futures = {pool.submit(job, u): u for u in left}
         broken = False
         try:
@@ -49,6 +51,7 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
             pool.shutdown()
             return
         stop_pool(pool)
+        pool = None
         deaths += 1
         if deaths > max_deaths:
             raise BayesprogError(f"worker processes died {deaths} times in a row (killed, out "
@@ -58,15 +61,22 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
               file=sys.stderr)
 
 
-def process_pool(workers: int) -> Any:
+def process_pool(workers: int, preload: tuple[str, ...] = (), start: bool = False) -> Any:
     """A pool of ``workers`` local processes (a ``ProcessPoolExecutor``): spawned, dying with
-    this process, Ctrl-C left to it, one compiled-kernel thread each (no oversubscription)."""
+    this process, Ctrl-C left to it, one compiled-kernel thread each (no oversubscription),
+    each importing the modules ``preload`` as it starts. With ``start``, the processes are
+    started now (a pool starts them at its first tasks): they import while this process
+    prepares the work."""
     from concurrent.futures import ProcessPoolExecutor
 
     from runner.child import WatchedContext
 
-    return ProcessPoolExecutor(max_workers=workers, mp_context=WatchedContext(),
-                               initializer=worker_init)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=WatchedContext(),
+                               initializer=worker_init, initargs=(preload,))
+    if start:
+        for _ in range(workers):  # a process is started for each task no idle one takes
+            pool.submit(int)
+    return pool
 
 
 def stop_pool(pool: Any) -> None:
@@ -77,11 +87,13 @@ def stop_pool(pool: Any) -> None:
         process.terminate()
 
 
-def worker_init() -> None:
+def worker_init(preload: tuple[str, ...] = ()) -> None:
     """A worker process (already dying with its parent, :mod:`runner.child`): one
     compiled-kernel thread, Ctrl-C left to the parent; stopped (SIGTERM), it ends as a Python
     program does, its files and semaphores released; its progress bars lock with a thread
-    lock, not a semaphore of the machine's that a killed process would leave behind."""
+    lock, not a semaphore of the machine's that a killed process would leave behind. The
+    modules ``preload`` are imported then."""
+    import importlib
     import signal
     import threading
 
@@ -92,6 +104,8 @@ def worker_init() -> None:
     signal.signal(signal.SIGTERM, _exit_quietly)
     numba.set_num_threads(1)
     tqdm.set_lock(threading.RLock())
+    for module in preload:
+        importlib.import_module(module)
 
 
 def _exit_quietly(signum: int, frame: Any) -> None:

@@ -12,7 +12,7 @@ import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -282,11 +282,14 @@ def run_experiment(
     workers: int = 1,
     scheduler: str | None = None,
     progress: bool | None = None,
+    pool: Any = None,
 ) -> ResultStore:
     """Compute every unit not yet stored in ``out``, saving each as soon as it is finished.
 
-    ``workers > 1`` uses local processes, ``scheduler`` an existing Dask cluster; the numbers
-    do not depend on either, nor on the chunk size (randomness is keyed by run).
+    ``workers > 1`` uses local processes (those of ``pool`` first, when given: started by
+    :func:`~runner.executors.process_pool` while the caller prepared; it is shut down),
+    ``scheduler`` an existing Dask cluster; the numbers do not depend on either, nor on the
+    chunk size (randomness is keyed by run).
     """
     store = ResultStore(out)
     store.open(manifest(experiment))
@@ -305,7 +308,7 @@ def run_experiment(
         if scheduler is not None:
             run_dask(scheduler, job, todo, store, bar, MAX_WORKER_DEATHS, WORKER_TIMEOUT)
         elif workers > 1:
-            run_processes(workers, job, todo, store, bar, MAX_WORKER_DEATHS)
+            run_processes(workers, job, todo, store, bar, MAX_WORKER_DEATHS, pool)
         else:
             for unit in todo:
                 store.save(unit, compute_unit(path, unit, digest))

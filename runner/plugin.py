@@ -70,18 +70,28 @@ class RobotCommand:
 
 def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
         report_options: ReportOptions = ReportOptions()) -> int:
-    """Run an experiment file (resuming what ``out`` already holds), then write its report."""
-    from runner.experiment import load_experiment, run_experiment
+    """Run an experiment file (resuming what ``out`` already holds), then write its report.
+    Local worker processes are started first: they import the simulation while this process
+    reads the experiment."""
+    from runner.executors import process_pool, stop_pool
 
-    exp = load_experiment(_experiment_file(experiment))
-    _say(exp.scenario.warnings)
+    pool = None
+    if options.workers > 1 and options.scheduler is None:
+        pool = process_pool(options.workers, preload=("runner.experiment",), start=True)
     try:
+        from runner.experiment import load_experiment, run_experiment
+
+        exp = load_experiment(_experiment_file(experiment))
+        _say(exp.scenario.warnings)
         run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
-                       progress=False if options.quiet else None)
+                       progress=False if options.quiet else None, pool=pool)
     except KeyboardInterrupt:
         print(f"interrupted: the finished chunks are kept in {out}; run the same command "
               "again to resume", file=sys.stderr)
         return 130
+    finally:
+        if pool is not None:  # (shut down by the run, unless it stopped before)
+            stop_pool(pool)
     if options.report:
         return report(out, report_options)
     print(f"results written to {out}")
@@ -98,16 +108,28 @@ def tune(experiment: Path, out: Path, options: TuneOptions = TuneOptions()) -> i
 
 
 def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
-    """Rebuild ``out/report`` from the stored results."""
-    from runner.report import build_report
+    """Rebuild ``out/report`` from the stored results. Where there is a second core, the
+    process that draws Fig. 11 is started first: it imports the figures while this process
+    reads the results."""
+    import os
+
+    from runner.executors import process_pool, stop_pool
 
     _output_folder(out)
+    pool = process_pool(1, preload=("runner.report",), start=True) \
+        if (os.cpu_count() or 1) >= 2 else None
     try:
-        folder = build_report(out, animation=options.animation, compare=options.compare)
+        from runner.report import build_report
+
+        folder = build_report(out, animation=options.animation, compare=options.compare,
+                              pool=pool)
     except KeyboardInterrupt:
         print(f"interrupted while drawing the report: the results are kept in {out}; "
               f"bayesprog report {out} draws it", file=sys.stderr)
         return 130
+    finally:
+        if pool is not None:
+            stop_pool(pool)
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 

@@ -580,9 +580,12 @@ def comparison_lines(found: list[tuple[str, str, str]], other: Path, name: str) 
     return lines + [""]
 
 
-def build_report(out: Path, animation: bool = True, compare: Path | None = None) -> Path:
+def build_report(out: Path, animation: bool = True, compare: Path | None = None,
+                 pool: Any = None) -> Path:
     """Write ``out/report/`` (figures, table, report.md, report.html) from stored results;
-    ``compare``: another experiment's output folder whose findings are set beside these."""
+    ``compare``: another experiment's output folder whose findings are set beside these;
+    ``pool``: a process pool (:func:`~runner.executors.process_pool`) started beforehand, on
+    which Fig. 11 is drawn (else one is started here, where there is a second core)."""
     store = ResultStore(out)
     manifest = store.manifest()
     experiment = stored_experiment(out)
@@ -605,7 +608,7 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None)
              folder / video if video else None, max(spec.iterations - 1, 1))
     # Fig. 11 (a replay and an animation, the longest part) is drawn by a second process
     # while this one draws the rest, where there is a second core
-    with _beside(fig11) as pending:
+    with _beside(fig11, pool) as pending:
         rows = statistics_table(results, spec, borders, scenario)
         bar = progress_bar(3, "report figures")
         plot_gamma_tasks(results, spec, folder / "fig10_gamma.png")
@@ -637,12 +640,14 @@ def _plot_stored_decision(out: Path, task: str, configuration: str, run: int, st
 
 
 @contextlib.contextmanager
-def _beside(fig11: tuple) -> Iterator[Callable[[], None]]:
-    """Draw Fig. 11 in a second process (one core: here, when waited for); yields the wait."""
-    if (os.cpu_count() or 1) < 2:
+def _beside(fig11: tuple, pool: Any = None) -> Iterator[Callable[[], None]]:
+    """Draw Fig. 11 in a second process, ``pool``'s or a new one (one core: here, when waited
+    for); yields the wait."""
+    if pool is None and (os.cpu_count() or 1) < 2:
         yield lambda: _plot_stored_decision(*fig11)
         return
-    pool = process_pool(1)
+    if pool is None:
+        pool = process_pool(1)
     try:
         future = pool.submit(_plot_stored_decision, *fig11)
         yield future.result
