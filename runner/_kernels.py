@@ -1,9 +1,17 @@
 """Compiled inner loops of the explorer (numba): the ICP of the shape cue and the saliency of the
-perceived stimulus on 2-D grids (the numpy versions spent most of an experiment here).
+perceived stimulus on 2-D grids, and the ICP of solids in a volume (the numpy versions spent
+most of an experiment here).
 
 ICP: for every (run, template, start) independently, transform the path into the template's
 frame, pair each path point with its closest point on the template polygon, and solve the 2-D
 Procrustes problem in closed form; repeat. Runs in parallel over (run, template, start).
+
+3-D ICP (:func:`icp3d`): the same for every pose of a batch against a solid's surface sample,
+each point paired with its nearest sample (exactly: the sample is looked for among the
+candidates its cell of a grid keeps, see ``runner.shape.NearestGrid``, or among all samples
+outside the grid's cells that keep candidates; or approximately, with the sample nearest to its
+cell's centre), then the Kabsch rotation (an SVD of the 3 x 3 cross-covariance, a reflection
+excluded); a pose stops where no pair changes.
 """
 
 from __future__ import annotations
@@ -183,3 +191,126 @@ def chamfer(path, counts, outlines, nverts, angle, shift):
         dist[r, t, s] = _mean_distance(path[r], counts[r], outlines[t], nverts[t],
                                        angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1])
     return dist
+
+
+@njit(cache=True, inline="always")
+def _nearest3d(x, y, z, surface, low, cell, shape, starts, candidates, centre, approximate):
+    """The index of the surface sample nearest to (x, y, z), and its squared distance; with
+    ``approximate``, the sample nearest to the centre of the point's cell (of the nearest
+    cell, outside the grid) and its squared distance to the point."""
+    i = int(math.floor((x - low[0]) / cell))
+    j = int(math.floor((y - low[1]) / cell))
+    k = int(math.floor((z - low[2]) / cell))
+    if approximate:
+        i = min(max(i, 0), shape[0] - 1)
+        j = min(max(j, 0), shape[1] - 1)
+        k = min(max(k, 0), shape[2] - 1)
+        s = centre[(i * shape[1] + j) * shape[2] + k]
+        return s, (x - surface[s, 0]) ** 2 + (y - surface[s, 1]) ** 2 + (z - surface[s, 2]) ** 2
+    first, last = 0, surface.shape[0]
+    every = True
+    if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
+        c = (i * shape[1] + j) * shape[2] + k
+        if starts[c, 0] >= 0:
+            first, last, every = starts[c, 0], starts[c, 1], False
+    best, arg = np.inf, -1
+    for q in range(first, last):
+        s = q if every else candidates[q]
+        d = (x - surface[s, 0]) ** 2 + (y - surface[s, 1]) ** 2 + (z - surface[s, 2]) ** 2
+        if d < best or (d == best and s < arg):
+            best, arg = d, s
+    return arg, best
+
+
+@njit(cache=True)
+def _local3d(path, r, j, rot, shift, p):
+    """Path point j of run r in the frame of pose p: R^T (x - t)."""
+    dx = path[r, j, 0] - shift[p, 0]
+    dy = path[r, j, 1] - shift[p, 1]
+    dz = path[r, j, 2] - shift[p, 2]
+    return (rot[p, 0, 0] * dx + rot[p, 1, 0] * dy + rot[p, 2, 0] * dz,
+            rot[p, 0, 1] * dx + rot[p, 1, 1] * dy + rot[p, 2, 1] * dz,
+            rot[p, 0, 2] * dx + rot[p, 1, 2] * dy + rot[p, 2, 2] * dz)
+
+
+@njit(cache=True, parallel=True)
+def icp3d(path, counts, run_of, rot, shift, surface, low, cell, shape, starts, candidates,
+          centre, iterations, approximate):
+    """Refine every pose (``rot`` [P, 3, 3], ``shift`` [P, 3], in place) on the first
+    ``counts[r]`` points of its run's path (``run_of`` [P]) by at most ``iterations`` ICP
+    steps; a pose whose pairs did not change since its last step is at its fixed point.
+    ``approximate``: pairs by the samples nearest to the cells' centres."""
+    n_p, k = rot.shape[0], path.shape[1]
+    for p in prange(n_p):
+        r = run_of[p]
+        n = counts[r]
+        before = np.full(k, -1, np.int64)
+        pairs = np.empty(k, np.int64)
+        for _ in range(iterations):
+            moved = False
+            for j in range(n):
+                x, y, z = _local3d(path, r, j, rot, shift, p)
+                arg, _ = _nearest3d(x, y, z, surface, low, cell, shape, starts, candidates,
+                                    centre, approximate)
+                pairs[j] = arg
+                moved = moved or arg != before[j]
+            if not moved:
+                break
+            ms = np.zeros(3)
+            mt = np.zeros(3)
+            for j in range(n):
+                for a in range(3):
+                    ms[a] += surface[pairs[j], a]
+                    mt[a] += path[r, j, a]
+            ms /= n
+            mt /= n
+            h = np.zeros((3, 3))
+            for j in range(n):
+                for a in range(3):
+                    sa = surface[pairs[j], a] - ms[a]
+                    for b in range(3):
+                        h[a, b] += sa * (path[r, j, b] - mt[b])
+            u, _, vt = np.linalg.svd(h)
+            d = 1.0 if np.linalg.det(u) * np.linalg.det(vt) >= 0 else -1.0
+            for a in range(3):
+                for b in range(3):
+                    rot[p, a, b] = vt[0, a] * u[b, 0] + vt[1, a] * u[b, 1] \
+                        + d * vt[2, a] * u[b, 2]
+            for a in range(3):
+                shift[p, a] = mt[a] - (rot[p, a, 0] * ms[0] + rot[p, a, 1] * ms[1]
+                                       + rot[p, a, 2] * ms[2])
+            for j in range(n):
+                before[j] = pairs[j]
+
+
+@njit(cache=True, parallel=True)
+def distance3d(path, counts, run_of, rot, shift, surface, low, cell, shape, starts,
+               candidates, centre, approximate):
+    """Mean distance of each pose's used path points to their nearest surface samples, [P]
+    (``approximate``: to the samples nearest to their cells' centres)."""
+    n_p = rot.shape[0]
+    out = np.empty(n_p)
+    for p in prange(n_p):
+        r = run_of[p]
+        total = 0.0
+        for j in range(counts[r]):
+            x, y, z = _local3d(path, r, j, rot, shift, p)
+            _, d = _nearest3d(x, y, z, surface, low, cell, shape, starts, candidates, centre,
+                              approximate)
+            total += math.sqrt(d)
+        out[p] = total / counts[r]
+    return out
+
+
+@njit(cache=True, parallel=True)
+def nearest3d(points, surface, low, cell, shape, starts, candidates, centre, approximate):
+    """The nearest surface sample of each point [n, 3]: its index and squared distance
+    (``approximate``: the sample nearest to its cell's centre)."""
+    n = points.shape[0]
+    index = np.empty(n, np.int64)
+    squared = np.empty(n)
+    for i in prange(n):
+        index[i], squared[i] = _nearest3d(points[i, 0], points[i, 1], points[i, 2], surface,
+                                          low, cell, shape, starts, candidates, centre,
+                                          approximate)
+    return index, squared

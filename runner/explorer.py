@@ -22,7 +22,13 @@ from bayesprog import Program, check_size
 from runner._kernels import perceived_sobel_2d_around
 from runner.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
-from runner.shape import MIN_POINTS, Registration, ShapeTracker, pad_outlines
+from runner.shape import (
+    MIN_POINTS,
+    SEARCH_GROWTH_3D,
+    Registration,
+    ShapeTracker,
+    pad_outlines,
+)
 
 #: The five configurations of the paper's ablation study (Fig. 9, 10): the term made uniform.
 CONFIGURATIONS: dict[str, tuple[str, ...]] = {
@@ -107,7 +113,8 @@ class Explorer:
         self.dims = scenario.dims
         self.diagonal = float(np.linalg.norm(np.asarray(scenario.shape) * scenario.cell))
         self.tracker = ShapeTracker(self.outlines, self.template_points,
-                                    method=scenario.spec.shape_matcher)
+                                    method=scenario.spec.shape_matcher,
+                                    growth=SEARCH_GROWTH_3D if self.dims == 3 else None)
         # I over every offset between two cells, from the offsets' lengths built axis by axis
         squares = np.ix_(*[(np.arange(-n + 1, n) * scenario.cell) ** 2 for n in scenario.shape])
         self._inhibition_table = inhibition_at_distance(

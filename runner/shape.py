@@ -26,12 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from runner._kernels import chamfer, icp
+from runner._kernels import chamfer, distance3d, icp, icp3d, nearest3d
 
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
 MIN_POINTS = 10  # fewer probed cells than this on the perceived border: no shape evidence (R uniform)
 _OFFSETS = np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
 METHODS = ("icp", "chamfer")
+#: In a volume, a run's full search of starts is made again once its set of points has grown
+#: by this factor since the last (a 3-D search costs some forty warm steps: every multiple of
+#: ``restart_every`` points, as on a surface, made them two thirds of the experiment's time)
+SEARCH_GROWTH_3D = 1.5
 #: the chamfer search's grid: rotations, and offsets per axis across [-radius, radius]
 CHAMFER_ROTATIONS, CHAMFER_OFFSETS = 24, 7
 #: its refinement: rounds of 27 neighbouring poses (angle and both offsets -1, 0, +1 step)
@@ -210,6 +214,7 @@ def match3d(
     offsets: np.ndarray = _OFFSETS,
     screen: int = 5,
     keep: int = 3,
+    grids: list[NearestGrid] | None = None,
 ) -> Registration:
     """Register 3-D templates onto ``path`` [runs, k, 3] by ICP: each path point is paired with
     its nearest point of the template's surface sample (``surfaces``, one [M, 3] per template, in
@@ -224,11 +229,16 @@ def match3d(
     within about half
     the samples' spacing of the exact pose (about 3 mm for 1,500 samples of a 10 cm solid,
     a third of a cell). ``counts``, ``points`` and the error are as in :func:`match`; ``trees``
-    are the surfaces' ``scipy.spatial.cKDTree`` when already built."""
+    are the surfaces' ``scipy.spatial.cKDTree`` when already built. With ``grids``
+    (:class:`NearestGrid`, one per surface) the steps run compiled
+    (:func:`runner._kernels.icp3d`), the same pairs found through the grid, but for the
+    screening of the starts, which pairs each point with the sample nearest to its grid
+    cell's centre (within half a cell's diagonal of its own nearest)."""
     from scipy.spatial import cKDTree
 
     runs = path.shape[0]
     counts, weight, centroid = _path_set_up(path, counts, rotations, warm)
+    path = np.ascontiguousarray(path, dtype=float)
     trees = trees if trees is not None else [cKDTree(s) for s in surfaces]
     n_t = len(surfaces)
     radius = np.array([np.linalg.norm(s, axis=1).max() for s in surfaces])
@@ -250,17 +260,34 @@ def match3d(
         n_s = rot.shape[1]
         rot, shift = rot.reshape(-1, 3, 3).copy(), shift.reshape(-1, 3).copy()
         run_of = np.repeat(np.arange(runs), n_s)
-        _icp_poses(trees[t], surfaces[t], path, weight, run_of, rot, shift, min(screen, iterations))
-        if iterations > screen and n_s > keep:  # the most promising starts go on
-            dist = _mean_distance(trees[t], path, weight, counts, run_of, rot, shift)
+        if grids is not None:
+            def steps(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray, n: int,
+                      rough: bool = False, t: int = t) -> None:
+                icp3d(path, counts, run_of, rot, shift, *grids[t].arrays, n, rough)
+
+            def distances(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray,
+                          rough: bool = False, t: int = t) -> np.ndarray:
+                return distance3d(path, counts, run_of, rot, shift, *grids[t].arrays, rough)
+        else:
+            def steps(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray, n: int,
+                      rough: bool = False, t: int = t) -> None:
+                _icp_poses(trees[t], surfaces[t], path, weight, run_of, rot, shift, n)
+
+            def distances(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray,
+                          rough: bool = False, t: int = t) -> np.ndarray:
+                return _mean_distance(trees[t], path, weight, counts, run_of, rot, shift)
+        # the screening of many starts, some far from the surface: with grids, paired
+        # approximately (each point with its cell centre's nearest sample)
+        screened = n_s > keep and iterations > screen
+        steps(rot, shift, run_of, min(screen, iterations), screened)
+        if screened:  # the most promising starts go on
+            dist = distances(rot, shift, run_of, True)
             order = np.argsort(dist.reshape(runs, n_s), axis=1, kind="stable")[:, :keep]
             chosen = (np.arange(runs)[:, None] * n_s + order).ravel()
             rot, shift, run_of, n_s = rot[chosen], shift[chosen], run_of[chosen], keep
         if iterations > screen:
-            _icp_poses(trees[t], surfaces[t], path, weight, run_of, rot, shift,
-                       iterations - screen)
-        dist = _mean_distance(trees[t], path, weight, counts, run_of, rot, shift).reshape(
-            runs, n_s)
+            steps(rot, shift, run_of, iterations - screen)
+        dist = distances(rot, shift, run_of).reshape(runs, n_s)
         best = np.arange(runs) * n_s + dist.argmin(axis=1)
         out_rot[:, t], out_shift[:, t] = rot[best], shift[best]
         out_dist[:, t] = dist.min(axis=1)
@@ -297,6 +324,72 @@ def _mean_distance(tree: Any, path: np.ndarray, weight: np.ndarray, counts: np.n
     return (distance.reshape(local.shape[:2]) * weight[run_of]).sum(axis=1) / counts[run_of]
 
 
+class NearestGrid:
+    """Where to look for the sample of a surface nearest to a point: a grid of cubic cells
+    (the samples' mean spacing) over the surface's bounding box widened by half its
+    radius, each cell keeping the samples within ``d + 2h`` of its centre (``d``: the centre's
+    distance to its nearest sample, ``h``: half the cell's diagonal), which hold the nearest
+    sample of every point of the cell. A cell with more than ``MAX_CANDIDATES`` of them (far
+    from the surface), and a point outside the grid, are looked up among all the samples. The
+    compiled 3-D ICP (:func:`runner._kernels.icp3d`) reads it: ``starts[c]`` is the slice of
+    ``candidates`` of cell ``c`` (-1: all the samples)."""
+
+    MAX_CANDIDATES = 32
+
+    def __init__(self, tree: Any, surface: np.ndarray) -> None:
+        spacing = float(np.mean(tree.query(surface, 2)[0][:, 1]))
+        margin = 0.5 * float(np.linalg.norm(surface, axis=1).max())
+        self.surface = np.ascontiguousarray(surface, dtype=float)
+        self.cell = spacing
+        self.low = surface.min(axis=0) - margin
+        self.shape = np.ceil((surface.max(axis=0) + margin - self.low) / self.cell).astype(
+            np.int64)
+        axes = [self.low[a] + self.cell * (np.arange(self.shape[a]) + 0.5) for a in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        nearest, self.centre = tree.query(centres)
+        # (a small relative slack: a sample at exactly the bound stays in)
+        reach = (nearest + np.sqrt(3.0) * self.cell) * (1 + 1e-9)
+        sizes = tree.query_ball_point(centres, reach, return_length=True)
+        kept = np.flatnonzero(sizes <= self.MAX_CANDIDATES)
+        lists = tree.query_ball_point(centres[kept], reach[kept])
+        lengths = np.array([len(found) for found in lists], dtype=np.int64)
+        self.starts = np.full((len(centres), 2), -1, dtype=np.int64)
+        ends = np.cumsum(lengths)
+        self.starts[kept, 0], self.starts[kept, 1] = ends - lengths, ends
+        self.candidates = np.fromiter((i for found in lists for i in sorted(found)),
+                                      dtype=np.int64, count=int(lengths.sum()))
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray,
+                              np.ndarray]:
+        """What the compiled kernels take: surface, low corner, cell, shape, starts,
+        candidates, and each cell centre's nearest sample."""
+        return (self.surface, self.low, self.cell, self.shape, self.starts, self.candidates,
+                self.centre)
+
+    def query(self, points: np.ndarray, approximate: bool = False
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The distance to the nearest sample and its index, for points [n, 3] (as the k-d
+        tree's ``query`` gives them); ``approximate``: the sample nearest to each point's
+        cell's centre (of the nearest cell, outside the grid)."""
+        index, squared = nearest3d(np.ascontiguousarray(points, dtype=float), *self.arrays,
+                                   approximate)
+        return np.sqrt(squared), index
+
+
+#: The grids of the surfaces a process has registered, by their bytes (made once per process,
+#: as they take a tree search per cell).
+_GRIDS: dict[bytes, NearestGrid] = {}
+
+
+def nearest_grid(tree: Any, surface: np.ndarray) -> NearestGrid:
+    """The :class:`NearestGrid` of ``surface`` (whose k-d tree is ``tree``), made once."""
+    key = np.ascontiguousarray(surface).tobytes()
+    if key not in _GRIDS:
+        _GRIDS[key] = NearestGrid(tree, surface)
+    return _GRIDS[key]
+
+
 def _local(path: np.ndarray, rot: np.ndarray, shift: np.ndarray) -> np.ndarray:
     """Paths [P, k, 3] in the template frame of their poses (rotation [P, 3, 3], shift
     [P, 3]): R^T (p - t), [P, k, 3]."""
@@ -330,13 +423,15 @@ class ShapeTracker:
     Each run keeps its last registration. ``update`` recomputes only the runs it is given
     (those whose point set changed), starting from their previous transform (a few
     iterations). The full multi-start search runs again while a run's set is short, each time
-    its size passes a multiple of ``restart_every``, and at once for the runs whose warm fit got
-    clearly worse than their previous one (it is sliding into a wrong basin).
+    its size passes a multiple of ``restart_every`` (with ``growth``: each time it has grown by
+    that factor since the run's last search), and at once for the runs whose warm fit got
+    clearly worse than their previous one (it is sliding into a wrong basin). In 3-D the steps
+    run compiled, pairs found through each surface's :class:`NearestGrid`.
     """
 
     def __init__(self, outlines: np.ndarray, points: np.ndarray, restart_every: int = 10,
                  short: int = 12, warm_iterations: int = 8, worse: float = 1.25,
-                 slack: float = 0.0005, method: str = "icp"):
+                 slack: float = 0.0005, method: str = "icp", growth: float | None = None):
         if method not in METHODS:
             raise ValueError(f"unknown shape matcher {method!r}: expected one of {METHODS}")
         self.outlines, self.points, self.method = outlines, points, method
@@ -348,7 +443,9 @@ class ShapeTracker:
             from scipy.spatial import cKDTree
 
             self._trees = [cKDTree(surface) for surface in outlines]
-        self.restart_every, self.short = restart_every, short
+            self._grids = [nearest_grid(tree, surface)
+                           for tree, surface in zip(self._trees, outlines, strict=True)]
+        self.restart_every, self.short, self.growth = restart_every, short, growth
         self.warm_iterations, self.worse, self.slack = warm_iterations, worse, slack
         self.reset()
 
@@ -380,8 +477,11 @@ class ShapeTracker:
         state, fitted, searched = self.state, self.fitted, self.searched
         assert fitted is not None and searched is not None
         every = self.restart_every
-        full = ~fitted[todo] | (counts[todo] <= self.short) \
-            | (counts[todo] // every > searched[todo] // every)
+        if self.growth is None:  # at each multiple of restart_every
+            grown = counts[todo] // every > searched[todo] // every
+        else:  # once the set has grown by the factor growth since the last search
+            grown = counts[todo] >= searched[todo] * self.growth
+        full = ~fitted[todo] | (counts[todo] <= self.short) | grown
         warm_runs = todo[~full]
         if warm_runs.size:
             reg = self._match(path, counts, warm_runs, rotations=0,
@@ -414,7 +514,7 @@ class ShapeTracker:
         if self.dims == 3:
             return match3d(path[runs, :top], list(self.outlines), self.points,
                            counts=counts[runs], rotations=rotations, iterations=iterations,
-                           warm=start, trees=self._trees)
+                           warm=start, trees=self._trees, grids=self._grids)
         return match(path[runs, :top], self.outlines, self.points, counts=counts[runs],
                      rotations=rotations, iterations=iterations, warm=start,
                      method=self.method)

@@ -298,6 +298,71 @@ def test_icp_3d_recovers_a_moved_solid():
         assert cKDTree(moved).query(reg.points[0, t])[0].max() < spacing[t]
 
 
+def test_nearest_grid_finds_the_k_d_trees_nearest_sample():
+    """The grid's exact lookup is the tree's nearest sample (index and distance) for points
+    on, near, far from and outside the grid; its approximate one is within half a cell's
+    diagonal of it."""
+    from scipy.spatial import cKDTree
+
+    from runner.shape import NearestGrid
+
+    for solid in (SolidSpec(box=[0.08, 0.06, 0.05]), SolidSpec(ellipsoid=[0.045, 0.035, 0.03])):
+        surface = solid.surface(1500)
+        surface = surface - surface.mean(axis=0)
+        tree = cKDTree(surface)
+        grid = NearestGrid(tree, surface)
+        rng = np.random.default_rng(1)
+        for scale in (0.001, 0.005, 0.02, 0.1, 0.5):
+            points = surface[rng.integers(0, len(surface), 3000)] \
+                + rng.normal(scale=scale, size=(3000, 3))
+            distance, index = grid.query(points)
+            reference, nearest = tree.query(points)
+            np.testing.assert_array_equal(distance, reference)
+            np.testing.assert_array_equal(index, nearest)
+            rough, _ = grid.query(points, approximate=True)
+            inside = np.all((points >= grid.low) & (points < grid.low + grid.shape * grid.cell),
+                            axis=1)
+            assert np.all(rough[inside] <= reference[inside] + np.sqrt(3) * grid.cell + 1e-12)
+
+
+def test_compiled_icp_3d_recovers_a_moved_solid_as_the_tree_does():
+    """With the grids, the compiled ICP (screened approximately, then exact) brings each solid's
+    own template onto its moved surface as the k-d tree's ICP does (within the sample's
+    resolution), the other template staying clearly farther."""
+    from scipy.spatial import cKDTree
+
+    from runner.shape import NearestGrid
+
+    solids = [SolidSpec(box=[0.08, 0.06, 0.05]), SolidSpec(ellipsoid=[0.045, 0.035, 0.03])]
+    surfaces = [s.surface(1500) for s in solids]
+    surfaces = [s - s.mean(axis=0) for s in surfaces]
+    trees = [cKDTree(s) for s in surfaces]
+    grids = [NearestGrid(tree, s) for tree, s in zip(trees, surfaces, strict=True)]
+    spacing = [np.sort(tree.query(s, 2)[0][:, 1]).mean() for tree, s in zip(trees, surfaces,
+                                                                              strict=True)]
+    points = np.stack([farthest_points(s, 40) for s in surfaces])
+    rng = np.random.default_rng(5)
+    for t, surface in enumerate(surfaces):
+        turn = Rotation.from_euler("zx", [50 + 90 * t, 4], degrees=True).as_matrix()
+        moved = surface @ turn.T + np.array([0.1, 0.12, 0.06])
+        path = moved[rng.choice(len(surface), 60, replace=False)][None]
+        compiled = match3d(path, surfaces, points, rotations=8, iterations=40, trees=trees,
+                           grids=grids)
+        tree = match3d(path, surfaces, points, rotations=8, iterations=40, trees=trees)
+        assert compiled.distance[0, t] < spacing[t] / 2
+        assert compiled.distance[0, t] == pytest.approx(tree.distance[0, t], abs=spacing[t] / 2)
+        assert compiled.distance[0, 1 - t] > 2 * compiled.distance[0, t] + 1e-3
+        assert cKDTree(moved).query(compiled.points[0, t])[0].max() < spacing[t]
+        # a warm start alone (no screening) pairs exactly: the tree's fit, to rounding
+        warm = (compiled.angle, compiled.shift)
+        again = match3d(path, surfaces, points, rotations=0, iterations=8, warm=warm,
+                        trees=trees, grids=grids)
+        by_tree = match3d(path, surfaces, points, rotations=0, iterations=8, warm=warm,
+                          trees=trees)
+        np.testing.assert_allclose(again.distance, by_tree.distance, rtol=1e-9)
+        np.testing.assert_allclose(again.shift, by_tree.shift, atol=1e-9)
+
+
 # --- the loop, the experiment and the report on a volume --------------------------------------
 
 
@@ -415,3 +480,28 @@ def test_a_solid_past_the_volumes_edge_is_clipped_with_a_warning_at_its_line(tmp
     warning = str(scenario.warnings[0])
     assert "small_volume.yaml:" in warning and "warning: object 1 (plush) reaches past" in warning
     assert "surface points are outside; it is clipped to the grid" in warning
+
+
+@pytest.mark.parametrize("growth, expected", [(None, [20, 30, 40, 50, 60]),
+                                              (1.5, [18, 27, 41, 62])])
+def test_full_searches_at_multiples_or_as_the_set_grows(growth, expected, monkeypatch):
+    """On a surface a run's full search is made again at each multiple of restart_every
+    points; in a volume (growth) once its set has grown by the factor since the last."""
+    from runner.shape import Registration, ShapeTracker
+
+    tracker = ShapeTracker(np.zeros((1, 4, 2)), np.zeros((1, 3, 2)), growth=growth)
+    searched = []
+
+    def fake(path, counts, runs, *, rotations, iterations, warm=True):
+        if rotations:
+            searched.append(int(counts[runs][0]))
+        n = len(runs)
+        return Registration(error=np.full((n, 1), 0.1), distance=np.full((n, 1), 0.01),
+                            points=np.zeros((n, 1, 3, 2)), angle=np.zeros((n, 1)),
+                            shift=np.zeros((n, 1, 2)))
+
+    monkeypatch.setattr(tracker, "_match", fake)
+    path = np.zeros((1, 64, 2))
+    for count in range(10, 65):
+        tracker.update(path, np.array([count]))
+    assert [c for c in searched if c > tracker.short] == expected
