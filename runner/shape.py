@@ -326,15 +326,17 @@ def _mean_distance(tree: Any, path: np.ndarray, weight: np.ndarray, counts: np.n
 
 class NearestGrid:
     """Where to look for the sample of a surface nearest to a point: a grid of cubic cells
-    (the samples' mean spacing) over the surface's bounding box widened by half its
-    radius, each cell keeping the samples within ``d + 2h`` of its centre (``d``: the centre's
-    distance to its nearest sample, ``h``: half the cell's diagonal), which hold the nearest
-    sample of every point of the cell. A cell with more than ``MAX_CANDIDATES`` of them (far
-    from the surface), and a point outside the grid, are looked up among all the samples. The
-    compiled 3-D ICP (:func:`runner._kernels.icp3d`) reads it: ``starts[c]`` is the slice of
+    (the samples' mean spacing) over the surface's bounding box widened by half its radius,
+    each cell within ``BAND`` cells of the surface keeping the samples within ``d + 2h`` of its
+    centre (``d``: the centre's distance to its nearest sample, ``h``: half the cell's
+    diagonal), which hold the nearest sample of every point of the cell. A cell farther, or
+    with more than ``MAX_CANDIDATES`` of them, and a point outside the grid, are looked up
+    among all the samples (a registered path lies within a few cells of the surface: the band
+    spares the lists of the cells it never reaches, most of the grid's making). The compiled 3-D ICP (:func:`runner._kernels.icp3d`) reads it: ``starts[c]`` is the slice of
     ``candidates`` of cell ``c`` (-1: all the samples)."""
 
-    MAX_CANDIDATES = 32
+    MAX_CANDIDATES = 64
+    BAND = 4.0
 
     def __init__(self, tree: Any, surface: np.ndarray) -> None:
         spacing = float(np.mean(tree.query(surface, 2)[0][:, 1]))
@@ -350,7 +352,7 @@ class NearestGrid:
         # (a small relative slack: a sample at exactly the bound stays in)
         reach = (nearest + np.sqrt(3.0) * self.cell) * (1 + 1e-9)
         sizes = tree.query_ball_point(centres, reach, return_length=True)
-        kept = np.flatnonzero(sizes <= self.MAX_CANDIDATES)
+        kept = np.flatnonzero((sizes <= self.MAX_CANDIDATES) & (nearest <= self.BAND * self.cell))
         lists = tree.query_ball_point(centres[kept], reach[kept])
         lengths = np.array([len(found) for found in lists], dtype=np.int64)
         self.starts = np.full((len(centres), 2), -1, dtype=np.int64)
