@@ -26,10 +26,15 @@ def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], s
     while left:
         if pool is None:
             pool = process_pool(min(workers, len(left)))
-        futures = {pool.submit(job, u): u for u in left}
+        futures: dict[Any, Unit] = {}
         broken = False
         try:
-            for future in as_completed(futures):
+            try:
+                for u in left:
+                    futures[pool.submit(job, u)] = u
+            except BrokenProcessPool:  # a worker died before taking any of them
+                broken = True
+            for future in [] if broken else as_completed(futures):
                 if isinstance(future.exception(), BrokenProcessPool):
                     broken = True
                     break

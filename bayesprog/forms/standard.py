@@ -171,8 +171,9 @@ class Beta(Form):
             # such as Beta(1, 2.5) and Beta(4, 1) halve their work)
             out = _plus_xlog(out, a - 1, x, np.log, scipy.special.xlogy)
             out = _plus_xlog(out, b - 1, -x, np.log1p, scipy.special.xlog1py)
-        outside = (x < 0) | (x > 1)
-        return np.where(outside, -np.inf, out) if outside.any() else out
+        if not (np.min(x, initial=0.0) < 0 or np.max(x, initial=1.0) > 1):  # (two passes)
+            return out
+        return np.where((x < 0) | (x > 1), -np.inf, out)
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
         return scipy.special.betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
@@ -188,7 +189,12 @@ def _plus_xlog(out: np.ndarray, c: np.ndarray, v: np.ndarray, log: Any, xlog: An
     if not np.any(c):
         return out
     if np.all(c):
-        return out + c * log(v)
+        term = log(v)
+        if np.broadcast_shapes(term.shape, np.shape(c), out.shape) != term.shape:
+            return out + c * term
+        term *= c  # (a new array of the result's shape: the product and the sum in place)
+        term += out
+        return term
     return out + xlog(c, v)
 
 

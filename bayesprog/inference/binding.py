@@ -7,6 +7,7 @@ that every method sees one batch axis of ``Bound.size`` rows.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,7 +33,7 @@ class Bound:
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.batch_shape)) if self.batch_shape else 1
+        return math.prod(self.batch_shape)  # (1 for no batch; read often: no numpy call)
 
     def rows(self, start: int, stop: int) -> Bound:
         """Rows ``start`` to ``stop`` of the flat batch (values without a batch axis kept)."""

@@ -280,5 +280,6 @@ def rescaled(factors: list[Factor], size: int, merge: bool = True
             continue
         m = np.where(np.isfinite(m), m, 0.0)
         offset += m.reshape(-1) if f.batched else m.reshape(())
-        operands.append(Factor(f.axes, np.exp(f.log - m), f.batched))
+        scaled = f.log - m  # (a new array: its exponential in place)
+        operands.append(Factor(f.axes, np.exp(scaled, out=scaled), f.batched))
     return operands, offset
