@@ -57,7 +57,7 @@ def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...]
     if not own:
         return arr, False
     tail = arr.shape[arr.ndim - trailing :] if trailing else ()
-    full = np.broadcast_to(arr, batch_shape + tail)
+    full = arr if arr.shape == batch_shape + tail else np.broadcast_to(arr, batch_shape + tail)
     return full.reshape((-1,) + tail), True
 
 
@@ -230,11 +230,14 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
                 raise QuestionError(f"unknown value {bad[0]} of {var.name} (expected "
                                     f"{var.values[0]}..{var.values[-1]})")
             return np.vectorize(lookup.__getitem__, otypes=[np.intp])(arr) if arr.size else arr
-        if arr.size and (arr.min() < 0 or arr.max() >= var.card):
+        # (a few values, the common case of one evidence set, checked without reductions)
+        outside = any(not 0 <= v < var.card for v in arr.ravel().tolist()) \
+            if arr.size <= 16 else bool(arr.min() < 0 or arr.max() >= var.card)
+        if outside:
             bad = arr[(arr < 0) | (arr >= var.card)].ravel()[0]
             raise QuestionError(f"state index {bad} of {var.name} is out of range "
                                 f"(0..{var.card - 1})")
-        return arr.astype(np.intp)
+        return arr.astype(np.intp, copy=False)
     if arr.dtype.kind in "USO":
         names, inverse = np.unique(arr.astype(str), return_inverse=True)
         codes = np.empty(len(names), dtype=np.intp)

@@ -14,6 +14,7 @@ again.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -51,11 +52,12 @@ class Kernel:
                       for name, value in expr.values.items()}
         states, values = layout.named_states
         self.cards = layout.cards
+        # every field of the answer at its default, then this question's
         self.template: dict[str, Any] = {
-            "question": str(expr), "variables": expr.left, "names": states, "values": values,
-            "batch_shape": (), "ablated": program.ablated, "stderr": None, "ess": None,
-            "iterations": None, "residual": None, "evidence": None, "impossible": None,
-        }
+            field.name: field.default for field in dataclasses.fields(Posterior)
+            if field.default is not dataclasses.MISSING}
+        self.template.update(question=str(expr), variables=expr.left, names=states,
+                             values=values, batch_shape=(), ablated=program.ablated)
         self.settled: tuple[int, Any] | None = None  # (registry version, settled method)
         #: the generation of the limits the full path last checked this question against
         self.checked = generation()
