@@ -231,9 +231,9 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
                                     f"{var.values[0]}..{var.values[-1]})")
             return np.vectorize(lookup.__getitem__, otypes=[np.intp])(arr) if arr.size else arr
         # (a few values, the common case of one evidence set, checked without reductions)
-        outside = any(not 0 <= v < var.card for v in arr.ravel().tolist()) \
+        beyond = any(not 0 <= v < var.card for v in arr.ravel().tolist()) \
             if arr.size <= 16 else bool(arr.min() < 0 or arr.max() >= var.card)
-        if outside:
+        if beyond:
             bad = arr[(arr < 0) | (arr >= var.card)].ravel()[0]
             raise QuestionError(f"state index {bad} of {var.name} is out of range "
                                 f"(0..{var.card - 1})")
