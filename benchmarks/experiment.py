@@ -28,7 +28,8 @@ Measured in one run on this machine:
 * whole commands, as a user runs them (fresh processes: worker start-up, imports and kernel
   loading included): ``bayesprog run`` on the paper's experiment with two workers and no
   report, ``bayesprog report`` on its results, and the volume experiment's run; each beside
-  the bound it is held to (10 s, 4 s, 60 s), the ratio in the JSON.
+  the bound it is held to (10 s, 4 s, 60 s), the ratio in the JSON; and a small search of
+  ``bayesprog tune`` on two local processes beside a Dask LocalCluster of two workers.
 
     python benchmarks/experiment.py [--repeats 3] [--naive-runs 2] [--out results/...json]
         [--plot docs/performance.png] [--volume-repeats 1] [--only-commands]
@@ -331,6 +332,41 @@ def commands(repeats: int, volume_repeats: int = 1) -> dict[str, dict[str, float
             for name, found in times.items()}
 
 
+def sweeps(trials: int = 4) -> dict[str, float | bool]:
+    """A small search of ``bayesprog tune`` (``trials`` candidates on the small grid, three
+    runs each) on two local processes and on a Dask LocalCluster of two worker processes,
+    each into a fresh folder: their wall seconds, the ratio, and whether their trials agree."""
+    import yaml
+    from dask.distributed import LocalCluster
+
+    from runner.tune import load_search, run_search
+
+    scenarios = ROOT / "models" / "scenarios"
+    spec = {"experiment": 1, "name": "sweep", "runner": "haptic",
+            "scenario": str(scenarios / "small_grid.yaml"), "tasks": ["T1"],
+            "configurations": ["full"], "runs": 4, "iterations": 25, "seed": 3,
+            "tune": {"training": [str(scenarios / "small_grid.yaml")],
+                     "validation": [str(scenarios / "corners.yaml")],
+                     "trials": trials, "runs": 3, "validation_runs": 5}}
+    folder = Path(tempfile.mkdtemp())
+    try:
+        path = folder / "sweep.yaml"
+        path.write_text(yaml.safe_dump(spec, sort_keys=False))
+        start = time.perf_counter()
+        local = run_search(load_search(path), folder / "local", workers=2, progress=False)
+        local_s = time.perf_counter() - start
+        with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+            start = time.perf_counter()
+            dask = run_search(load_search(path), folder / "dask", progress=False,
+                              scheduler=cluster.scheduler_address)
+            dask_s = time.perf_counter() - start
+    finally:
+        shutil.rmtree(folder)
+    return {"trials": trials, "local_workers_2_s": local_s, "dask_local_cluster_2_s": dask_s,
+            "dask_over_local": dask_s / local_s,
+            "same_trials": local["trials"] == dask["trials"]}
+
+
 def split() -> dict[str, float]:
     """One process, every (task, configuration): where the time goes."""
     experiment = load_experiment(PAPER)
@@ -441,10 +477,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.only_commands:
         found = commands(args.repeats, args.volume_repeats)
-        print("\n".join(_command_lines(found)))
+        sweep = sweeps()
+        print("\n".join(_command_lines(found, sweep)))
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"commands": found}, indent=2))
+        out.write_text(json.dumps({"commands": found, "sweep": sweep}, indent=2))
         print(f"written to {out}")
         return 0
     load_experiment(PAPER)  # compile the kernels before timing
@@ -460,6 +497,7 @@ def main(argv: list[str] | None = None) -> int:
     robot = session()
     ref = naive(args.naive_runs)
     found = commands(args.repeats, args.volume_repeats)
+    sweep = sweeps()
     lines = [
         f"paper experiment (150,000 decisions), median of {args.repeats}:",
         f"  one process      {one:8.1f} s",
@@ -486,24 +524,29 @@ def main(argv: list[str] | None = None) -> int:
         f"{ref['extrapolated_seconds']:.0f} s",
         f"speed-up over the naive reference: {ref['extrapolated_seconds'] / one:.0f}x (one "
         f"process), {ref['extrapolated_seconds'] / two:.0f}x (--workers 2)",
-        *_command_lines(found),
+        *_command_lines(found, sweep),
     ]
     print("\n".join(lines))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"one_process_s": one, "two_workers_s": two, "report_s": report,
                                "split_s": parts, "decision": decision, "scaling": points,
-                               "session": robot, "naive": ref, "commands": found},
+                               "session": robot, "naive": ref, "commands": found,
+                               "sweep": sweep},
                               indent=2))
     print(f"written to {out}")
     return 0
 
 
-def _command_lines(found: dict[str, dict[str, float]]) -> list[str]:
+def _command_lines(found: dict[str, dict[str, float]], sweep: dict) -> list[str]:
     return ["whole commands, as a user runs them (fresh processes), median seconds:",
             *(f"  bayesprog {name:<36}{row['seconds']:7.1f} s  (bound {row['bound_s']:.0f} s: "
               f"{row['ratio_to_bound']:.2f}x; {row['repeats']} run(s))"
-              for name, row in found.items())]
+              for name, row in found.items()),
+            f"a search of {sweep['trials']} candidates: two local processes "
+            f"{sweep['local_workers_2_s']:.1f} s, a Dask LocalCluster of two worker processes "
+            f"{sweep['dask_local_cluster_2_s']:.1f} s ({sweep['dask_over_local']:.2f}x); the "
+            f"same trials: {sweep['same_trials']}"]
 
 
 if __name__ == "__main__":
