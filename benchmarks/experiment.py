@@ -302,30 +302,26 @@ def commands(repeats: int, volume_repeats: int = 1) -> dict[str, dict[str, float
     report) and of ``bayesprog report`` on its results, each a fresh process into a fresh
     folder, and of the volume experiment's run (``volume_repeats`` times: a minute each);
     with each one's bound and its ratio to it."""
-    command = [sys.executable, "-m", "bayesprog"]
     volume = ROOT / "models" / "experiments" / "volume.yaml"
     times: dict[str, list[float]] = defaultdict(list)
-    for _ in range(repeats):
-        out = Path(tempfile.mkdtemp())
-        try:
-            start = time.perf_counter()
-            subprocess.run([*command, "run", str(PAPER), "--workers", "2", "--no-report",
-                            "--out", str(out), "-q"], check=True, capture_output=True)
-            times["run paper --workers 2 --no-report"].append(time.perf_counter() - start)
-            start = time.perf_counter()
-            subprocess.run([*command, "report", str(out)], check=True, capture_output=True)
-            times["report paper"].append(time.perf_counter() - start)
-        finally:
-            shutil.rmtree(out)
-    for _ in range(volume_repeats):
-        out = Path(tempfile.mkdtemp())
-        try:
-            start = time.perf_counter()
-            subprocess.run([*command, "run", str(volume), "--workers", "2", "--no-report",
-                            "--out", str(out), "-q"], check=True, capture_output=True)
-            times["run volume --workers 2 --no-report"].append(time.perf_counter() - start)
-        finally:
-            shutil.rmtree(out)
+
+    def timed(*arguments: str) -> float:
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "bayesprog", *arguments], check=True,
+                       capture_output=True)
+        return time.perf_counter() - start
+
+    for experiment, count in ((PAPER, repeats), (volume, volume_repeats)):
+        for _ in range(count):
+            out = Path(tempfile.mkdtemp())
+            try:
+                times[f"run {experiment.stem} --workers 2 --no-report"].append(timed(
+                    "run", str(experiment), "--workers", "2", "--no-report", "--out", str(out),
+                    "-q"))
+                if experiment == PAPER:
+                    times["report paper"].append(timed("report", str(out)))
+            finally:
+                shutil.rmtree(out)
     return {name: {"seconds": statistics.median(found), "bound_s": COMMANDS[name],
                    "ratio_to_bound": statistics.median(found) / COMMANDS[name],
                    "repeats": len(found)}
