@@ -297,14 +297,15 @@ class Program:
         ``pdf``), and for one on discrete and real variables together a Joint (the discrete
         configurations' ``weights``, the real ones' density given each, its ``map()``).
         """
-        # a question asked again with one state name per known variable: its warm path
-        warm = (type(question) is str and type(evidence) is dict and inputs is None
-                and soft is None and rng is None and samples is None and bins is None
-                and burn_in is None and thin is None and (kind is None or kind == "posterior")
+        # a question asked again with one state name per known variable (or none): its warm path
+        warm = (type(question) is str and (evidence is None or type(evidence) is dict)
+                and inputs is None and soft is None and rng is None and samples is None
+                and bins is None and burn_in is None and thin is None
+                and (kind is None or kind == "posterior")
                 and (method is None or type(method) is str))
         if warm:
-            kept = (question, kind, method, tuple(evidence))  # type: ignore[arg-type]
-            found = quick.answer(self, kept, evidence)  # type: ignore[arg-type]
+            kept = (question, kind, method, tuple(evidence or ()))
+            found = quick.answer(self, kept, evidence or {})
             if found is not None:
                 return found
         q = self.question(question, kind)
@@ -338,7 +339,7 @@ class Program:
             return mixed(self, q, evidence, inputs, soft, method, options)
         result = inference.ask(self, q, evidence, inputs, soft, rng, method, options)
         if warm:
-            quick.learn(self, kept, q, evidence)  # type: ignore[arg-type]
+            quick.learn(self, kept, q, evidence or {})
         return result
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,

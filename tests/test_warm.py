@@ -150,3 +150,14 @@ def test_a_question_asked_again_is_checked_against_new_limits(method):
         set_limits(entries=None)
     assert program.ask("P(W | B)", {"B": "b1"}, method=method).probabilities.shape == (2,)
     assert _warm(program, "P(W | B)", {"B": "b1"}, method) is not None
+
+
+def test_a_question_without_evidence_asked_again_is_warm():
+    program = bayesprog.loads(LAMP)
+    first = program.ask("P(R)")
+    again = _ask_often(program, "P(R)", None)
+    assert quick.answer(program, ("P(R)", None, None, ()), {}) is not None
+    np.testing.assert_allclose(again.probabilities, first.probabilities, rtol=1e-15)
+    np.testing.assert_allclose(again.probabilities, [0.7 * 0.9 + 0.3 * 0.2, 0.7 * 0.1 + 0.3 * 0.8],
+                               rtol=1e-12)
+    assert float(again.log_evidence) == 0.0
