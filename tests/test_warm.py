@@ -161,3 +161,33 @@ def test_a_question_without_evidence_asked_again_is_warm():
     np.testing.assert_allclose(again.probabilities, [0.7 * 0.9 + 0.3 * 0.2, 0.7 * 0.1 + 0.3 * 0.8],
                                rtol=1e-12)
     assert float(again.log_evidence) == 0.0
+
+
+def test_states_by_index_or_value_asked_again_are_those_by_name():
+    """An integer is a state's index, a range's integer its value (a numpy integer too); a
+    bool or a number is read, or refused, by the full path as before."""
+    program = bayesprog.loads(LAMP.replace("  B: {states: [b0, b1, b2]}",
+                                           "  B: {states: [b0, b1, b2]}\n  N: {range: [3, 5]}")
+                              + """
+  - term: P(N | R)
+    form: table
+    table:
+      quiet: [0.2, 0.3, 0.5]
+      ringing: [0.6, 0.3, 0.1]
+""")
+    for _ in range(3):
+        by_name = _ask_often(program, "P(W | B, N)", {"B": "b1", "N": "4"})
+        by_index = _ask_often(program, "P(W | B, N)", {"B": 1, "N": 4})
+        by_numpy = program.ask("P(W | B, N)", {"B": np.int64(1), "N": np.int64(4)})
+        np.testing.assert_allclose(by_index.probabilities, by_name.probabilities, rtol=1e-12)
+        np.testing.assert_allclose(by_numpy.probabilities, by_name.probabilities, rtol=1e-12)
+    assert quick.answer(program, ("P(W | B, N)", None, None, ("B", "N")), {"B": 1, "N": 4}) \
+        is not None
+    with pytest.raises(bayesprog.QuestionError, match="unknown value 9 of N"):
+        program.ask("P(W | B, N)", {"B": 1, "N": 9})
+    with pytest.raises(bayesprog.QuestionError, match="out of range"):
+        program.ask("P(W | B, N)", {"B": 3, "N": 4})
+    with pytest.raises(bayesprog.QuestionError, match="expected state names or indices"):
+        program.ask("P(W | B, N)", {"B": True, "N": 4})
+    with pytest.raises(bayesprog.QuestionError, match="expected state names or indices"):
+        program.ask("P(W | B, N)", {"B": 1.0, "N": 4})

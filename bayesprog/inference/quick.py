@@ -1,7 +1,7 @@
 """Questions asked again, one evidence set at a time: the warm path of ``Program.ask``.
 
-A question asked with one state name per known variable (``program.ask("P(A | B, C)",
-{"B": "b0", "C": "c1"})``) is bound, planned and dispatched at its first call; what that
+A question asked with one state per known variable, by name or integer (``program.ask("P(A | B,
+C)", {"B": "b0", "C": 1})``), is bound, planned and dispatched at its first call; what that
 settles (the layout, the method, its compiled table or its one answer) does not change with
 the evidence's values. A :class:`Kernel` keeps it for the question's text, method and known
 variables: a later call looks the states up, reads the settled method's answer and builds the
@@ -35,6 +35,17 @@ from bayesprog.variables import Discrete
 KERNELS = 1024
 
 
+def _states(variable: Any) -> dict[str | int, int]:
+    """A discrete variable's states by name and by integer, as binding reads them: a range's
+    integer is its value, another variable's the state's index (a discretised variable reads
+    numbers as readings: by name only)."""
+    found: dict[str | int, int] = dict(variable._lookup)
+    if variable.edges is None:
+        found.update({int(v): i for i, v in enumerate(variable.values)}
+                     if variable.values is not None else {i: i for i in range(variable.card)})
+    return found
+
+
 class Kernel:
     """One question's warm path for one set of known variables (see the module)."""
 
@@ -46,8 +57,7 @@ class Kernel:
         variables = program.variables
         expr = question.expression
         self.program, self.question, self.method, self.layout = program, question, method, layout
-        self.lookups = tuple((name, variables[name]._lookup)  # type: ignore[union-attr]
-                             for name in keys)
+        self.lookups = tuple((name, _states(variables[name])) for name in keys)
         self.fixed = {name: variables[name]._lookup[value]  # type: ignore[union-attr]
                       for name, value in expr.values.items()}
         states, values = layout.named_states
@@ -92,8 +102,9 @@ class Kernel:
         found: dict[str, np.ndarray | int] = dict(self.fixed) if self.fixed else {}
         for name, lookup in self.lookups:
             value = evidence[name]
-            if type(value) is not str:
-                return None
+            kind = type(value)
+            if kind is not str and kind is not int and not isinstance(value, np.integer):
+                return None  # (a bool, a number, an array: the full path reads or refuses it)
             index = lookup.get(value)
             if index is None:
                 return None
