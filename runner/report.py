@@ -341,7 +341,7 @@ class DecisionFigure:
                 self.show(frame, k)
                 for artist in dynamic + self.lines:
                     self.fig.draw_artist(artist)
-                writer.send(bytes(canvas.buffer_rgba()))
+                writer.send(canvas.buffer_rgba())  # (the canvas's memory, not a copy)
                 bar.update(1)
             writer.close()
             os.replace(partial, out)
