@@ -384,12 +384,21 @@ class NearestGrid:
 _GRIDS: dict[bytes, NearestGrid] = {}
 
 
+#: Grids a process keeps (a few megabytes each): the templates of a few scenarios.
+GRIDS_KEPT = 16
+
+
 def nearest_grid(tree: Any, surface: np.ndarray) -> NearestGrid:
-    """The :class:`NearestGrid` of ``surface`` (whose k-d tree is ``tree``), made once."""
+    """The :class:`NearestGrid` of ``surface`` (whose k-d tree is ``tree``), made once (the
+    ``GRIDS_KEPT`` last used are kept)."""
     key = np.ascontiguousarray(surface).tobytes()
-    if key not in _GRIDS:
-        _GRIDS[key] = NearestGrid(tree, surface)
-    return _GRIDS[key]
+    found = _GRIDS.pop(key, None)
+    if found is None:
+        found = NearestGrid(tree, surface)
+        while len(_GRIDS) >= GRIDS_KEPT:
+            del _GRIDS[next(iter(_GRIDS))]  # the least recently used
+    _GRIDS[key] = found
+    return found
 
 
 def _local(path: np.ndarray, rot: np.ndarray, shift: np.ndarray) -> np.ndarray:
