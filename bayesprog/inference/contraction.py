@@ -345,19 +345,18 @@ class Sliceable:
         """The answer to one row of evidence when every term is prepared, in scalars: the
         normalised table ``[1] + cards`` and the log normaliser ``[1]``; None when it needs
         the general path (a probability below what scaled arithmetic resolves)."""
-        values = _one_row(plan.bound)
         if self.single is None:
-            self._plan_single(plan, values)
-        found = self.row(values)
+            self._plan_single(plan)
+        found = self.row(_one_row(plan.bound))
         if found is None:
             return None
         return found[0][np.newaxis], np.array([found[1]])
 
-    def _plan_single(self, plan: QuestionPlan, values: dict[str, int]) -> None:
+    def _plan_single(self, plan: QuestionPlan) -> None:
         """The contraction of one row of evidence: its runner, and the uniform factors of the
         searched variables that no table holds."""
-        shapes = [(rest, (table[tuple(values[a] for a in fixed)] if fixed else table).shape)
-                  for fixed, rest, table in self.tables if rest]
+        # a table sliced by one row keeps the axes after its observed ones
+        shapes = [(rest, table.shape[len(fixed):]) for fixed, rest, table in self.tables if rest]
         present = {a for rest, _ in shapes for a in rest}
         missing = [v for v in plan.searched if v not in present]
         self.ones = [np.ones(plan.card(v)) for v in missing]

@@ -74,10 +74,15 @@ def named(plan: QuestionPlan, method: str) -> Posterior | Density:
     answer = _by(method, plan)
     exact = registered_methods()[method].exact
     if exact and plan.layout.constant and isinstance(answer, Posterior):
-        first = answer.probabilities.reshape((plan.bound.size,) + plan.layout.cards)[:1]
-        schedule.fixed_by[method] = (first.copy(), float(answer.log_evidence.flat[0]),
-                                     answer.method)
+        schedule.fixed_by[method] = _first_row(plan, answer)
     return with_evidence(plan, answer, exact)
+
+
+def _first_row(plan: QuestionPlan, answer: Posterior) -> tuple[np.ndarray, float, str]:
+    """A layout's one answer, from ``answer`` (before its evidence is deferred): its first
+    row of probabilities ``[1] + cards``, the log of its normaliser, and its method."""
+    first = answer.probabilities.reshape((plan.bound.size,) + plan.layout.cards)[:1]
+    return first.copy(), float(answer.log_evidence.flat[0]), answer.method
 
 
 def _constant(plan: QuestionPlan, fixed: tuple[np.ndarray, float, str]
@@ -159,8 +164,7 @@ def _ranked(plan: QuestionPlan) -> Posterior | Density:
             schedule.spent = (math.inf if cost.setup else
                               spent + cost.operations / ranked_size * size + cost.fixed)
             if layout.constant and isinstance(answer, Posterior):
-                first = answer.probabilities.reshape((size,) + layout.cards)[:1].copy()
-                schedule.fixed = (first, float(answer.log_evidence.flat[0]), answer.method)
+                schedule.fixed = _first_row(plan, answer)
             return with_evidence(plan, answer, method_.exact)
     raise RuntimeError(f"no inference method answered {plan.question.expression}")
 
