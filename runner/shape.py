@@ -247,6 +247,21 @@ def match3d(
     start_rot = np.zeros((turns.size, 3, 3))  # turns about z
     start_rot[:, :2, :2], start_rot[:, 2, 2] = rotation(turns), 1.0
     moves = np.tile(offsets, (rotations, 1))
+    def steps(t: int, rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray, n: int,
+              rough: bool = False) -> None:
+        """ICP steps of the poses in place (``rough``: paired approximately, with grids)."""
+        if grids is not None:
+            icp3d(path, counts, run_of, rot, shift, *grids[t].arrays, n, rough)
+        else:
+            _icp_poses(trees[t], surfaces[t], path, weight, run_of, rot, shift, n)
+
+    def distances(t: int, rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray,
+                  rough: bool = False) -> np.ndarray:
+        """The poses' mean distances to template ``t``'s surface sample, [P]."""
+        if grids is not None:
+            return distance3d(path, counts, run_of, rot, shift, *grids[t].arrays, rough)
+        return _mean_distance(trees[t], path, weight, counts, run_of, rot, shift)
+
     out_rot = np.empty((runs, n_t, 3, 3))
     out_shift = np.empty((runs, n_t, 3))
     out_dist = np.empty((runs, n_t))
@@ -260,34 +275,18 @@ def match3d(
         n_s = rot.shape[1]
         rot, shift = rot.reshape(-1, 3, 3).copy(), shift.reshape(-1, 3).copy()
         run_of = np.repeat(np.arange(runs), n_s)
-        if grids is not None:
-            def steps(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray, n: int,
-                      rough: bool = False, t: int = t) -> None:
-                icp3d(path, counts, run_of, rot, shift, *grids[t].arrays, n, rough)
-
-            def distances(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray,
-                          rough: bool = False, t: int = t) -> np.ndarray:
-                return distance3d(path, counts, run_of, rot, shift, *grids[t].arrays, rough)
-        else:
-            def steps(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray, n: int,
-                      rough: bool = False, t: int = t) -> None:
-                _icp_poses(trees[t], surfaces[t], path, weight, run_of, rot, shift, n)
-
-            def distances(rot: np.ndarray, shift: np.ndarray, run_of: np.ndarray,
-                          rough: bool = False, t: int = t) -> np.ndarray:
-                return _mean_distance(trees[t], path, weight, counts, run_of, rot, shift)
         # the screening of many starts, some far from the surface: with grids, paired
         # approximately (each point with its cell centre's nearest sample)
         screened = n_s > keep and iterations > screen
-        steps(rot, shift, run_of, min(screen, iterations), screened)
+        steps(t, rot, shift, run_of, min(screen, iterations), screened)
         if screened:  # the most promising starts go on
-            dist = distances(rot, shift, run_of, True)
+            dist = distances(t, rot, shift, run_of, True)
             order = np.argsort(dist.reshape(runs, n_s), axis=1, kind="stable")[:, :keep]
             chosen = (np.arange(runs)[:, None] * n_s + order).ravel()
             rot, shift, run_of, n_s = rot[chosen], shift[chosen], run_of[chosen], keep
         if iterations > screen:
-            steps(rot, shift, run_of, iterations - screen)
-        dist = distances(rot, shift, run_of).reshape(runs, n_s)
+            steps(t, rot, shift, run_of, iterations - screen)
+        dist = distances(t, rot, shift, run_of).reshape(runs, n_s)
         best = np.arange(runs) * n_s + dist.argmin(axis=1)
         out_rot[:, t], out_shift[:, t] = rot[best], shift[best]
         out_dist[:, t] = dist.min(axis=1)
