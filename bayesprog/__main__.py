@@ -1,5 +1,5 @@
 """``python -m bayesprog``: the command line, as ``bayesprog``."""
 
-from bayesprog.cli import main
+from bayesprog.cli import command
 
-raise SystemExit(main())
+raise SystemExit(command())

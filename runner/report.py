@@ -4,6 +4,7 @@ findings (Sec. 6.3) beside what was measured. Built from stored results only."""
 from __future__ import annotations
 
 import contextlib
+import gc
 import html
 import json
 import math
@@ -57,15 +58,32 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
             rows.append(row)
     _runner_up_tests(rows, results)
     _detectable(rows, results)
-    for key in ("p_final", "p_auc", "p_runner_up"):  # Holm's correction over each column
-        tested = [r for r in rows if key in r]
-        if tested:
-            from statsmodels.stats.multitest import multipletests
+    with _heap_frozen():
+        for key in ("p_final", "p_auc", "p_runner_up"):  # Holm's correction over each column
+            tested = [r for r in rows if key in r]
+            if tested:
+                from statsmodels.stats.multitest import multipletests
 
-            adjusted = multipletests([r[key] for r in tested], method="holm")[1]
-            for r, value in zip(tested, adjusted, strict=True):
-                r[f"{key}_holm"] = float(value)
+                adjusted = multipletests([r[key] for r in tested], method="holm")[1]
+                for r, value in zip(tested, adjusted, strict=True):
+                    r[f"{key}_holm"] = float(value)
     return rows
+
+
+@contextlib.contextmanager
+def _heap_frozen() -> Iterator[None]:
+    """The objects alive now kept out of the garbage collector's reach while the block runs:
+    statsmodels' Holm correction collects garbage at every call, and a report's heap
+    (matplotlib, scipy) would make each collection last a tenth of a second. Nothing is done
+    where a part of the heap is frozen already (that part stays so)."""
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 #: the power at which :func:`_detectable` says what the paired tests can see
@@ -285,19 +303,20 @@ class DecisionFigure:
         self.lines: list = []
         self.fixed = False
         flat[7].axis("off")
-        # the caption's first lines change with the step; the legend below them does not (a
-        # video redraws only the first)
+        # the caption's first two lines change with the step; the legend below them does not
+        # (a video redraws only the first, and the fewer glyphs the faster)
         self.caption = flat[7].text(0.0, 0.98, "", va="top", fontsize=8,
                                     transform=flat[7].transAxes)
-        # four lines below the caption's top, whatever the panel's height
-        flat[7].annotate("white line: the path so far" + (" (seen from above;\n  dots: its "
+        # three lines below the caption's top, whatever the panel's height
+        flat[7].annotate("red star: the next cell, the MAP\n  of P(O | ...)\n"
+                         "white line: the path so far" + (" (seen from above;\n  dots: its "
                                                            "probes in this slice)" if where
                                                            else "")
                          + "\nwhite circle: the start cell\n"
                          f"magenta (black in the first panel):\n  the ground-truth border of "
                          f"{task}\n\ngrey: a cell not probed (belief),\n  or a saliency with "
                          "nothing perceived\n  to compare (the term is left out)",
-                         xy=(0.0, 0.98), xycoords="axes fraction", xytext=(0, -4 * 8 * 1.25),
+                         xy=(0.0, 0.98), xycoords="axes fraction", xytext=(0, -3 * 8 * 1.25),
                          textcoords="offset points", va="top", fontsize=8)
         figures.axes_in_cm(axes)
         self.fig.suptitle(title, fontsize=10)
@@ -374,9 +393,7 @@ class DecisionFigure:
         for line in self.lines:
             line.set_animated(self.fixed)  # in a video, never part of the static background
         at = self.scenario.centres[frame["next"]] * 100
-        self.caption.set_text(
-            f"step k = {k}\nred star: the next cell, the MAP of\n  P(O | ...), at "
-            f"({', '.join(f'{v:.1f}' for v in at)}) cm")
+        self.caption.set_text(f"step k = {k}\nnext cell: ({', '.join(f'{v:.1f}' for v in at)}) cm")
 
 
 def decision_slice(scenario: Scenario, frames: list[dict]) -> int | None:
