@@ -68,3 +68,45 @@ def test_a_program_displays_in_a_notebook_without_importing_the_display_first():
             "html = p.ask('P(I | G)', {'G': 'A'})._repr_html_()\n"
             "assert html and '<table' in html, html")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def _after(code: str) -> str:
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
+def test_the_command_freezes_its_heap_when_done_and_returns_the_status(tmp_path):
+    """``bayesprog`` (``command``) leaves the heap frozen for the exit (no collection visits it
+    again), after the command has run and with its exit status; ``main`` (what tests and
+    notebooks call) freezes nothing."""
+    program = tmp_path / "student.yaml"
+    program.write_text(STUDENT, encoding="utf-8")
+    code = ("import gc, sys\nfrom bayesprog.cli import command, main\n"
+            f"sys.argv = ['bayesprog', 'query', {str(program)!r}, 'P(I)']\n"
+            "print('status', main(sys.argv[1:]), gc.get_freeze_count())\n"
+            "print('status', command(), gc.get_freeze_count() > 0)\n"
+            "sys.argv = ['bayesprog', 'query', 'missing.yaml', 'P(I)']\n"
+            "print('status', command())")
+    lines = [line for line in _after(code).splitlines() if line.startswith("status ")]
+    assert lines == ["status 0 0", "status 0 True", "status 2"], lines
+
+
+def test_a_worker_freezes_what_it_imported_and_freezes_again_at_exit():
+    """A worker process's imports are frozen out of the collector's reach at start, and an
+    exit handler freezes what it made since (the last collections at exit skip them)."""
+    code = ("import atexit, gc\nfrom runner.executors import worker_init\n"
+            "before = gc.get_freeze_count()\nworker_init(('json',))\n"
+            "print(before == 0, gc.get_freeze_count() > 0, atexit._ncallbacks() >= 1)")
+    assert _after(code).splitlines()[-1] == "True True True"
+
+
+def test_the_report_freezes_its_heap_for_holms_collections_and_thaws_it():
+    """statsmodels' Holm correction collects garbage at each call: the report runs it with the
+    heap frozen, and thaws it after (a heap frozen before stays frozen)."""
+    code = ("import gc\nfrom runner.report import _heap_frozen\n"
+            "with _heap_frozen():\n    inside = gc.get_freeze_count() > 0\n"
+            "after = gc.get_freeze_count()\n"
+            "gc.freeze(); frozen = gc.get_freeze_count()\n"
+            "with _heap_frozen():\n    pass\n"
+            "print(inside, after, gc.get_freeze_count() == frozen)")
+    assert _after(code).splitlines()[-1] == "True 0 True"
