@@ -4,6 +4,11 @@ Randomness is keyed by run, never by batch position: run ``r`` of an experiment 
 starts at the ``r``-th of the start cells drawn from ``s``, decides with ``default_rng([s, r, 0])``
 and senses with ``default_rng([s, r, 1])``, in every configuration. So the same seed gives the same
 numbers whatever the batching, and the configurations are compared on paired runs.
+
+``replications: R`` runs the whole protocol R times, each on a sample of its own: replication
+``q`` draws its start cells and every stream from (seed, q) alone (:mod:`runner.loop`), and
+replication 0 is the experiment without replications, stored where it always was. The results
+do not depend on R: asking for more replications in a folder keeps the ones it holds.
 """
 
 from __future__ import annotations
@@ -68,6 +73,10 @@ class TuneSpec(BaseModel):
         "much; none: any)")
 
 
+#: the most replications an experiment may ask for (each is the whole protocol again)
+MAX_REPLICATIONS = 1000
+
+
 class ExperimentSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -81,6 +90,9 @@ class ExperimentSpec(BaseModel):
     runs: int = Field(ge=1)
     iterations: int = Field(ge=1)
     seed: int = Field(0, ge=0)
+    replications: int = Field(1, ge=1, le=MAX_REPLICATIONS, description="how many times the "
+                              "protocol runs, each on its own sample of start cells, readings "
+                              "and tie-breaks (replication 0 is the experiment itself)")
     chunk: int = Field(25, ge=1, description="runs per stored piece of results")
     tune: TuneSpec | None = None
 
@@ -91,14 +103,22 @@ class Experiment:
     path: Path
     scenario: Scenario
 
-    def start_cells(self) -> np.ndarray:
-        """The seeded start cells [runs, dims], shared by every task and configuration."""
-        return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed)
+    def start_cells(self, replication: int = 0) -> np.ndarray:
+        """The seeded start cells [runs, dims] of a replication, shared by every task and
+        configuration."""
+        return start_cells(self.scenario.shape, self.spec.runs, self.spec.seed, replication)
 
 
-def load_experiment(path: str | Path) -> Experiment:
+def load_experiment(path: str | Path, replications: int | None = None) -> Experiment:
+    """The experiment file at ``path``; ``replications`` replaces the file's ``replications:``
+    (``bayesprog run --replications``)."""
     path = Path(path)
     located, spec = load_document(path, ExperimentSpec)
+    if replications is not None:
+        if not 1 <= replications <= MAX_REPLICATIONS:
+            raise BayesprogError(f"--replications: expected a whole number from 1 to "
+                                 f"{MAX_REPLICATIONS:,}, found {replications}")
+        spec = spec.model_copy(update={"replications": replications})
     problem = reference_problem(path.parent / spec.scenario, "scenario", spec.scenario)
     if problem:
         raise SpecError([located.diagnostic(("scenario",), f"scenario {spec.scenario!r}: "
@@ -116,9 +136,10 @@ def load_experiment(path: str | Path) -> Experiment:
     # what the results of every run take (stored per step, and held together by the report),
     # estimated before anything is allocated
     entries = spec.runs * spec.iterations * (2 + len(CUES)) * len(spec.tasks) \
-        * len(spec.configurations)
+        * len(spec.configurations) * spec.replications
     try:
-        check_size(entries, f"{spec.runs:,} runs of {spec.iterations:,} iterations")
+        check_size(entries, f"{spec.runs:,} runs of {spec.iterations:,} iterations"
+                   + (f" in {spec.replications:,} replications" if spec.replications > 1 else ""))
     except SizeError as exc:
         diags.append(located.diagnostic(("runs",), str(exc)))
     chunk = min(spec.chunk, spec.runs)  # the runs one process explores at once
@@ -142,11 +163,13 @@ def simulate(
     seed: int,
     iterations: int,
     explorer: Explorer | None = None,
+    replication: int = 0,
 ) -> dict[str, np.ndarray]:
-    """Run the loop for the given runs in lockstep. Returns gamma [runs, K] and paths [runs, K]."""
+    """Run the loop for the given runs (of ``replication``) in lockstep. Returns gamma
+    [runs, K] and paths [runs, K]."""
     runs = len(run_ids)
     explorer = explorer or Explorer(scenario, task, ablate=CONFIGURATIONS[configuration], runs=runs)
-    sensor = start_runs(explorer, starts, seed, run_ids)
+    sensor = start_runs(explorer, starts, seed, run_ids, replication)
     gamma = BorderDistance(scenario.centres, scenario.border(task), runs)
     out_gamma = np.empty((runs, iterations))
     out_paths = np.empty((runs, iterations), dtype=np.int64)
@@ -181,13 +204,15 @@ def mean_sem(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def units(spec: ExperimentSpec) -> list[Unit]:
-    """The experiment cut into (task, configuration, chunk of runs) pieces, in a fixed order."""
+    """The experiment cut into (replication, task, configuration, chunk of runs) pieces, in a
+    fixed order (replication 0's first, as an experiment without replications)."""
     out = []
-    for task in spec.tasks:
-        for conf in spec.configurations:
-            for i, start in enumerate(range(0, spec.runs, spec.chunk)):
-                runs = tuple(range(start, min(start + spec.chunk, spec.runs)))
-                out.append(Unit(task, conf, i, runs))
+    for replication in range(spec.replications):
+        for task in spec.tasks:
+            for conf in spec.configurations:
+                for i, start in enumerate(range(0, spec.runs, spec.chunk)):
+                    runs = tuple(range(start, min(start + spec.chunk, spec.runs)))
+                    out.append(Unit(task, conf, i, runs, replication))
     return out
 
 
@@ -204,6 +229,16 @@ def expected_cost(unit: Unit, iterations: int) -> float:
 
 
 def stored_experiment(out: str | Path) -> Experiment:
+    """The experiment whose results ``out`` holds (see :func:`_stored_experiment`), with the
+    number of replications it was last run with."""
+    experiment = _stored_experiment(out)
+    replications = ResultStore(Path(out)).manifest().get("replications", 1)
+    if isinstance(replications, int) and replications > 1:
+        experiment.spec = experiment.spec.model_copy(update={"replications": replications})
+    return experiment
+
+
+def _stored_experiment(out: str | Path) -> Experiment:
     """The experiment whose results ``out`` holds, rebuilt from the texts stored with them (its
     spec, and every scenario, program and sensor file as they were when it ran): what a report
     draws does not depend on the folder it is asked from, nor on files edited since."""
@@ -246,8 +281,10 @@ def manifest(experiment: Experiment) -> dict:
         files["sensor_model"] = scenario.sensor_model.path
     files.update(scenario.recordings_paths())  # what a lab's programs are learned from
     return {
-        # a search's settings (tune:) do not change what a run computes
-        "experiment": experiment.spec.model_dump(exclude={"tune"}),
+        # a search's settings (tune:) do not change what a run computes, nor does the number
+        # of replications (each is computed alone): kept beside, outside what the hash covers
+        "experiment": experiment.spec.model_dump(exclude={"tune", "replications"}),
+        "replications": experiment.spec.replications,
         "start_cells": experiment.start_cells().tolist(),
         "files": {k: {"path": str(v), "text": Path(v).read_text(encoding="utf-8")}
                   for k, v in files.items()},
@@ -270,10 +307,11 @@ def compute_unit(experiment_path: str, unit: Unit, digest: str | None = None
     experiment once for all the units of that configuration it computes."""
     experiment = load_experiment(experiment_path) if digest is None else \
         _loaded(experiment_path, digest)
-    starts = experiment.start_cells()[list(unit.runs)]
+    starts = experiment.start_cells(unit.replication)[list(unit.runs)]
     spec = experiment.spec
     return simulate(experiment.scenario, unit.task, unit.configuration, starts,
-                    np.asarray(unit.runs), spec.seed, spec.iterations)
+                    np.asarray(unit.runs), spec.seed, spec.iterations,
+                    replication=unit.replication)
 
 
 @dataclass(frozen=True)
@@ -339,8 +377,16 @@ MAX_WORKER_DEATHS = 3
 WORKER_TIMEOUT = 60.0
 
 
-def load_results(store: ResultStore, spec: ExperimentSpec) -> dict[str, dict[str, np.ndarray]]:
-    """``{"T1/full": {"gamma": [runs, K], "paths": [runs, K], "runs": [runs]}, ...}``."""
+def load_results(store: ResultStore, spec: ExperimentSpec, replication: int = 0
+                 ) -> dict[str, dict[str, np.ndarray]]:
+    """``{"T1/full": {"gamma": [runs, K], "paths": [runs, K], "runs": [runs]}, ...}`` of one
+    replication (0: the experiment itself)."""
     all_units = units(spec)
-    return {f"{t}/{c}": store.load(t, c, all_units)
+    return {f"{t}/{c}": store.load(t, c, all_units, replication)
             for t in spec.tasks for c in spec.configurations}
+
+
+def load_replications(store: ResultStore, spec: ExperimentSpec
+                      ) -> list[dict[str, dict[str, np.ndarray]]]:
+    """The results of every replication, in order (:func:`load_results` of each)."""
+    return [load_results(store, spec, q) for q in range(spec.replications)]

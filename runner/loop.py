@@ -21,7 +21,14 @@ from runner.scenario import Scenario
 from runner.sensor import HapticSensor, ProgramNormals, SimulatedSensor
 
 
-def start_cell(shape: tuple[int, ...], seed: int, run: int) -> np.ndarray:
+def _replicated(key: list[int], replication: int) -> list[int]:
+    """A random stream's key in replication ``replication`` (0: the key itself)."""
+    if replication < 0:
+        raise ValueError(f"replication: expected 0 or more, found {replication}")
+    return key + [replication] if replication else key
+
+
+def start_cell(shape: tuple[int, ...], seed: int, run: int, replication: int = 0) -> np.ndarray:
     """The start cell [dims] of run ``run`` of an experiment of ``seed`` on a grid of ``shape``:
     drawn from (seed, run) alone, so a run starts where it does whatever the number of runs
     (and a simulated robot, ``bayesprog robot --seed S --run R``, starts there too).
@@ -29,23 +36,26 @@ def start_cell(shape: tuple[int, ...], seed: int, run: int) -> np.ndarray:
     >>> start_cell((30, 60), seed=2024, run=3).tolist() == start_cells((30, 60), 8, 2024)[3].tolist()
     True
     """
-    rng = np.random.default_rng([seed, 0xC0FFEE, run])
+    rng = np.random.default_rng(_replicated([seed, 0xC0FFEE, run], replication))
     return np.array([rng.integers(0, n) for n in shape], dtype=np.int64)
 
 
-def decision_seed(seed: int, run: int) -> tuple[int, int, int]:
+def decision_seed(seed: int, run: int, replication: int = 0) -> tuple[int, ...]:
     """The seed of the decisions' tie breaking of run ``run`` of an experiment of ``seed``."""
-    return (seed, run, 0)
+    return tuple(_replicated([seed, run, 0], replication))
 
 
-def reading_seed(seed: int, run: int) -> tuple[int, int, int]:
+def reading_seed(seed: int, run: int, replication: int = 0) -> tuple[int, ...]:
     """The seed of the simulated sensor's readings of run ``run`` of an experiment of ``seed``."""
-    return (seed, run, 1)
+    return tuple(_replicated([seed, run, 1], replication))
 
 
-def start_cells(shape: tuple[int, ...], runs: int, seed: int) -> np.ndarray:
-    """``runs`` start cells [runs, dims] on a grid of ``shape``, run r's from (seed, r)."""
-    return np.stack([start_cell(shape, seed, r) for r in range(runs)]).reshape(runs, len(shape))
+def start_cells(shape: tuple[int, ...], runs: int, seed: int, replication: int = 0
+                ) -> np.ndarray:
+    """``runs`` start cells [runs, dims] on a grid of ``shape``, run r's from (seed, r) (and
+    the replication's number, from replication 1 on)."""
+    return np.stack([start_cell(shape, seed, r, replication)
+                     for r in range(runs)]).reshape(runs, len(shape))
 
 
 def make_sensor(scenario: Scenario, perception: Program,
@@ -58,12 +68,13 @@ def make_sensor(scenario: Scenario, perception: Program,
 
 
 def start_runs(explorer: Explorer, starts: np.ndarray, seed: int,
-               run_ids: Sequence[int] | np.ndarray) -> HapticSensor:
-    """Start runs ``run_ids`` of an experiment of ``seed`` from ``starts`` [runs, dims]: the
-    explorer reset with their decisions' seeds, and the simulated sensor with their readings'."""
-    explorer.reset(starts, seed=[decision_seed(seed, int(r)) for r in run_ids])
+               run_ids: Sequence[int] | np.ndarray, replication: int = 0) -> HapticSensor:
+    """Start runs ``run_ids`` of replication ``replication`` of an experiment of ``seed`` from
+    ``starts`` [runs, dims]: the explorer reset with their decisions' seeds, and the simulated
+    sensor with their readings'."""
+    explorer.reset(starts, seed=[decision_seed(seed, int(r), replication) for r in run_ids])
     return make_sensor(explorer.scenario, explorer.perception,
-                       [reading_seed(seed, int(r)) for r in run_ids])
+                       [reading_seed(seed, int(r), replication) for r in run_ids])
 
 
 @dataclass

@@ -27,6 +27,8 @@ class RunOptions:
     scheduler: str | None = None
     quiet: bool = False
     report: bool = True
+    #: replaces the experiment's ``replications:`` (None: the file's)
+    replications: int | None = None
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,7 @@ def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
     try:
         from runner.experiment import load_experiment, run_experiment
 
-        exp = load_experiment(_experiment_file(experiment))
+        exp = load_experiment(_experiment_file(experiment), replications=options.replications)
         _say(exp.scenario.warnings)
         run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
                        progress=False if options.quiet else None, pool=pool)
@@ -279,11 +281,26 @@ def _at_least(flag: str, value: int | None, least: int) -> None:
         raise BayesprogError(f"{flag}: expected at least {least}, found {value}")
 
 
+def _whole_number(flag: str, text: str | None, least: int) -> int | None:
+    """``text`` as a whole number of at least ``least`` (None stays None): read here rather
+    than by argparse, so that a wrong value is one line, not the usage."""
+    if text is None:
+        return None
+    try:
+        value = int(text.strip())
+    except ValueError:
+        raise BayesprogError(f"{flag}: expected a whole number of at least {least}, found "
+                             f"{text!r}") from None
+    _at_least(flag, value, least)
+    return value
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     _at_least("--workers", args.workers, 1)
+    replications = _whole_number("--replications", args.replications, 1)
     return run(Path(args.experiment), Path(args.out),
                RunOptions(workers=args.workers, scheduler=args.scheduler, quiet=args.quiet,
-                          report=not args.no_report),
+                          report=not args.no_report, replications=replications),
                ReportOptions(animation=not args.no_animation,
                              compare=Path(args.compare) if args.compare else None))
 
@@ -370,6 +387,10 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="an existing Dask scheduler, instead of local processes (install "
                    "bayesprog[dask]; default: none)")
+    p.add_argument("--replications", metavar="R",
+                   help="run the protocol R times, each replication on its own sample of "
+                   "start cells, readings and tie-breaks; the report pools them (default: the "
+                   "experiment's replications:, else 1)")
     p.add_argument("--no-report", action="store_true",
                    help="do not build the report (default: build it)")
     _report_arguments(p)

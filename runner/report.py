@@ -4,12 +4,9 @@ findings (Sec. 6.3) beside what was measured. Built from stored results only."""
 from __future__ import annotations
 
 import contextlib
-import gc
 import html
 import json
-import math
 import os
-from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,112 +24,23 @@ from runner.experiment import (
     stored_experiment,
 )
 from runner.explorer import CONFIGURATIONS, Explorer
-from runner.metrics import area_under, behaviour, border_band, paired_test, visits
+from runner.metrics import area_under, border_band, paired_test, visits  # noqa: F401
 from runner.scenario import Scenario
 from runner.sensor import SensorModel, confusion
 from runner.store import ResultStore, atomic_write, sweep_partial
-
-
-def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int],
-                     scenario: Scenario | None = None) -> list[dict]:
-    rows = []
-    for task in spec.tasks:
-        full = results.get(f"{task}/full")
-        for conf in spec.configurations:
-            g = results[f"{task}/{conf}"]["gamma"]
-            final, auc = g[:, -1], area_under(g)
-            fm, fs = mean_sem(final[:, None])
-            am, as_ = mean_sem(auc[:, None])
-            row = {"task": task, "configuration": conf, "runs": int(g.shape[0]),
-                   "final_mean": float(fm[0]), "final_sem": float(fs[0]),
-                   # a task whose material borders nothing has no border to follow
-                   "final_per_border_cell_mm": (1000 * float(fm[0]) / borders[task]
-                                                if borders[task] else float("nan")),
-                   "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
-            if scenario is not None:
-                row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task),
-                                     scenario.centres))
-            if full is not None and conf != "full":
-                row["p_final"] = paired_test(final, full["gamma"][:, -1])
-                row["p_auc"] = paired_test(auc, area_under(full["gamma"]))
-            rows.append(row)
-    _runner_up_tests(rows, results)
-    _detectable(rows, results)
-    with _heap_frozen():
-        for key in ("p_final", "p_auc", "p_runner_up"):  # Holm's correction over each column
-            tested = [r for r in rows if key in r]
-            if tested:
-                from statsmodels.stats.multitest import multipletests
-
-                adjusted = multipletests([r[key] for r in tested], method="holm")[1]
-                for r, value in zip(tested, adjusted, strict=True):
-                    r[f"{key}_holm"] = float(value)
-    return rows
-
-
-@contextlib.contextmanager
-def _heap_frozen() -> Iterator[None]:
-    """The objects alive now kept out of the garbage collector's reach while the block runs:
-    statsmodels' Holm correction collects garbage at every call, and a report's heap
-    (matplotlib, scipy) would make each collection last a tenth of a second. Nothing is done
-    where a part of the heap is frozen already (that part stays so)."""
-    if gc.get_freeze_count():
-        yield
-        return
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
-
-
-#: the power at which :func:`_detectable` says what the paired tests can see
-POWER = 0.8
-#: the smallest effect a verdict turns on: removing U must cost more than 5 %
-SMALLEST_EFFECT = 0.05
-
-
-def _detectable(rows: list[dict], results: dict) -> None:
-    """Per ablation row, ``detectable_auc``: the smallest change of the area under Gamma,
-    relative to the full model's, that its paired test finds with probability POWER at the
-    verdicts' threshold after Holm's adjustment over the column's tests (at worst ALPHA / m),
-    by the normal approximation of the paired differences; and ``runs_for_smallest``: how many
-    runs would find SMALLEST_EFFECT so."""
-    from scipy import stats
-
-    tested = [r for r in rows if "p_auc" in r]
-    if not tested:
-        return
-    z = stats.norm.ppf(1 - ALPHA / len(tested) / 2) + stats.norm.ppf(POWER)
-    for row in tested:
-        task = row["task"]
-        full = area_under(results[f"{task}/full"]["gamma"])
-        diff = area_under(results[f"{task}/{row['configuration']}"]["gamma"]) - full
-        n, spread, scale = len(diff), float(np.std(diff, ddof=1)) if len(diff) > 1 else math.inf, \
-            float(np.mean(full))
-        row["detectable_auc"] = float(z * spread / math.sqrt(n) / scale) if scale > 0 else math.inf
-        row["runs_for_smallest"] = (int(math.ceil((z * spread / (SMALLEST_EFFECT * scale)) ** 2))
-                                    if scale > 0 and math.isfinite(spread) else None)
-
-
-def _runner_up_tests(rows: list[dict], results: dict) -> None:
-    """Per task, the ablation that degrades the most after removing S ("runner_up" in the
-    without_S row) and the paired test of their areas under Gamma: whether removing S is
-    distinguishable from the next worst ablation."""
-    by_task: dict[str, list[dict]] = defaultdict(list)
-    for r in rows:
-        if r["configuration"] != "full":
-            by_task[r["task"]].append(r)
-    for task, ablations in by_task.items():
-        s = next((r for r in ablations if r["configuration"] == "without_S"), None)
-        others = [r for r in ablations if r is not s]
-        if s is None or not others:
-            continue
-        runner_up = max(others, key=lambda r: r["auc_mean"])
-        s["runner_up"], s["runner_up_auc"] = runner_up["configuration"], runner_up["auc_mean"]
-        s["p_runner_up"] = paired_test(area_under(results[f"{task}/without_S"]["gamma"]),
-                                       area_under(results[f"{task}/{runner_up['configuration']}"]
-                                                  ["gamma"]))
+from runner.verdicts import (  # noqa: F401  (the report's statistics, read from here too)
+    ALPHA,
+    FINDINGS,
+    POWER,
+    SMALLEST_EFFECT,
+    _full_auc,
+    _heap_frozen,
+    _unseen,
+    findings,
+    judge_replications,
+    pooled,
+    statistics_table,
+)
 
 
 def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
@@ -153,6 +61,30 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
         ax.set_xlabel("iteration k")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, title="mean +- SEM", title_fontsize=7)
+    axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def plot_gamma_pooled(results: dict, spec: ExperimentSpec, out: Path) -> None:
+    """Fig. 10 over every replication: Gamma(k), the mean over all their runs with its 95%
+    interval (mean +- 1.96 SEM), one curve per configuration, a panel per task."""
+    fig = figures.figure(figsize=(5 * len(spec.tasks), 3.9))
+    axes = fig.subplots(1, len(spec.tasks), squeeze=False)
+    for ax, task in zip(axes[0], spec.tasks, strict=True):
+        for conf in spec.configurations:
+            gamma = results[f"{task}/{conf}"]["gamma"]
+            mean, sem = mean_sem(gamma)
+            k = np.arange(mean.size)
+            style = ({"color": "black", "lw": 3.0, "alpha": 0.55, "zorder": 1} if conf == "full"
+                     else {"lw": 1.3, "ls": "--" if conf == "without_R" else "-", "zorder": 2})
+            line, = ax.plot(k, mean, label=conf.replace("_", " "), **style)
+            ax.fill_between(k, mean - 1.96 * sem, mean + 1.96 * sem, alpha=0.2,
+                            color=line.get_color(), lw=0)
+        ax.set_title(f"Task {task}: {gamma.shape[0]} runs, {spec.replications} replications")
+        ax.set_xlabel("iteration k")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, title="mean, 95% interval", title_fontsize=7)
     axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -436,96 +368,6 @@ def plot_decision(experiment: Experiment, task: str, configuration: str, run: in
         figure.video(frames, out_video)
 
 
-#: The significance level where the paper claims a difference (S, U), and below which a change
-#: counts as significant (I, R).
-ALPHA = 0.01
-
-FINDINGS = [
-    ("S", "Removing S degrades the most (the exploration becomes random)."),
-    ("U", "Removing U degrades considerably."),
-    ("I", "Removing I stays near the full model."),
-    ("R", "Removing R has no strong influence."),
-    ("T", "T1 and T2 are followed more accurately than T3."),
-]
-
-
-def _s_is_worst(row: dict) -> bool:
-    """In the without_S row: whether removing S has the largest area under Gamma."""
-    return "runner_up" not in row or row["auc_mean"] >= row["runner_up_auc"]
-
-
-def _s_the_worst(row: dict) -> bool:
-    """Removing S degrades the most: its area under Gamma is the largest of the ablations, or
-    the one that is larger is not distinguishable from it (paired test, Holm-adjusted p >= 0.01):
-    a difference of means that the runs cannot tell from chance does not rank the two."""
-    return _s_is_worst(row) or row.get("p_runner_up_holm", row.get("p_runner_up", 0.0)) >= ALPHA
-
-
-def findings(rows: list[dict], spec: ExperimentSpec) -> list[tuple[str, str, str]]:
-    """Each finding of the paper, what was measured, and whether they agree."""
-    by = {(r["task"], r["configuration"]): r for r in rows}
-    out = []
-    tasks = spec.tasks
-
-    def rel(task: str, conf: str) -> float:
-        return by[(task, conf)]["auc_mean"] / by[(task, "full")]["auc_mean"] - 1
-
-    def have(conf: str) -> bool:
-        return all((t, conf) in by for t in tasks) and all((t, "full") in by for t in tasks)
-
-    for key, text in FINDINGS:
-        if key == "T":
-            per = {t: by[(t, "full")]["final_per_border_cell_mm"] for t in tasks if (t, "full") in by}
-            if {"T1", "T2", "T3"} <= set(per):
-                agree = per["T1"] < per["T3"] and per["T2"] < per["T3"]
-                measured = ", ".join(f"{t}: {v:.1f} mm" for t, v in per.items())
-                out.append((text, f"final Gamma per border cell (full model): {measured}",
-                            "agrees" if agree else "differs"))
-            continue
-        conf = f"without_{key}"
-        if not have(conf):
-            continue
-        changes = {t: rel(t, conf) for t in tasks}
-        ps = {t: by[(t, conf)].get("p_auc_holm", by[(t, conf)]["p_auc"]) for t in tasks}
-        measured = "; ".join(f"{t}: {100 * changes[t]:+.0f}% area under Gamma "
-                             f"(Holm-adjusted p={ps[t]:.2g})" for t in tasks)
-        if key == "S":
-            agree = all(changes[t] > 0 and ps[t] < ALPHA and _s_the_worst(by[(t, conf)])
-                        for t in tasks)
-            ablations = [c for c in spec.configurations if c != "full"]
-            worst = [ablations[int(np.argmax([by[(t, c)]["auc_mean"] for c in ablations]))]
-                     for t in tasks]
-            measured += f"; the worst ablation per task: {', '.join(worst)}"
-            ahead = []
-            for t in tasks:
-                row = by[(t, conf)]
-                if not _s_is_worst(row):
-                    p = row.get("p_runner_up_holm", row["p_runner_up"])
-                    ahead.append(f"{t}: {row['runner_up']} "
-                                 f"{100 * (rel(t, row['runner_up']) - changes[t]):+.0f} points "
-                                 f"(Holm-adjusted p={p:.2g})")
-            if ahead:
-                measured += ("; where another ablation degrades more, its paired test against "
-                             "removing S: " + "; ".join(ahead))
-        elif key == "U":
-            agree = all(changes[t] > 0.05 and ps[t] < ALPHA for t in tasks)
-        elif key == "I":  # near the full model
-            agree = all(abs(changes[t]) < 0.10 or ps[t] >= ALPHA for t in tasks)
-        else:  # R: no strong influence, or the full model is better; never a significant loss
-            agree = all(changes[t] > -0.10 or ps[t] >= ALPHA for t in tasks)
-        verdict = "agrees" if agree else "differs"
-        # not significant where the test could not have seen a change as large as the
-        # verdicts weigh: the runs, not the model, may have decided
-        unseen = [t for t in tasks if _unseen(by[(t, conf)], changes[t], ps[t], key)]
-        if unseen:
-            said = ", ".join(f"{t} {100 * changes[t]:+.0f}%" for t in unseen)
-            finds = max(by[(t, conf)].get("detectable_auc", math.nan) for t in unseen)
-            verdict += (f" (runs too few to tell: {said} not significant; with these runs the "
-                        f"test finds changes of about {100 * finds:.0f}% or more)")
-        out.append((text, measured, verdict))
-    return out
-
-
 #: held-out probes per material for the report's confusion matrix, and their seed
 HELD_OUT, HELD_OUT_SEED = 2000, 7
 
@@ -608,6 +450,9 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
     experiment = stored_experiment(out)
     spec = experiment.spec
     results = load_results(store, spec)
+    # replication 0 is the experiment (its figures and tables); the findings pool them all
+    replications = [results] + [load_results(store, spec, q)
+                                for q in range(1, spec.replications)]
     scenario = experiment.scenario
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
@@ -634,6 +479,11 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
                       experiment.start_cells())
         if scenario.dims == 3:
             plot_slices(results, spec, scenario, folder / "fig9_slices.png", shown)
+        judged = judge_replications(replications, spec, borders)
+        if len(replications) > 1:
+            plot_gamma_pooled(pooled(replications), spec, folder / "fig10_gamma_pooled.png")
+        else:
+            (folder / "fig10_gamma_pooled.png").unlink(missing_ok=True)  # not this report's
         bar.update(1)
         pending()
         bar.update(1)
@@ -641,11 +491,13 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(_json_safe(rows), indent=1,
                                                         allow_nan=False).encode())
+    atomic_write(folder / "findings.json", json.dumps(_json_safe_tree(judged), indent=1,
+                                                      allow_nan=False).encode())
     extra = perception_lines(scenario, rows, spec.tasks)
     if compare is not None:
         extra += comparison_lines(found, compare, spec.name)
     md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video,
-                   shown, volume=scenario.dims == 3)
+                   shown, volume=scenario.dims == 3, judged=judged)
     atomic_write(folder / "report.md", md.encode())
     atomic_write(folder / "report.html", _html(md, spec, video).encode())
     return folder
@@ -721,6 +573,17 @@ def _table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
+def _json_safe_tree(value: Any) -> Any:
+    """``value`` for JSON, every number that is not finite as null, at any depth."""
+    if isinstance(value, dict):
+        return {k: _json_safe_tree(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_json_safe_tree(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def _json_safe(rows: list[dict]) -> list[dict]:
     """Rows for JSON: a number that is not finite (no run reached the border) as null."""
     return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
@@ -730,7 +593,7 @@ def _json_safe(rows: list[dict]) -> list[dict]:
 def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str, str]],
               borders: dict[str, int], step: int, task: str, digest: str, run: int = 0,
               extra: Sequence[str] = (), animation: str | None = None, shown: str = "full",
-              volume: bool = False) -> str:
+              volume: bool = False, judged: dict | None = None) -> str:
     lines = [f"# Experiment {spec.name}", "",
              f"{spec.description.strip()}", "",
              f"{len(spec.tasks)} task(s) x {len(spec.configurations)} configuration(s) x "
@@ -781,9 +644,19 @@ def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str
               "stays on cells it has probed the registered templates do not change, and the "
               "cells nearest them win each tie of S and I.", ""]
     lines += _behaviour_lines(rows)
-    lines += ["", "## The paper's findings (Sec. 6.3) and ours", "",
-              "| the paper | measured here | verdict |", "|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} |" for a, b, c in found]
+    stability = {f["claim"]: f["stability"] for f in (judged or {}).get("findings", [])}
+    several = judged is not None and judged["replications"] > 1
+    lines += ["", "## The paper's findings (Sec. 6.3) and ours", ""]
+    if several:
+        lines += [f"On the runs above (replication 0, one sample of {spec.runs} start cells, "
+                  "the paper's protocol); the verdicts over every replication are under "
+                  "[Replications](#replications).", ""]
+    if stability and not several:
+        lines += ["| the paper | measured here | verdict | stability |", "|---|---|---|---|"]
+        lines += [f"| {a} | {b} | {c} | {_share(stability.get(a))} |" for a, b, c in found]
+    else:
+        lines += ["| the paper | measured here | verdict |", "|---|---|---|"]
+        lines += [f"| {a} | {b} | {c} |" for a, b, c in found]
     lines += ["", "Verdicts (on Holm-adjusted p-values): *S* agrees when removing S raises the area "
               "under Gamma with p < 0.01 in every task and no other ablation raises it more, "
               "or none by a margin the paired runs tell from chance (Wilcoxon signed-rank of "
@@ -792,9 +665,61 @@ def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str
               "the change is under 10% or not significant (p >= 0.01); *R* when the change is "
               "under 10%, not significant, or in the full model's favour; *T* compares the "
               "final Gamma per border cell.", ""]
+    if stability and not several and judged is not None:
+        lines += [_stability_text(judged), ""]
     lines += _power_lines(rows, spec)
+    if several and judged is not None:
+        lines += _replication_lines(judged, spec)
     lines += list(extra)
     return "\n".join(lines)
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.0f}%"
+
+
+def _stability_text(judged: dict) -> str:
+    b = judged["bootstrap"]
+    return (f"Stability: the share of {b['resamples']:,} bootstrap resamples of the paired runs "
+            f"(drawn with replacement, seed {b['seed']}) in which the verdict comes out the "
+            "same by the same rules: how firmly these runs decide it (50% is a coin toss). A "
+            "verdict holds for the protocol, not for one sample: `bayesprog run EXPERIMENT "
+            "--replications R` runs the protocol R times and pools them.")
+
+
+def _effects(finding: dict) -> str:
+    unit = "mm" if finding["finding"] == "T" else "%"
+    sign = "" if finding["finding"] == "T" else "+"
+    return "; ".join(f"{t}: {v['effect']:{sign}.1f} {unit} [{v['ci95'][0]:{sign}.1f}, "
+                     f"{v['ci95'][1]:{sign}.1f}]" + ("" if finding["finding"] == "T" and t == "T3"
+                                                     else f", p {v['p_holm']:.2g}")
+                     for t, v in finding["tasks"].items())
+
+
+def _replication_lines(judged: dict, spec: ExperimentSpec) -> list[str]:
+    """The Replications section: the findings over every replication, pooled."""
+    r, b = judged["replications"], judged["bootstrap"]
+    lines = ["## Replications", "",
+             f"The protocol run {r} times, each replication on its own sample of {spec.runs} "
+             "start cells, readings and tie-breaks (replication q draws them from the seed and "
+             f"q alone; replication 0 is the experiment above). Pooled: the report's rules "
+             f"applied to all {r * spec.runs} paired runs together. Effect: the change of the "
+             "mean area under Gamma against the full model (for T: the full model's final "
+             "Gamma per border cell), with its 95% interval, the 2.5th and 97.5th percentiles "
+             f"over {b['resamples']:,} bootstrap resamples of the paired runs (seed "
+             f"{b['seed']}); p: the pooled Holm-adjusted p-value of the verdict's test (for T, "
+             "the task against T3, paired by run). k of R: the replications whose own runs "
+             "agree. Stability: the share of the resamples whose verdict is the pooled one.", "",
+             "| finding | the paper | pooled effect per task [95% interval] | agrees in | "
+             "pooled verdict | stability |", "|---|---|---|---|---|---|"]
+    for f in judged["findings"]:
+        lines.append(f"| {f['finding']} | {f['claim']} | {_effects(f)} | {f['agree']} of "
+                     f"{f['of']} | {f['verdict']} | {_share(f['stability'])} |")
+    lines += ["", "![Gamma pooled](fig10_gamma_pooled.png)", "",
+              f"*Fig. 10 pooled: Gamma(k), the mean over the {r * spec.runs} runs of every "
+              "replication, shaded its 95% interval (mean +- 1.96 SEM); one panel per task.*",
+              ""]
+    return lines
 
 
 def _power_lines(rows: list[dict], spec: ExperimentSpec) -> list[str]:
@@ -822,25 +747,6 @@ def _power_lines(rows: list[dict], spec: ExperimentSpec) -> list[str]:
                  f"{100 * SMALLEST_EFFECT:.0f}%: marked beside their verdicts); about {needed} "
                  f"runs would find a {100 * SMALLEST_EFFECT:.0f}% change there.")
     return [text, ""]
-
-
-def _unseen(row: dict, change: float, p: float, key: str) -> bool:
-    """Whether the verdict on ablation ``key`` rests, in this task, on a test that these runs
-    were too few for: S and U agree only on a significant change, so one not significant
-    where the test could not have found a 5% change (or the change is larger) is unsettled;
-    I and R agree on a small change or a not significant one, so only a large change that is
-    not significant is."""
-    if p < ALPHA:
-        return False
-    if key in ("S", "U"):
-        return abs(change) > SMALLEST_EFFECT or row.get("detectable_auc", 0.0) > SMALLEST_EFFECT
-    if key == "I":
-        return abs(change) >= 0.10
-    return change <= -0.10
-
-
-def _full_auc(rows: list[dict], task: str) -> float:
-    return next(r["auc_mean"] for r in rows if r["task"] == task and r["configuration"] == "full")
 
 
 def _p(row: dict, key: str) -> str:

@@ -28,16 +28,21 @@ class StoreError(BayesprogError):
 
 @dataclass(frozen=True)
 class Unit:
-    """One piece of work: some runs of one task under one configuration."""
+    """One piece of work: some runs of one task under one configuration, in one replication
+    of the experiment (0: the experiment itself)."""
 
     task: str
     configuration: str
     chunk: int
     runs: tuple[int, ...]
+    replication: int = 0
 
     @property
     def name(self) -> str:
-        return f"{self.task}/{self.configuration}/runs_{self.runs[0]:04d}-{self.runs[-1]:04d}.npz"
+        runs = f"runs_{self.runs[0]:04d}-{self.runs[-1]:04d}.npz"
+        if self.replication:  # replication 0 is stored where an experiment always stored it
+            runs = f"replication_{self.replication:03d}/{runs}"
+        return f"{self.task}/{self.configuration}/{runs}"
 
 
 def identity(manifest: dict) -> dict:
@@ -112,10 +117,13 @@ class ResultStore:
                         f"{old.get('hash')}, this one {manifest['hash']}): choose another "
                         "--out folder, or remove this one to start again"
                     )
-                if old.get("hash") == manifest["hash"]:
+                if old == manifest:
                     sweep_partial(self.out / "chunks")
                     return
-                # the same configuration under the hash of an earlier version: written anew
+                # the same configuration under the hash of an earlier version, or asked for
+                # another number of replications (which the results do not depend on): the
+                # manifest is written anew, the chunks kept
+                sweep_partial(self.out / "chunks")
         try:
             self.out.mkdir(parents=True, exist_ok=True)
             atomic_write(self.manifest_path, json.dumps(manifest, indent=1).encode())
@@ -182,11 +190,13 @@ class ResultStore:
         np.savez(buffer, **(arrays | result))
         atomic_write(self.path(unit), buffer.getvalue())
 
-    def load(self, task: str, configuration: str, units: list[Unit]) -> dict[str, np.ndarray]:
-        """Every run of (task, configuration), in run order."""
+    def load(self, task: str, configuration: str, units: list[Unit], replication: int = 0
+             ) -> dict[str, np.ndarray]:
+        """Every run of (task, configuration) in ``replication``, in run order."""
         parts = []
         for unit in units:
-            if unit.task != task or unit.configuration != configuration:
+            if (unit.task != task or unit.configuration != configuration
+                    or unit.replication != replication):
                 continue
             path = self.path(unit)
             if not path.exists():
