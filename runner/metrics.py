@@ -103,6 +103,33 @@ def behaviour(paths: np.ndarray, border: np.ndarray,
     }
 
 
+def phase_areas(gamma: np.ndarray, paths: np.ndarray, border: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The area under Gamma(k) of each run [runs, K] split at the step it first probes a cell
+    of the task's ``border`` (grid-shaped, bool): the search (k = 0 up to that step) and the
+    following (from that step on), trapezoids as :func:`area_under`, so the two add up to it.
+    A run that never reaches the border is all search.
+
+    >>> border = np.array([False, True, False])
+    >>> search, follow = phase_areas(np.array([[4.0, 2.0, 0.0, 0.0]]), np.array([[0, 1, 1, 2]]),
+    ...                              border)
+    >>> search.tolist(), follow.tolist(), area_under(np.array([[4.0, 2.0, 0.0, 0.0]])).tolist()
+    ([3.0], [1.0], [4.0])
+    """
+    gamma = np.asarray(gamma, dtype=float)
+    runs, steps = gamma.shape
+    on = np.asarray(border).ravel()[paths]
+    first = np.where(on.any(axis=1), on.argmax(axis=1), steps - 1)[:, None]
+    k = np.arange(steps)[None, :]
+    # trapezoid weights of [0, first] and of [first, K - 1]: half at each end of a part (a
+    # part of one step has no area)
+    search = np.where(k <= first, 1.0, 0.0) - 0.5 * (k == 0) - 0.5 * (k == first)
+    follow = np.where(k >= first, 1.0, 0.0) - 0.5 * (k == first) - 0.5 * (k == steps - 1)
+    if steps == 1:
+        return np.zeros(runs), np.zeros(runs)
+    return (gamma * search).sum(axis=1), (gamma * follow).sum(axis=1)
+
+
 def area_under(gamma: np.ndarray) -> np.ndarray:
     """Area under Gamma(k) over k = 0..K-1 (trapezoids, unit steps), per run: metre-steps."""
     return np.trapezoid(gamma, axis=-1)

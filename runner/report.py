@@ -550,14 +550,24 @@ def _behaviour_lines(rows: list[dict]) -> list[str]:
     lines = ["| task | configuration | enrichment near the border | runs reaching it | median "
              "step of first reach | border cells probed (recall) | probes on the border "
              "(precision) | path length per run (m) | distinct cells per run | returns to the "
-             "cell of two steps before |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "cell of two steps before | area under Gamma: search + following | change against "
+             "the full model: search, following |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    full = {r["task"]: r for r in rows if r["configuration"] == "full"}
     for r in rows:
         if "enrichment" in r:
             length = f"{r['path_length']:.2f}" if "path_length" in r else "-"
+            phases = change = "-"
+            if "auc_search" in r:
+                phases = f"{r['auc_search']:.0f} + {r['auc_follow']:.0f}"
+                base = full.get(r["task"])
+                if base is not None and r is not base and base["auc_mean"] > 0:
+                    change = ", ".join(f"{100 * (r[k] - base[k]) / base['auc_mean']:+.1f}%"
+                                       for k in ("auc_search", "auc_follow"))
             lines.append(f"| {r['task']} | {r['configuration']} | {r['enrichment']:.2f}x | "
                          f"{100 * r['reached']:.0f}% | {r['reach_step']:.0f} | "
                          f"{100 * r['border_probed']:.0f}% | {100 * r['precision']:.0f}% | "
-                         f"{length} | {r['distinct']:.1f} | {100 * r['returns']:.0f}% |")
+                         f"{length} | {r['distinct']:.1f} | {100 * r['returns']:.0f}% | "
+                         f"{phases} | {change} |")
     return lines
 
 
@@ -642,7 +652,11 @@ def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str
               "ahead, and it goes back and forth between two salient cells, which the last "
               "column counts. With the shape cue the same pair wins every time: while the walker "
               "stays on cells it has probed the registered templates do not change, and the "
-              "cells nearest them win each tie of S and I.", ""]
+              "cells nearest them win each tie of S and I. The last two columns split each run's "
+              "area under Gamma at the step it first probes the task's border: the search "
+              "before it, the following after it (a run that never reaches the border is all "
+              "search), and an ablation's change of each part against the full model, in % of "
+              "the full model's whole area (the two add up to the change of the area).", ""]
     lines += _behaviour_lines(rows)
     stability = {f["claim"]: f["stability"] for f in (judged or {}).get("findings", [])}
     several = judged is not None and judged["replications"] > 1

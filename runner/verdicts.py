@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from runner.experiment import ExperimentSpec, mean_sem
-from runner.metrics import area_under, behaviour, paired_test
+from runner.metrics import area_under, behaviour, paired_test, phase_areas
 from runner.scenario import Scenario
 
 
@@ -36,8 +36,11 @@ def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int
                                                 if borders[task] else float("nan")),
                    "auc_mean": float(am[0]), "auc_sem": float(as_[0])}
             if scenario is not None:
-                row.update(behaviour(results[f"{task}/{conf}"]["paths"], scenario.border(task),
-                                     scenario.centres))
+                paths = results[f"{task}/{conf}"]["paths"]
+                row.update(behaviour(paths, scenario.border(task), scenario.centres))
+                # the area under Gamma before each run first probes the border, and after
+                search, follow = phase_areas(g, paths, scenario.border(task))
+                row["auc_search"], row["auc_follow"] = float(search.mean()), float(follow.mean())
             if full is not None and conf != "full":
                 row["p_final"] = paired_test(final, full["gamma"][:, -1])
                 row["p_auc"] = paired_test(auc, area_under(full["gamma"]))

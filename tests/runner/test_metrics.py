@@ -262,3 +262,20 @@ def test_behaviour_metrics_by_brute_force(seed, runs, steps):
     lengths = [sum(float(np.hypot(*(centres[b] - centres[a])))
                    for a, b in zip(run[:-1], run[1:], strict=True)) for run in paths]
     assert got["path_length"] == pytest.approx(np.mean(lengths))
+
+
+def test_the_search_and_the_following_add_up_to_the_area_under_gamma():
+    from runner.metrics import area_under, phase_areas
+
+    rng = np.random.default_rng(5)
+    gamma = rng.random((40, 12))
+    paths = rng.integers(0, 20, size=(40, 12))
+    border = np.zeros(20, bool)
+    border[[4, 11]] = True
+    search, follow = phase_areas(gamma, paths, border)
+    np.testing.assert_allclose(search + follow, area_under(gamma), rtol=1e-12)
+    for run in range(40):  # each part by itself: the trapezoids up to, and from, the first reach
+        hits = np.flatnonzero(border[paths[run]])
+        first = hits[0] if hits.size else 11
+        assert search[run] == pytest.approx(np.trapezoid(gamma[run, :first + 1]))
+        assert follow[run] == pytest.approx(np.trapezoid(gamma[run, first:]) if hits.size else 0.0)

@@ -27,7 +27,6 @@ from runner.verdicts import (
     signed_rank_p,
     statistics_table,
 )
-
 from tests.runner.test_experiment import assert_same, write_experiment
 
 
