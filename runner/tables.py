@@ -1,5 +1,5 @@
-"""An experiment's stored runs as one tidy table: a row per (task, configuration, run, step),
-for pandas, R or a spreadsheet (``bayesprog results DIR -o runs.parquet``)."""
+"""An experiment's stored runs as one tidy table: a row per (task, configuration, replication,
+run, step), for pandas, R or a spreadsheet (``bayesprog results DIR -o runs.parquet``)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from bayesprog import BayesprogError, atomic_write, require_extra
 from runner.executors import progress_bar
-from runner.experiment import CUES, load_results, stored_experiment
+from runner.experiment import CUES, load_replications, stored_experiment
 from runner.figures import centre_cm
 from runner.metrics import border_band
 from runner.store import ResultStore
@@ -19,6 +19,8 @@ from runner.store import ResultStore
 COLUMNS = {
     "task": "the task (T1, T2, ...)",
     "configuration": "full, or the ablated term (without_S, ...)",
+    "replication": "the replication of the protocol (0: the experiment itself), each with its "
+                   "own start cells and streams",
     "run": "the run (same start cell and seeds in every configuration)",
     "step": "k, from 0 (the start cell)",
     "cell": "the probed cell (flat index, x-major)",
@@ -44,30 +46,33 @@ def runs_table(out: str | Path) -> Any:
     store = ResultStore(Path(out))
     experiment = stored_experiment(out)
     spec, scenario = experiment.spec, experiment.scenario
-    results = load_results(store, spec)
+    replications = load_replications(store, spec)
     frames = []
-    bar = progress_bar(len(spec.tasks) * len(spec.configurations), "runs table")
+    bar = progress_bar(len(spec.tasks) * len(spec.configurations) * len(replications),
+                       "runs table")
     for task in spec.tasks:
         band = border_band(scenario.border(task)).ravel()
         for conf in spec.configurations:
-            r = results[f"{task}/{conf}"]
-            paths = r["paths"]
-            runs, steps = paths.shape
-            x, y = centre_cm(scenario, paths.ravel())
-            indices = np.unravel_index(paths.ravel(), scenario.shape)
-            columns = {
-                "task": np.full(paths.size, task), "configuration": np.full(paths.size, conf),
-                "run": np.repeat(r["runs"], steps), "step": np.tile(np.arange(steps), runs),
-                "cell": paths.ravel(),
-                **{axis: index for axis, index in zip(("ix", "iy", "iz"), indices, strict=False)},
-                "x_cm": x, "y_cm": y,
-                "near_border": band[paths.ravel()], "gamma_m": r["gamma"].ravel()}
-            if scenario.dims == 3:
-                columns["z_cm"] = scenario.centres[paths.ravel(), 2] * 100
-            for name in CUES:
-                columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
-            frames.append(pd.DataFrame(columns))
-            bar.update(1)
+            for replication, results in enumerate(replications):
+                r = results[f"{task}/{conf}"]
+                paths = r["paths"]
+                runs, steps = paths.shape
+                x, y = centre_cm(scenario, paths.ravel())
+                indices = np.unravel_index(paths.ravel(), scenario.shape)
+                columns = {
+                    "task": np.full(paths.size, task), "configuration": np.full(paths.size, conf),
+                    "replication": np.full(paths.size, replication),
+                    "run": np.repeat(r["runs"], steps), "step": np.tile(np.arange(steps), runs),
+                    "cell": paths.ravel(),
+                    **{axis: index for axis, index in zip(("ix", "iy", "iz"), indices, strict=False)},
+                    "x_cm": x, "y_cm": y,
+                    "near_border": band[paths.ravel()], "gamma_m": r["gamma"].ravel()}
+                if scenario.dims == 3:
+                    columns["z_cm"] = scenario.centres[paths.ravel(), 2] * 100
+                for name in CUES:
+                    columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
+                frames.append(pd.DataFrame(columns))
+                bar.update(1)
     bar.close()
     table = pd.concat(frames, ignore_index=True)
     for name in ("task", "configuration"):

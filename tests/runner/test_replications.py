@@ -124,6 +124,38 @@ def test_replications_differ_and_findings_json_is_complete(replicated):
     assert "## Replications" not in (once / "report" / "report.md").read_text()
 
 
+def test_the_runs_table_holds_every_replication(replicated, tmp_path):
+    import pandas as pd
+
+    _, _, thrice = replicated
+    assert main(["results", str(thrice), "-o", str(tmp_path / "runs.csv")]) == 0
+    table = pd.read_csv(tmp_path / "runs.csv")
+    assert sorted(table.replication.unique()) == [0, 1, 2]
+    spec = load_experiment(replicated[0], replications=3).spec
+    from runner.experiment import load_replications
+
+    stored = load_replications(ResultStore(thrice), spec)[2]["T2/without_I"]
+    rows = table[(table.task == "T2") & (table.configuration == "without_I")
+                 & (table.replication == 2)]
+    np.testing.assert_array_equal(rows["cell"].to_numpy(), stored["paths"].ravel())
+
+
+def test_a_dask_cluster_gives_the_replications_the_same_numbers(replicated, tmp_path):
+    from dask.distributed import LocalCluster
+
+    from runner.experiment import load_replications
+
+    path, _, thrice = replicated
+    experiment = load_experiment(path, replications=3)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        run_experiment(experiment, tmp_path / "out", scheduler=cluster.scheduler_address,
+                       progress=False)
+    for a, b in zip(load_replications(ResultStore(tmp_path / "out"), experiment.spec),
+                    load_replications(ResultStore(thrice), experiment.spec), strict=True):
+        assert_same(a, b)
+
+
 def test_more_replications_in_a_folder_keep_the_ones_it_holds(replicated, tmp_path):
     path, once, _ = replicated
     import shutil
