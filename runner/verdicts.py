@@ -454,7 +454,7 @@ def judge_replications(replications: Sequence[Mapping[str, Mapping[str, np.ndarr
     found = {key: (text, measured, verdict)
              for key, text, measured, verdict in keyed_findings(rows, spec)}
     single = [{key: verdict for key, _, _, verdict
-               in keyed_findings(statistics_table(r, spec, dict(borders)), spec)}
+               in keyed_findings(statistics_table(dict(r), spec, dict(borders)), spec)}
               for r in replications] if len(replications) > 1 else None
     resampled = Resampled(together, spec, borders)
     if set(resampled.keys()) != set(found):
