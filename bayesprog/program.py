@@ -263,6 +263,7 @@ class Program:
         bins: int | None = None,
         burn_in: int | None = None,
         thin: int | None = None,
+        ablate: Mapping[str, Any] | None = None,
     ) -> Posterior | MapResult | Density | Joint:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
@@ -289,6 +290,12 @@ class Program:
             one sweep kept in ``thin`` (default 1).
         bins : bins per unknown real variable for ``method="grid"`` (default 128; the answer
             is made with twice as many, and its error estimated from the difference).
+        ablate : terms made uniform on some rows of the batch: ``{"P(B | A)": rows}``, where
+            ``rows`` are booleans that broadcast with the batch (True: the term is uniform on
+            that row, as in :meth:`ablate`; False: it is as written). Rows that differ in
+            which terms they use are then one question, answered exactly by contraction (or
+            by ``"lbp"``); on a row that ablates a term, its inputs are not read (any finite
+            values stand in).
 
         Returns
         -------
@@ -299,8 +306,8 @@ class Program:
         """
         # a question asked again with one state name per known variable (or none): its warm path
         warm = (type(question) is str and (evidence is None or type(evidence) is dict)
-                and inputs is None and soft is None and rng is None and samples is None
-                and bins is None and burn_in is None and thin is None
+                and inputs is None and soft is None and ablate is None and rng is None
+                and samples is None and bins is None and burn_in is None and thin is None
                 and (kind is None or kind == "posterior")
                 and (method is None or type(method) is str))
         if warm:
@@ -329,6 +336,12 @@ class Program:
                 options[key] = int(value)
         if method is not None and not isinstance(method, str):
             raise ArgumentError(f"method: expected a method's name, found {short_repr(method)}")
+        rows_ablated = self._rows_ablated(ablate) if ablate is not None else None
+        if rows_ablated and (q.kind in ("filter", "smooth", "sequence") or len(
+                {self.variables[v].is_discrete for v in q.expression.left}) > 1):
+            raise QuestionError(f"ablate=: a term made uniform on some rows is answered for "
+                                f"questions on discrete variables, not {q.expression} "
+                                f"({q.kind}): ablate the term for every row (Program.ablate)")
         if q.kind in ("filter", "smooth", "sequence"):
             from bayesprog.dynamic import over_time
 
@@ -337,10 +350,25 @@ class Program:
             from bayesprog.inference.mixed import mixed
 
             return mixed(self, q, evidence, inputs, soft, method, options)
-        result = inference.ask(self, q, evidence, inputs, soft, rng, method, options)
+        result = inference.ask(self, q, evidence, inputs, soft, rng, method, options,
+                               rows_ablated)
         if warm:
             quick.learn(self, kept, q, evidence or {})
         return result
+
+    def _rows_ablated(self, ablate: Any) -> dict[str, Any]:
+        """``ask``'s ``ablate`` by each term's text (parents in any order, as :meth:`term`
+        reads them); the terms this program already ablates are left out (uniform on every
+        row)."""
+        if not isinstance(ablate, Mapping) or not all(isinstance(n, str) for n in ablate):
+            raise ArgumentError(f"ablate: expected a mapping of terms like 'P(B | A)' to the "
+                                f"rows where each is uniform, found {short_repr(ablate)}")
+        out: dict[str, Any] = {}
+        for name, rows in ablate.items():
+            text = str(self.term(name).expression)
+            if text not in self.ablated:
+                out[text] = rows
+        return out
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
                   **kw: Any) -> Posterior:

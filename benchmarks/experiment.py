@@ -31,8 +31,15 @@ Measured in one run on this machine:
   the bound it is held to (10 s, 4 s, 60 s), the ratio in the JSON; and a small search of
   ``bayesprog tune`` on two local processes beside a Dask LocalCluster of two workers.
 
+* with ``--against DIR`` (a checkout of another version, e.g. ``git worktree add DIR HEAD~1``),
+  only a paired comparison: ``bayesprog run`` on the paper's experiment (two workers, no
+  report) by this checkout and by that one in turn, ``--pairs`` times, each a fresh process
+  into a fresh folder; every pair's seconds, the medians, their ratio (this checkout's over
+  the other's), and whether the two wrote the same results (every array of every chunk).
+
     python benchmarks/experiment.py [--repeats 3] [--naive-runs 2] [--out results/...json]
         [--plot docs/performance.png] [--volume-repeats 1] [--only-commands]
+        [--against DIR [--pairs 5]]
 """
 
 from __future__ import annotations
@@ -328,6 +335,58 @@ def commands(repeats: int, volume_repeats: int = 1) -> dict[str, dict[str, float
             for name, found in times.items()}
 
 
+def _run_paper(root: Path, out: Path) -> float:
+    """Wall seconds of ``bayesprog run`` on the paper's experiment by the code of the checkout
+    ``root`` (first on the module path, from a folder outside it), two workers, no report."""
+    import os
+
+    env = dict(os.environ, PYTHONPATH=str(root))
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "bayesprog", "run",
+                    str(root / "models" / "experiments" / "paper.yaml"), "--workers", "2",
+                    "--no-report", "--out", str(out), "-q"],
+                   check=True, capture_output=True, env=env, cwd=out.parent)
+    return time.perf_counter() - start
+
+
+def _same_chunks(a: Path, b: Path) -> bool:
+    """Whether two experiments' folders hold the same chunks with the same arrays (their
+    configuration hashes aside)."""
+    files = sorted(p.relative_to(a) for p in (a / "chunks").rglob("*.npz"))
+    if files != sorted(p.relative_to(b) for p in (b / "chunks").rglob("*.npz")):
+        return False
+    for name in files:
+        with np.load(a / name) as x, np.load(b / name) as y:
+            keys = sorted(k for k in x.files if k != "config")
+            if keys != sorted(k for k in y.files if k != "config") or not all(
+                    np.array_equal(x[k], y[k], equal_nan=x[k].dtype.kind == "f") for k in keys):
+                return False
+    return True
+
+
+def paired(reference: Path, pairs: int) -> dict:
+    """``bayesprog run`` on the paper's experiment by this checkout and by ``reference`` in
+    turn (the order alternating from pair to pair, so that a drift of the machine's load
+    weighs on both), ``pairs`` times: the seconds of each, their medians and ratio, and
+    whether every pair wrote the same results."""
+    reference = reference.resolve()
+    this, other, same = [], [], True
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(pairs):
+            order = [(ROOT, this), (reference, other)]
+            folders = {}
+            for root, times in order if k % 2 == 0 else order[::-1]:
+                folders[root] = Path(tmp) / f"{k}-{'this' if root == ROOT else 'other'}"
+                times.append(_run_paper(root, folders[root]))
+            same &= _same_chunks(folders[ROOT], folders[reference])
+            for folder in folders.values():
+                shutil.rmtree(folder)
+    return {"reference": str(reference), "this_s": this, "reference_s": other,
+            "this_median_s": statistics.median(this),
+            "reference_median_s": statistics.median(other),
+            "ratio": statistics.median(this) / statistics.median(other), "same_results": same}
+
+
 def sweeps(trials: int = 4) -> dict[str, float | bool]:
     """A small search of ``bayesprog tune`` (``trials`` candidates on the small grid, three
     runs each) on two local processes and on a Dask LocalCluster of two worker processes,
@@ -461,7 +520,24 @@ def main(argv: list[str] | None = None) -> int:
                         help="time the whole commands only")
     parser.add_argument("--only-scaling", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--only-session", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--against", type=Path, default=None,
+                        help="another checkout: only the paired comparison of the commands")
+    parser.add_argument("--pairs", type=int, default=5)
     args = parser.parse_args(argv)
+    if args.against is not None:
+        found = paired(args.against, args.pairs)
+        print(f"bayesprog run paper --workers 2 --no-report, {args.pairs} pairs, this checkout "
+              f"against {found['reference']}:")
+        for k, (a, b) in enumerate(zip(found["this_s"], found["reference_s"], strict=True)):
+            print(f"  pair {k + 1}: {a:6.1f} s against {b:6.1f} s")
+        print(f"  medians {found['this_median_s']:.1f} s against "
+              f"{found['reference_median_s']:.1f} s: ratio {found['ratio']:.2f}; the same "
+              f"results: {found['same_results']}")
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"paired": found}, indent=2))
+        print(f"written to {out}")
+        return 0
     if args.only_session:
         print(json.dumps(session(), indent=1))
         return 0

@@ -1,10 +1,12 @@
-"""Compiled inner loops of the explorer (numba): the ICP of the shape cue and the saliency of the
-perceived stimulus on 2-D grids, and the ICP of solids in a volume (the numpy versions spent
-most of an experiment here).
+"""Compiled inner loops of the explorer (numba): the ICP of the shape cue, the saliency of the
+perceived stimulus and the part of the perceived border a run follows on 2-D grids, and the ICP
+of solids in a volume (the numpy versions spent most of an experiment here).
 
 ICP: for every (run, template, start) independently, transform the path into the template's
 frame, pair each path point with its closest point on the template polygon, and solve the 2-D
-Procrustes problem in closed form; repeat. Runs in parallel over (run, template, start).
+Procrustes problem in closed form; repeat. Runs in parallel over (run, template), the starts of
+a search side by side (the loops the compiler vectorises run over them), or over (run,
+template, start) for a few starts.
 
 3-D ICP (:func:`icp3d`): the same for every pose of a batch against a solid's surface sample,
 each point paired with its nearest sample (exactly: the sample is looked for among the
@@ -62,37 +64,97 @@ def _job(job, n_t, n_s):
     return job // (n_t * n_s), (job // n_s) % n_t, job % n_s
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, inline="always")
+def _closest_each(qx, qy, k, poly, nv, cx, cy, best):
+    """:func:`_closest` for the first ``k`` points (``qx``, ``qy``) at once, into ``cx``,
+    ``cy`` and ``best`` (their squared distances): the same arithmetic and the same
+    comparisons, edge by edge, so the same closest points to the bit; the loop over the points
+    is the inner one, branch-free, which the compiler vectorises (point after point, the
+    polygon's few edges ran as a short inner loop and the choice of the closest as
+    unpredictable branches: half of the experiment's ICP time)."""
+    for i in range(k):
+        best[i] = np.inf
+        cx[i] = 0.0
+        cy[i] = 0.0
+    for v in range(nv):
+        ax, ay = poly[v, 0], poly[v, 1]
+        w = v + 1 if v + 1 < nv else 0
+        ex, ey = poly[w, 0] - ax, poly[w, 1] - ay
+        length2 = ex * ex + ey * ey
+        if length2 > 0.0:
+            for i in range(k):
+                t = ((qx[i] - ax) * ex + (qy[i] - ay) * ey) / length2
+                t = min(max(t, 0.0), 1.0)
+                px, py = ax + t * ex, ay + t * ey
+                d2 = (qx[i] - px) ** 2 + (qy[i] - py) ** 2
+                closer = d2 < best[i]
+                best[i] = d2 if closer else best[i]
+                cx[i] = px if closer else cx[i]
+                cy[i] = py if closer else cy[i]
+        else:  # an empty edge (a padded outline's): its vertex, as _closest computes it
+            px, py = ax + 0.0 * ex, ay + 0.0 * ey
+            for i in range(k):
+                d2 = (qx[i] - px) ** 2 + (qy[i] - py) ** 2
+                closer = d2 < best[i]
+                best[i] = d2 if closer else best[i]
+                cx[i] = px if closer else cx[i]
+                cy[i] = py if closer else cy[i]
+
+
+#: From this many starts per run and template, ICP runs them side by side (the search of every
+#: start, 41 of them): a loop over the starts is longer than one over a path's points.
+SIDE_BY_SIDE = 8
+
+
 def icp(path, counts, outlines, nverts, angle, shift, iterations):
     """Refine every start in place; returns the mean distance per start.
 
     path [R, k, 2], of which run r uses its first ``counts[r]`` (>= 1) points; outlines
     [T, V, 2] with ``nverts[t]`` vertices used; angle [R, T, S] and
     shift [R, T, S, 2] are the starts (overwritten with the results).
+
+    Each step of a start: the points in the template frame, their closest points on the
+    outline, then the sums of the Procrustes step in the points' order (a sum in another order
+    would differ in its last bits). Many starts (a search) are refined side by side
+    (:func:`icp_side_by_side`), a few one by one (:func:`icp_one_by_one`): the same arithmetic,
+    the same numbers.
     """
+    refine = icp_side_by_side if angle.shape[2] >= SIDE_BY_SIDE else icp_one_by_one
+    return refine(path, counts, outlines, nverts, angle, shift, iterations)
+
+
+@njit(cache=True, parallel=True)
+def icp_one_by_one(path, counts, outlines, nverts, angle, shift, iterations):
+    """:func:`icp`, each (run, template, start) on its own: a step finds the closest points of
+    all the path's points at once (:func:`_closest_each`)."""
     runs, n_t, n_s = angle.shape
     dist = np.empty((runs, n_t, n_s))
+    width = path.shape[1]
     for job in prange(runs * n_t * n_s):
         r, t, s = _job(job, n_t, n_s)
         poly = outlines[t]
         nv = nverts[t]
         k = counts[r]
+        qx, qy = np.empty(width), np.empty(width)
+        cx, cy, best = np.empty(width), np.empty(width), np.empty(width)
         a, tx, ty = angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1]
         for _ in range(iterations):
             c, sn = math.cos(a), math.sin(a)
-            ssx = ssy = sdx = sdy = cross = dot = 0.0
             for i in range(k):
                 px, py = path[r, i, 0], path[r, i, 1]
                 # the path point in the template frame: R^T (p - shift)
-                qx = c * (px - tx) + sn * (py - ty)
-                qy = -sn * (px - tx) + c * (py - ty)
-                cx, cy, _ = _closest(qx, qy, poly, nv)
-                ssx += cx
-                ssy += cy
+                qx[i] = c * (px - tx) + sn * (py - ty)
+                qy[i] = -sn * (px - tx) + c * (py - ty)
+            _closest_each(qx, qy, k, poly, nv, cx, cy, best)
+            ssx = ssy = sdx = sdy = cross = dot = 0.0
+            for i in range(k):
+                px, py = path[r, i, 0], path[r, i, 1]
+                ssx += cx[i]
+                ssy += cy[i]
                 sdx += px
                 sdy += py
-                cross += cx * py - cy * px
-                dot += cx * px + cy * py
+                cross += cx[i] * py - cy[i] * px
+                dot += cx[i] * px + cy[i] * py
             msx, msy, mdx, mdy = ssx / k, ssy / k, sdx / k, sdy / k
             cross -= k * (msx * mdy - msy * mdx)
             dot -= k * (msx * mdx + msy * mdy)
@@ -102,6 +164,57 @@ def icp(path, counts, outlines, nverts, angle, shift, iterations):
             ty = mdy - (sn * msx + c * msy)
         angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1] = a, tx, ty
         dist[r, t, s] = _mean_distance(path[r], k, poly, nv, a, tx, ty)
+    return dist
+
+
+@njit(cache=True, parallel=True)
+def icp_side_by_side(path, counts, outlines, nverts, angle, shift, iterations):
+    """:func:`icp`, the starts of each (run, template) side by side: a step takes the path's
+    points one after the other, and each point's closest points and its terms of the sums for
+    every start at once (the loops over the starts are the inner ones, which the compiler
+    vectorises; each start's sums still add the points in their order)."""
+    runs, n_t, n_s = angle.shape
+    dist = np.empty((runs, n_t, n_s))
+    for job in prange(runs * n_t):
+        r, t = job // n_t, job % n_t
+        poly = outlines[t]
+        nv = nverts[t]
+        k = counts[r]
+        a, tx, ty = angle[r, t].copy(), shift[r, t, :, 0].copy(), shift[r, t, :, 1].copy()
+        c, sn = np.empty(n_s), np.empty(n_s)
+        ssx, ssy, sdx, sdy = np.empty(n_s), np.empty(n_s), np.empty(n_s), np.empty(n_s)
+        cross, dot = np.empty(n_s), np.empty(n_s)
+        qx, qy = np.empty(n_s), np.empty(n_s)
+        cx, cy, best = np.empty(n_s), np.empty(n_s), np.empty(n_s)
+        for _ in range(iterations):
+            for s in range(n_s):
+                c[s], sn[s] = math.cos(a[s]), math.sin(a[s])
+                ssx[s] = ssy[s] = sdx[s] = sdy[s] = cross[s] = dot[s] = 0.0
+            for i in range(k):
+                px, py = path[r, i, 0], path[r, i, 1]
+                for s in range(n_s):
+                    # the path point in each start's template frame: R^T (p - shift)
+                    qx[s] = c[s] * (px - tx[s]) + sn[s] * (py - ty[s])
+                    qy[s] = -sn[s] * (px - tx[s]) + c[s] * (py - ty[s])
+                _closest_each(qx, qy, n_s, poly, nv, cx, cy, best)
+                for s in range(n_s):
+                    ssx[s] += cx[s]
+                    ssy[s] += cy[s]
+                    sdx[s] += px
+                    sdy[s] += py
+                    cross[s] += cx[s] * py - cy[s] * px
+                    dot[s] += cx[s] * px + cy[s] * py
+            for s in range(n_s):
+                msx, msy, mdx, mdy = ssx[s] / k, ssy[s] / k, sdx[s] / k, sdy[s] / k
+                turn = cross[s] - k * (msx * mdy - msy * mdx)
+                along = dot[s] - k * (msx * mdx + msy * mdy)
+                a[s] = math.atan2(turn, along)
+                cs, ss = math.cos(a[s]), math.sin(a[s])
+                tx[s] = mdx - (cs * msx - ss * msy)
+                ty[s] = mdy - (ss * msx + cs * msy)
+        for s in range(n_s):
+            angle[r, t, s], shift[r, t, s, 0], shift[r, t, s, 1] = a[s], tx[s], ty[s]
+            dist[r, t, s] = _mean_distance(path[r], k, poly, nv, a[s], tx[s], ty[s])
     return dist
 
 
@@ -176,6 +289,81 @@ def perceived_sobel_2d_around(d, mask, out, cells):
         for x in range(max(x0 - 1, 0), min(x0 + 2, nx)):
             for y in range(max(y0 - 1, 0), min(y0 + 2, ny)):
                 out[r, x, y] = _sobel_cell(d, mask, r, x, y)
+
+
+@njit(cache=True, inline="always")
+def _on_border_2d(target, perceived, r, x, y):
+    """Whether cell (x, y) of run r is a probed cell on the perceived border (see
+    runner.cues.perceived_border): perceived, with a perceived neighbour (3 x 3) of the other
+    side (the task's material or not)."""
+    if not perceived[r, x, y]:
+        return False
+    nx, ny = perceived.shape[1], perceived.shape[2]
+    inside = target[r, x, y]
+    for cx in range(max(x - 1, 0), min(x + 2, nx)):
+        for cy in range(max(y - 1, 0), min(y + 2, ny)):
+            if perceived[r, cx, cy] and target[r, cx, cy] != inside:
+                return True
+    return False
+
+
+@njit(cache=True)
+def followed_border_2d(target, perceived, path, out):
+    """The part of the perceived border that each run follows, into ``out`` [R, nx * ny]
+    (booleans): of the probed cells on the perceived border (``target`` [R, nx, ny] the cells
+    perceived as the task's material, ``perceived`` [R, nx, ny] those perceived as either side),
+    the ones connected (8 neighbours) to the last cell of the run's ``path`` [steps, R] (flat
+    cells) that lies on the border; none when no cell of the path does. A flood fill from that
+    cell: the cells it reaches are those of its connected component, the border's other cells
+    are never looked at."""
+    runs, nx, ny = perceived.shape
+    stack = np.empty(nx * ny, np.int64)
+    for r in range(runs):
+        out[r, :] = False
+        seed = -1
+        for k in range(path.shape[0] - 1, -1, -1):
+            cell = path[k, r]
+            if _on_border_2d(target, perceived, r, cell // ny, cell % ny):
+                seed = cell
+                break
+        if seed < 0:
+            continue
+        out[r, seed] = True
+        stack[0] = seed
+        top = 1
+        while top:
+            top -= 1
+            cell = stack[top]
+            x, y = cell // ny, cell % ny
+            for cx in range(max(x - 1, 0), min(x + 2, nx)):
+                for cy in range(max(y - 1, 0), min(y + 2, ny)):
+                    near = cx * ny + cy
+                    if not out[r, near] and _on_border_2d(target, perceived, r, cx, cy):
+                        out[r, near] = True
+                        stack[top] = near
+                        top += 1
+
+
+@njit(cache=True)
+def marked_first(marked, width):
+    """The first ``width`` cells of each run ``marked`` [R, cells] (booleans) in the order of
+    a stable sort that puts the marked ones first: the marked cells in order, then the others
+    in order (``np.argsort(~marked, axis=1, kind="stable")[:, :width]``), [R, width]."""
+    runs, cells = marked.shape
+    out = np.empty((runs, width), np.int64)
+    for r in range(runs):
+        n = 0
+        for c in range(cells):
+            if n < width and marked[r, c]:
+                out[r, n] = c
+                n += 1
+        for c in range(cells):
+            if n >= width:
+                break
+            if not marked[r, c]:
+                out[r, n] = c
+                n += 1
+    return out
 
 
 @njit(cache=True, parallel=True)

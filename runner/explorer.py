@@ -15,11 +15,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 import bayesprog
 from bayesprog import Program, check_size
-from runner._kernels import perceived_sobel_2d_around
+from runner._kernels import followed_border_2d, marked_first, perceived_sobel_2d_around
 from runner.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
 from runner.scenario import Scenario
 from runner.shape import (
@@ -100,7 +99,6 @@ class Explorer:
         target = programs.get("target") or scenario.target
         self.target = target.ablate(*ablate) if ablate else target
         self.ablated = tuple(ablate)
-        self.target_no_shape = self.target.ablate("P(R | O)")
         names = self.target.variables["R"].states  # type: ignore[union-attr]
         self.shape_names = names
         self.outlines = pad_outlines([scenario.templates[n][0] for n in names])
@@ -275,6 +273,13 @@ class Explorer:
         """The probed cells of the perceived border that the walker follows, [runs, cells]: of
         the perceived border of the task's material, the connected part (8-neighbours; 26 in a
         volume) that holds the last probed border cell."""
+        if self.dims == 2:  # a flood fill from that cell (the border's other parts untouched)
+            target, perceived = self.percept()
+            part = np.empty((self.runs, len(self.centres)), bool)
+            followed_border_2d(target, perceived, np.stack(self.path), part)
+            return part
+        from scipy import ndimage
+
         border = perceived_border(*self.percept(), dims=self.dims)
         structure = np.zeros((3,) * (1 + self.dims), bool)
         structure[1] = True  # connected within a run's grid, never across runs
@@ -294,9 +299,10 @@ class Explorer:
 
     def border_points(self, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Cells ``border`` [runs, cells] as points [runs, K, dims] (each run's first ``counts[r]``
-        rows; the rest padding) and their counts [runs]."""
+        rows, in the cells' order; the rest padding: the first other cells) and their counts
+        [runs]."""
         counts = border.sum(axis=1)
-        cells = np.argsort(~border, axis=1, kind="stable")[:, :max(int(counts.max()), 1)]
+        cells = marked_first(border, max(int(counts.max()), 1))
         return self.centres[cells], counts
 
     def shape_cue(self) -> tuple[Registration, np.ndarray]:
@@ -324,27 +330,25 @@ class Explorer:
             self.registration = reg
         ask_start = time.perf_counter()
         self.timings["shape"] += ask_start - shape_start
-        nxt = np.empty(self.runs, dtype=np.int64)
-        probabilities = np.empty((self.runs, len(self.centres)))
-        for group, with_shape in ((np.flatnonzero(ready), True), (np.flatnonzero(~ready), False)):
-            if not group.size:
-                continue
-            everyone = group.size == self.runs
-            rows = {k: (v[group] if isinstance(v, np.ndarray) and not everyone else v)
-                    for k, v in evidence.items()}
-            if with_shape:
-                assert reg is not None
-                inputs = {"templates": reg.points[group], "errors": reg.error[group]}
-                program = self.target
-            else:
-                # no shape evidence: P(R | O) is uniform, and so the soft evidence on R is moot
-                inputs = {"errors": np.full(len(self.shape_names), 0.5)}
-                program = self.target_no_shape
-            answer = program.ask("next_target", rows, inputs=inputs,
-                                 rng=[self.rngs[r] for r in group])
-            assert isinstance(answer, bayesprog.MapResult)
-            nxt[group] = answer.indices[:, 0]
-            probabilities[group] = answer.posterior.probabilities
+        if reg is None:
+            # no shape cue: P(R | O) is uniform, and so the soft evidence on R is moot
+            inputs: dict[str, np.ndarray] = {"errors": np.full(len(self.shape_names), 0.5)}
+            ablate: dict[str, np.ndarray] | None = None
+        else:
+            # one question for every run: the runs without enough border cells for a shape
+            # cue ask with P(R | O) uniform (their template points are not read: zeros stand
+            # in for those never registered) and errors of 1/2, which make the soft evidence
+            # on R uniform: summed over R it then doubles their cells' products exactly, and
+            # their answers are those of pi_tar without P(R | O) to the bit (another likelihood
+            # would scale them by a number that is not a power of two)
+            inputs = {"templates": np.where(ready[:, None, None, None], reg.points, 0.0),
+                      "errors": np.where(ready[:, None], reg.error, 0.5)}
+            ablate = {"P(R | O)": ~ready}
+        answer = self.target.ask("next_target", evidence, inputs=inputs, rng=self.rngs,
+                                 ablate=ablate)
+        assert isinstance(answer, bayesprog.MapResult)
+        nxt = answer.indices[:, 0]
+        probabilities = answer.posterior.probabilities
         self.last = Decision(len(self.path), i, s, u, None if reg is None else reg.error,
                              None if reg is None else reg.points, nxt, ready)
         self.target_probabilities = probabilities

@@ -261,6 +261,11 @@ class Form:
     soft_evidence: ClassVar[bool] = False
     #: the term is another program's answer (loaded with the program, shown by its question)
     subprogram: ClassVar[bool] = False
+    #: over a real child, its log density at each value reads that value alone (and literal
+    #: parameters): a field whose values changed at a few cells since a layout's last question
+    #: has its log densities computed again at those cells only
+    #: (:mod:`bayesprog.inference.recurring`)
+    pointwise: ClassVar[bool] = False
 
     @property
     def display_name(self) -> str:

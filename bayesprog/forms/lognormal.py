@@ -68,6 +68,7 @@ class LogNormal(Form):
     location_scale = ("mu", "sigma")
 
     name = "lognormal"
+    pointwise = True
     title = "LogNormal"
     child_kinds = ("continuous",)
     params = (

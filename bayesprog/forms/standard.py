@@ -89,6 +89,7 @@ class Uniform(Form):
     """
 
     name = "uniform"
+    pointwise = True
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         child = ctx.child
@@ -117,6 +118,7 @@ class Normal(Form):
     """``N(x; mean[parents], sigma[parents])`` (not truncated to the variable's support)."""
 
     name = "normal"
+    pointwise = True
     child_kinds = ("continuous",)
     params = (
         Param("mean", real, doc="mean, a literal or a table keyed by parent states"),
@@ -146,6 +148,7 @@ class Beta(Form):
     """``Beta(x; a[parents], b[parents])`` on [0, 1]."""
 
     name = "beta"
+    pointwise = True
     child_kinds = ("continuous",)
     params = (
         Param("a", positive, doc="first shape parameter (alpha), > 0"),
@@ -214,6 +217,7 @@ class GaussianMixture(Form):
     """
 
     name = "gmm"
+    pointwise = True
     normalized = False
     params = (
         Param("means", real, event_ndim=1, doc="component means: [K] or, over a grid, [K, D]"),
@@ -263,15 +267,23 @@ class GaussianMixture(Form):
         if (shape is None or len(shape) < 2 or means.shape[gi] != 1 or s.shape[-1] != 1
                 or "weights" in ctx.params or not np.all(floor > 0) or floor.shape[gi] != 1):
             return None
+        from bayesprog.forms.compiled import floored, gaussian_exponents
+
         dim = len(shape)
         m = np.take(means, 0, axis=gi)  # [b, ..other.., K, D]
         sig = s[..., 0]  # [b, ..other.., 1]
         on_grid = coords.reshape(*shape, dim)
         along = [on_grid[tuple(slice(None) if b == a else 0 for b in range(dim)) + (a,)]
                  for a in range(dim)]  # the coordinates of the cells along each axis
-        g = [np.exp(-0.5 * ((x - m[..., a:a + 1]) / sig[..., None]) ** 2)  # [.., K, n_a]
-             for a, x in enumerate(along)]
-        k = m.shape[-2]
+        lead, k = m.shape[:-2], m.shape[-2]
+        rows = int(np.prod(lead, dtype=np.int64))
+        deviation = np.ascontiguousarray(np.broadcast_to(sig[..., 0], lead)).reshape(rows)
+        g = []  # per axis, exp(-0.5 * ((x - m) / sigma) ** 2): [.., K, n_a]
+        for a, x in enumerate(along):
+            term = np.empty((rows, k, len(x)))
+            gaussian_exponents(np.ascontiguousarray(x, dtype=float),
+                               np.ascontiguousarray(m[..., a]).reshape(rows, k), deviation, term)
+            g.append(np.exp(term, out=term).reshape(lead + (k, len(x))))
         cells = int(np.prod(shape))
         # the outer product of the leading axes' terms holds K x (all cells but the last axis)
         # values: taken over a few components at a time, it never exceeds the mixture's size
@@ -282,13 +294,22 @@ class GaussianMixture(Form):
             for factor in g[1:-1]:  # [.., step, n_0 * .. * n_a]
                 part = factor[..., lo:lo + step, :]
                 head = (head[..., :, None] * part[..., None, :]).reshape(*head.shape[:-1], -1)
-            mix = mix + np.swapaxes(head, -1, -2) @ g[-1][..., lo:lo + step, :]
-        mix = mix.reshape(mix.shape[:-2] + (cells,))
-        mix = mix / (k * (2 * np.pi * sig**2) ** (dim / 2))
+            product = np.swapaxes(head, -1, -2) @ g[-1][..., lo:lo + step, :]
+            mix = product if lo == 0 else mix + product
         cell = grid.cell or 1.0
         f = np.take(floor, 0, axis=gi)[..., None]  # [b, ..other.., 1]
-        value = (1 - f) * mix + f / (cells * cell**dim)
-        out = np.log(value)  # [b, ..other.., cells]
+        # (1 - f) * mix / (k (2 pi sigma^2)^(D/2)) + f / V, then its log, in place
+        divisor, keep, uniform = (
+            np.ascontiguousarray(np.broadcast_to(np.asarray(v, float)[..., 0], lead)).reshape(rows)
+            for v in (k * (2 * np.pi * sig**2) ** (dim / 2), 1 - f, f / (cells * cell**dim)))
+        out = np.empty((rows, cells))
+        floored(np.ascontiguousarray(mix).reshape(rows, cells), divisor, keep, uniform, out)
+        # far from every mean the mixture is below the floor's last bit: the value there is
+        # the floor's share itself, whose log is taken once
+        floor = out == uniform[:, None]
+        np.log(out, out=out, where=~floor)
+        np.copyto(out, np.log(uniform)[:, None], where=floor)
+        out = out.reshape(lead + (cells,))  # [b, ..other.., cells]
         return np.moveaxis(out[..., None], -2, gi)[..., 0]
 
     def keyable(self, child: Variable, parents: tuple[Variable, ...]) -> list[Discrete]:

@@ -30,6 +30,9 @@ class Bound:
     continuous: dict[str, ParamValue] = field(default_factory=dict)
     inputs: dict[str, ParamValue] = field(default_factory=dict)
     soft: dict[str, ParamValue] = field(default_factory=dict)
+    #: terms made uniform on some rows, by their text (``str(term.expression)``): where
+    #: (``[size]`` booleans, some of them True)
+    ablated: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def size(self) -> int:
@@ -37,18 +40,27 @@ class Bound:
 
     def rows(self, start: int, stop: int) -> Bound:
         """Rows ``start`` to ``stop`` of the flat batch (values without a batch axis kept)."""
+        return self._picked(slice(start, stop), min(stop, self.size) - start)
 
+    def take(self, rows: np.ndarray) -> Bound:
+        """The rows ``rows`` (flat indices, in their order) of the flat batch, as a batch of
+        their own (values without a batch axis kept)."""
+        return self._picked(np.asarray(rows, dtype=np.intp), len(rows))
+
+    def _picked(self, index: slice | np.ndarray, size: int) -> Bound:
         def cut(value: ParamValue) -> ParamValue:
-            return ParamValue(value.axes, value.array[start:stop], True) if value.batched \
+            return ParamValue(value.axes, value.array[index], True) if value.batched \
                 else value
 
+        ablated = {k: v[index] for k, v in self.ablated.items()}
         return Bound(
-            (min(stop, self.size) - start,),
-            {k: v[start:stop] if isinstance(v, np.ndarray) else v
+            (size,),
+            {k: v[index] if isinstance(v, np.ndarray) else v
              for k, v in self.discrete.items()},
             {k: cut(v) for k, v in self.continuous.items()},
             {k: cut(v) for k, v in self.inputs.items()},
-            {k: cut(v) for k, v in self.soft.items()})
+            {k: cut(v) for k, v in self.soft.items()},
+            {k: v for k, v in ablated.items() if v.any()})
 
 
 def _flatten(arr: np.ndarray, own: tuple[int, ...], batch_shape: tuple[int, ...],
@@ -67,9 +79,14 @@ def bind(
     evidence: Mapping[str, Any] | None,
     inputs: Mapping[str, Any] | None,
     soft: Mapping[str, Any] | None,
+    ablate: Mapping[str, Any] | None = None,
 ) -> Bound:
+    """``evidence``, ``inputs`` and ``soft`` evidence checked and flattened to one batch
+    axis; ``ablate``: the rows on which terms (by their text, as ``str(term.expression)``)
+    are made uniform, booleans that broadcast with the rest (a term ablated on no row is left
+    out)."""
     expr = question.expression
-    if not inputs and not soft:
+    if not inputs and not soft and not ablate:
         named = _named_states(program, expr, evidence)
         if named is not None:
             return named
@@ -123,6 +140,12 @@ def bind(
             raise QuestionError(f"soft evidence on {name}: expected {soft_var.card} non-negative "
                                 f"likelihoods (one per state), found shape {arr.shape}")
         staged.append(("soft", name, arr, arr.shape[:-1], 1))
+    for name, value in (ablate or {}).items():
+        arr = np.asarray(value)
+        if arr.dtype != np.bool_:
+            raise QuestionError(f"ablate {name}: expected booleans (True on the rows where the "
+                                f"term is uniform), found {short_repr(value)}")
+        staged.append(("ablated", name, arr, arr.shape, 0))
     try:
         batch_shape = tuple(np.broadcast_shapes(*(s[3] for s in staged))) if staged else ()
     except ValueError:
@@ -139,6 +162,10 @@ def bind(
             bound.continuous[name] = ParamValue(axes, flat, batched)
         elif kind == "input":
             bound.inputs[name] = ParamValue(program.inputs[name].axes, flat, batched)
+        elif kind == "ablated":
+            rows = np.broadcast_to(flat, (bound.size,))
+            if rows.any():
+                bound.ablated[name] = rows
         else:
             bound.soft[name] = ParamValue((name,), flat, batched)
     return bound

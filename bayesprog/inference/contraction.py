@@ -31,6 +31,7 @@ from bayesprog.inference.factors import (
 from bayesprog.inference.methods.base import answer
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
+from bayesprog.inference.recurring import Recurring
 from bayesprog.limits import limit
 from bayesprog.variables import discrete
 
@@ -216,8 +217,8 @@ def first_question(plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | N
     costs several times what answering it this way does, and pays off only over the questions
     of a layout asked again: the cost model plans a layout at its second question."""
     bound, program = plan.bound, plan.program
-    if bound.size != 1 or bound.continuous or bound.inputs or bound.soft or not plan.searched \
-            or plan.latent:
+    if bound.size != 1 or bound.continuous or bound.inputs or bound.soft or bound.ablated \
+            or not plan.searched or plan.latent:
         return None
     values = _one_row(bound)
     factors: list[tuple[tuple[str, ...], np.ndarray]] = []
@@ -258,11 +259,12 @@ class Sliceable:
 
     def __init__(self, plan: QuestionPlan) -> None:
         program, observed = plan.program, set(plan.layout.key[1])
+        ablated = set(plan.layout.key[5])  # (terms uniform on some rows: they vary by row)
         self.tables: list[tuple[tuple[str, ...], tuple[str, ...], np.ndarray]] = []
         self.others = []
         self.log_scale = 0.0
         for term in plan.terms:
-            if not is_static(term):
+            if not is_static(term) or str(term.expression) in ablated:
                 self.others.append(term)
                 continue
             table, top = static_table(program, term)
@@ -273,6 +275,7 @@ class Sliceable:
             self.log_scale += top
         self._fold(plan)
         self.single: Any = None  # the contraction of one row of evidence, once made
+        self.recurring = Recurring()
 
     def _fold(self, plan: QuestionPlan) -> None:
         """Sum out, once, the variables that only evidence-free tables hold: such tables
@@ -409,8 +412,9 @@ class Sliceable:
             with np.errstate(divide="ignore"):
                 offset = self.log_scale + np.log(scale)
         if self.others or bound.soft:
-            more, more_offset = rescaled(question_factors(plan.program, self.others, bound),
-                                         bound.size)
+            # the factors that read the evidence: computed again where it changed since the
+            # layout's last question
+            more, more_offset = self.recurring.operands(plan.program, self.others, bound)
             operands += more
             offset = offset + more_offset
         return operands, offset

@@ -412,6 +412,9 @@ class InferenceCache:
     layouts: dict[Any, Any] = field(default_factory=dict)
     #: factors of terms that depend on no evidence nor input, by id of the term
     static_factors: dict[int, Factor] = field(default_factory=dict)
+    #: the program's terms made uniform, for the questions that ablate them on some rows, by
+    #: id of the term
+    uniform_terms: dict[int, Any] = field(default_factory=dict)
     #: the same factors in the probability domain, each divided by its largest entry, and
     #: the log of that entry
     static_tables: dict[int, tuple[np.ndarray, float]] = field(default_factory=dict)

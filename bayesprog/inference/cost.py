@@ -15,7 +15,8 @@ def ranked(plan: QuestionPlan, exact: bool = True, quick: bool = False
     marked ``floor``, see :func:`refined`)."""
     found = []
     for method in registered_methods().values():
-        if (exact and not method.exact) or (plan.latent and not method.continuous):
+        if (exact and not method.exact) or (plan.latent and not method.continuous) or (
+                plan.bound.ablated and not method.ablates_rows):
             continue
         cost = method.quick_estimate(plan) if quick else method.estimate(plan)
         if cost is not None:
@@ -44,8 +45,16 @@ def in_order(methods: list[tuple[Method, Cost]]) -> list[tuple[Method, Cost]]:
 def unanswerable(plan: QuestionPlan) -> str:
     """Why no method answers ``plan``: each method's own reason."""
     reasons = [f"{m.name}: {why}" for m in registered_methods().values()
-               if (why := m.why_not(plan)) is not None]
+               if (why := why_not(m, plan)) is not None]
     unknown = ", ".join(plan.latent)
     head = (f"{plan.question.expression}: no method answers with {unknown} unknown"
             if plan.latent else f"no method answers {plan.question.expression}")
     return head + ("; " + "; ".join(reasons) if reasons else "")
+
+
+def why_not(method: Method, plan: QuestionPlan) -> str | None:
+    """Why ``method`` does not answer ``plan`` (None: it does, or has nothing to say)."""
+    if plan.bound.ablated and not method.ablates_rows:
+        return ("a term made uniform on some rows of the batch (ablate=...) is answered by "
+                + ", ".join(m.name for m in registered_methods().values() if m.ablates_rows))
+    return method.why_not(plan)

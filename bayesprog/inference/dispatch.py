@@ -15,7 +15,7 @@ from bayesprog.errors import QuestionError
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
-from bayesprog.inference.cost import ranked, refined, unanswerable
+from bayesprog.inference.cost import ranked, refined, unanswerable, why_not
 from bayesprog.inference.density import Density
 from bayesprog.inference.methods import (
     Cost,
@@ -247,14 +247,15 @@ def _by(name: str, plan: QuestionPlan) -> Posterior | Density:
     key = (name, options, registry_version(), plan.bound.size.bit_length())
     found = estimates.get(key)
     if found is None:
-        cost = None if plan.latent and not method.continuous else method.estimate(plan)
+        cost = None if (plan.latent and not method.continuous) or (
+            plan.bound.ablated and not method.ablates_rows) else method.estimate(plan)
         found = estimates[key] = (plan.bound.size, cost)
     size, cost = found
     if cost is not None:
         cost = Cost(cost.operations / size * plan.bound.size, cost.memory / size * plan.bound.size)
     if cost is None:
-        why = method.why_not(plan) or (f"{', '.join(plan.latent)} unknown and continuous"
-                                       if plan.latent and not method.continuous else None)
+        why = why_not(method, plan) or (f"{', '.join(plan.latent)} unknown and continuous"
+                                        if plan.latent and not method.continuous else None)
         raise QuestionError(f"method {name!r} does not answer {plan.question.expression}"
                             + (f": {why}" if why else " (see the methods in the language "
                                "reference)"))
@@ -300,9 +301,11 @@ def ask(
     rng: Any = None,
     method: str | None = None,
     options: Mapping[str, Any] | None = None,
+    ablate: Mapping[str, Any] | None = None,
 ) -> Posterior | MapResult | Density:
-    """Answer ``question`` (posterior or MAP, by its kind) for batched evidence."""
-    bound = bind(program, question, evidence, inputs, soft)
+    """Answer ``question`` (posterior or MAP, by its kind) for batched evidence; ``ablate``:
+    terms (by their text) made uniform on the rows where it is True (see :func:`bind`)."""
+    bound = bind(program, question, evidence, inputs, soft, ablate)
     if bound.batch_shape and bound.size == 0:  # an empty batch: empty answers of its shape
         posterior = _empty_answer(program, question, bound.batch_shape)
     else:

@@ -9,7 +9,7 @@ from collections.abc import Collection, Iterable
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext
+from bayesprog.forms import FormulaParam, InputRef, ParamValue, TermContext, get_form
 from bayesprog.forms.standard import Categorical
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import Factor
@@ -152,11 +152,28 @@ def observed_part(term: Term, value: ParamValue | None
 
 
 def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
+    """The log-factor of ``term`` over its discrete axes for ``bound``'s evidence and inputs
+    (the observed axes not yet sliced): ``[size] + cards`` when it varies by row, else
+    ``cards``."""
+    if bound.ablated:
+        rows = bound.ablated.get(str(term.expression))
+        if rows is not None:
+            return partly_ablated(program, term, bound, rows)
     static = is_static(term)
     if static:
         cached = program.inference_cache.static_factors.get(id(term))
         if cached is not None:
             return cached
+    log, batched = term_log(program, term, bound)
+    factor = as_factor(program, term, log, batched, bound.size)
+    if static:
+        program.inference_cache.static_factors[id(term)] = factor
+    return factor
+
+
+def term_params(program: ProgramLike, term: Term, bound: Bound) -> dict[str, ParamValue]:
+    """The term's parameters for ``bound``: its inputs bound and checked, its formulas
+    evaluated, its literals as they are."""
     params: dict[str, ParamValue] = {}
     for key, param in term.params.items():
         if isinstance(param, InputRef):
@@ -165,8 +182,27 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
             params[key] = formula_value(program.variables, param, bound, f"term {term.label}")
         else:
             params[key] = param
+    return params
+
+
+def term_log(program: ProgramLike, term: Term, bound: Bound) -> tuple[np.ndarray, bool]:
+    """The log values of ``term`` as its form gives them for ``bound`` (``[size or 1]`` then
+    one axis per discrete axis of the term, of its card or 1; a missing field value's 0), and
+    whether they vary by row."""
+    params = term_params(program, term, bound)
     observed = bound.continuous.get(term.child.name) if not term.child.is_discrete else None
     value, missing = observed_part(term, observed)
+    log = log_values(program, term, params, value, missing)
+    batched = log.shape[0] != 1 or any(p.batched for p in params.values()) or bool(
+        value is not None and value.batched)
+    return log, batched
+
+
+def log_values(program: ProgramLike, term: Term, params: dict[str, ParamValue],
+               value: ParamValue | None, missing: ParamValue | None) -> np.ndarray:
+    """The log values of ``term`` (see :func:`term_log`) for its parameters, the value of its
+    child (a real child's, with its missing entries moved into the support) and where that
+    value is missing."""
     axes = term.axes
     cards = tuple(discrete(program.variables[a]).card for a in axes)
     ctx = TermContext(term.child, term.parents, axes, cards, params, value, program.variables,
@@ -179,21 +215,54 @@ def term_factor(program: ProgramLike, term: Term, bound: Bound) -> Factor:
             # a field value that is not observed: the density integrates to one over it
             # (masked before broadcasting over the axes the value does not vary with)
             log = np.where(missing.aligned(axes, 0), 0.0, log)
-        full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
+        np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None
-    batched = full[0] != 1 or any(p.batched for p in params.values()) or bool(
-        value is not None and value.batched
-    )
+    return log
+
+
+def as_factor(program: ProgramLike, term: Term, log: np.ndarray, batched: bool,
+              size: int) -> Factor:
+    """The factor of ``term`` from its log values (:func:`term_log`), broadcast over its
+    axes (a view): ``[size] + cards`` when ``batched``, else ``cards``."""
+    cards = tuple(discrete(program.variables[a]).card for a in term.axes)
+    full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     log = np.broadcast_to(log, full)
     if not batched:
         log = log[0]
-    elif log.shape[0] != bound.size:
-        log = np.broadcast_to(log, (bound.size,) + cards)
-    factor = Factor(axes, log, batched)
-    if static:
-        program.inference_cache.static_factors[id(term)] = factor
-    return factor
+    elif log.shape[0] != size:
+        log = np.broadcast_to(log, (size,) + cards)
+    return Factor(term.axes, log, batched)
+
+
+def uniform_term(program: ProgramLike, term: Term) -> Term:
+    """``term`` made uniform, as an ablation makes it (:meth:`bayesprog.Program.ablate`);
+    made once per program (its factor is then kept as a static term's)."""
+    made = program.inference_cache.uniform_terms
+    found = made.get(id(term))
+    if found is None:
+        uniform = get_form("uniform")
+        assert uniform is not None
+        found = made[id(term)] = Term(term.expression, term.child, term.parents, uniform, {},
+                                      term.position, description="ablated: uniform")
+    return found
+
+
+def partly_ablated(program: ProgramLike, term: Term, bound: Bound, rows: np.ndarray) -> Factor:
+    """The factor of a term made uniform on the rows ``rows`` (``[size]`` booleans) of the
+    batch: there, the uniform's (the factor of an ablated term); on the other rows, the
+    term's own, computed for those rows alone (a term whose inputs are not read where it is
+    ablated)."""
+    uniform = term_factor(program, uniform_term(program, term), Bound(()))
+    if rows.all():
+        return uniform
+    kept = np.flatnonzero(~rows)
+    own = term_factor(program, term, bound.take(kept))
+    cards = uniform.log.shape
+    log = np.empty((bound.size,) + cards)
+    log[rows] = uniform.log
+    log[kept] = own.log if own.batched else own.log[np.newaxis]
+    return Factor(uniform.axes, log, True)
 
 
 def slice_factor(f: Factor, bound: Bound) -> Factor:
@@ -244,13 +313,19 @@ def _same_axes_summed(factors: list[Factor]) -> list[tuple[Factor, list[Factor]]
             continue
         axes = group[0].axes
         total: np.ndarray | None = None
+        owned = False  # (whether total is a sum made here, which the next part is added to)
         for f in group:
             lead = 1 if f.batched else 0
             log = f.log if f.axes == axes else np.transpose(
                 f.log, list(range(lead)) + [lead + f.axes.index(a) for a in axes])
             if not f.batched and any(g.batched for g in group):
                 log = log[np.newaxis]
-            total = log if total is None else total + log
+            if total is None:
+                total = log
+            elif owned and np.broadcast_shapes(total.shape, log.shape) == total.shape:
+                total += log
+            else:
+                total, owned = total + log, True
         assert total is not None
         out.append((Factor(axes, total, any(f.batched for f in group)), group))
     return out
@@ -267,19 +342,47 @@ def rescaled(factors: list[Factor], size: int, merge: bool = True
     operands: list[Factor] = []
     pairs = _same_axes_summed(factors) if merge else [(f, [f]) for f in factors]
     for f, parts in pairs:
-        m = _row_max(f)
-        # +inf in a part (shows as +inf, or NaN where another part is -inf)
-        if np.any(m == np.inf) or (len(parts) > 1 and np.isnan(m).any()):
-            for part in parts:
-                if np.any(_row_max(part) == np.inf):
-                    raise QuestionError(f"an infinite density over "
-                                        f"{', '.join(part.axes) or 'the evidence'}: a value "
-                                        "sits on a singular point of its density")
-        if not f.axes:
-            offset += np.broadcast_to(f.log, (size,)) if f.batched else f.log
-            continue
-        m = np.where(np.isfinite(m), m, 0.0)
-        offset += m.reshape(-1) if f.batched else m.reshape(())
-        scaled = f.log - m  # (a new array: its exponential in place)
-        operands.append(Factor(f.axes, np.exp(scaled, out=scaled), f.batched))
+        operand, share = rescale_one(f, parts, size)
+        offset += share
+        if operand is not None:
+            operands.append(operand)
     return operands, offset
+
+
+def rescale_one(f: Factor, parts: list[Factor], size: int
+                ) -> tuple[Factor | None, np.ndarray]:
+    """One factor of :func:`rescaled`: ``f`` (the sum of ``parts`` in log space) in the
+    probability domain, divided by its largest value (per row when batched), and the log of
+    that divisor, its share of the offset (``[size]`` when batched); a factor without axes is
+    all offset (None, its log)."""
+    m = _row_max(f)
+    # +inf in a part (shows as +inf, or NaN where another part is -inf)
+    if np.any(m == np.inf) or (len(parts) > 1 and np.isnan(m).any()):
+        for part in parts:
+            if np.any(_row_max(part) == np.inf):
+                raise QuestionError(f"an infinite density over "
+                                    f"{', '.join(part.axes) or 'the evidence'}: a value "
+                                    "sits on a singular point of its density")
+    if not f.axes:
+        return None, np.broadcast_to(f.log, (size,)) if f.batched else f.log
+    m = np.where(np.isfinite(m), m, 0.0)
+    scaled = f.log - m  # (a new array: its exponential in place)
+    return (Factor(f.axes, exp_shared_floor(scaled, f.batched), f.batched),
+            m.reshape(-1) if f.batched else m.reshape(()))
+
+
+def exp_shared_floor(values: np.ndarray, batched: bool) -> np.ndarray:
+    """``exp(values)`` in place. Where a quarter or more of a factor's entries equal its
+    smallest (per row when ``batched``; a potential's floor, as a gmm's far from its means),
+    those share one exponential: the same number for each, computed once."""
+    axes = tuple(range(1 if batched else 0, values.ndim))
+    if not axes or values.size < 64:
+        return np.exp(values, out=values)
+    with np.errstate(invalid="ignore"):
+        low = np.min(values, axis=axes, keepdims=True)
+        floor = values == low
+    if 4 * np.count_nonzero(floor) < values.size:
+        return np.exp(values, out=values)
+    np.exp(values, out=values, where=~floor)
+    np.copyto(values, np.exp(low), where=floor)
+    return values

@@ -27,7 +27,8 @@ from bayesprog.inference.relevance import family, requisite
 from bayesprog.inference.schedule import Schedule
 from bayesprog.model import Term
 
-#: (searched, observed discrete, observed continuous, inputs, soft evidence): names only
+#: (searched, observed discrete, observed continuous, inputs, soft evidence, terms ablated on
+#: some rows): names only
 LayoutKey = tuple[tuple[str, ...], ...]
 
 
@@ -57,7 +58,8 @@ def layout_key(question: Question, bound: Bound) -> LayoutKey:
     return (question.expression.left, tuple(sorted(bound.discrete)),
             tuple(sorted(bound.continuous)) if bound.continuous else (),
             tuple(sorted(bound.inputs)) if bound.inputs else (),
-            tuple(sorted(bound.soft)) if bound.soft else ())
+            tuple(sorted(bound.soft)) if bound.soft else (),
+            tuple(sorted(bound.ablated)) if bound.ablated else ())
 
 
 @dataclass
@@ -80,7 +82,7 @@ class Layout:
     def ancestral_names(self) -> set[str]:
         """The searched, observed and soft-evidence variables and their ancestors
         (:func:`~bayesprog.inference.factors.relevant_names`)."""
-        searched, observed, continuous, _, soft = self.key
+        searched, observed, continuous, _, soft, _ = self.key
         return relevant_names(self.program, searched, observed + continuous, soft)
 
     @once
@@ -100,7 +102,7 @@ class Layout:
     def requisite_names(self) -> set[str] | None:
         """The variables whose terms the answer needs (:mod:`~bayesprog.inference.relevance`)
         when every unknown variable is discrete; None: those of :attr:`ancestral_names`."""
-        searched, observed, continuous, _, soft = self.key
+        searched, observed, continuous, _, soft, _ = self.key
         if self.latent or not searched:
             return None
         return requisite(self.program, searched, observed + continuous, soft)
@@ -134,8 +136,8 @@ class Layout:
         """Whether the answer is the same whatever the evidence's values: no requisite term
         reads an observed variable, an input or soft evidence (the searched variables are
         independent of the evidence)."""
-        searched, observed, continuous, inputs, soft = self.key
-        if inputs or soft or not searched or self.latent:
+        searched, observed, continuous, inputs, soft, ablated = self.key
+        if inputs or soft or ablated or not searched or self.latent:
             return False
         return all(is_static(t) for t in self.terms) and not any(
             name in self.touched for name in observed + continuous)

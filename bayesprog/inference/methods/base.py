@@ -62,6 +62,10 @@ class Method:
     fallback: ClassVar[bool] = False
     #: it answers some first questions of a layout with nothing planned (:meth:`first_question`)
     answers_first: ClassVar[bool] = False
+    #: it answers questions that make a term uniform on some rows of their batch
+    #: (``ask(..., ablate=...)``): it builds every term's factor for the question's own rows
+    #: (:func:`~bayesprog.inference.factors.term_factor`)
+    ablates_rows: ClassVar[bool] = False
 
     def why_not(self, plan: QuestionPlan) -> str | None:
         """Why this method does not answer ``plan`` (None: it does, or has nothing to say)."""

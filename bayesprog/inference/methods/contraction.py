@@ -26,6 +26,7 @@ class ContractionMethod(Method):
 
     name = "contraction"
     answers_first = True
+    ablates_rows = True
 
     def first_question(self, plan: QuestionPlan) -> tuple[np.ndarray, np.ndarray, int] | None:
         return first_question(plan)

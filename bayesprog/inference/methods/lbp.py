@@ -30,6 +30,7 @@ EXPECTED_ITERATIONS = 25
 class LoopyBeliefPropagation(Method):
     name = "lbp"
     exact = False
+    ablates_rows = True
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
         sizes = [plan.free_size(t.axes) for t in plan.terms] or [1]
