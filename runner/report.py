@@ -43,8 +43,10 @@ from runner.verdicts import (  # noqa: F401  (the report's statistics, read from
 )
 
 
-def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
-    """Fig. 10: Gamma(k) mean +- SEM over runs, one curve per configuration, a panel per task."""
+def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path, band: float = 1.0,
+                     title: str = "") -> None:
+    """Fig. 10: Gamma(k), the mean over runs shaded +- ``band`` SEM (1: the SEM, as the paper
+    draws it; 1.96: a 95% interval), one curve per configuration, a panel per task."""
     fig = figures.figure(figsize=(5 * len(spec.tasks), 3.9))
     axes = fig.subplots(1, len(spec.tasks), squeeze=False)
     for ax, task in zip(axes[0], spec.tasks, strict=True):
@@ -55,12 +57,13 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
             style = ({"color": "black", "lw": 3.0, "alpha": 0.55, "zorder": 1} if conf == "full"
                      else {"lw": 1.3, "ls": "--" if conf == "without_R" else "-", "zorder": 2})
             line, = ax.plot(k, mean, label=conf.replace("_", " "), **style)
-            ax.fill_between(k, mean - sem, mean + sem, alpha=0.2, color=line.get_color(),
-                            lw=0)
-        ax.set_title(f"Task {task}")
+            ax.fill_between(k, mean - band * sem, mean + band * sem, alpha=0.2,
+                            color=line.get_color(), lw=0)
+        ax.set_title(f"Task {task}{title}")
         ax.set_xlabel("iteration k")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, title="mean +- SEM", title_fontsize=7)
+        ax.legend(fontsize=8, title="mean +- SEM" if band == 1.0 else "mean, 95% interval",
+                  title_fontsize=7)
     axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -68,26 +71,10 @@ def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path) -> None:
 
 def plot_gamma_pooled(results: dict, spec: ExperimentSpec, out: Path) -> None:
     """Fig. 10 over every replication: Gamma(k), the mean over all their runs with its 95%
-    interval (mean +- 1.96 SEM), one curve per configuration, a panel per task."""
-    fig = figures.figure(figsize=(5 * len(spec.tasks), 3.9))
-    axes = fig.subplots(1, len(spec.tasks), squeeze=False)
-    for ax, task in zip(axes[0], spec.tasks, strict=True):
-        for conf in spec.configurations:
-            gamma = results[f"{task}/{conf}"]["gamma"]
-            mean, sem = mean_sem(gamma)
-            k = np.arange(mean.size)
-            style = ({"color": "black", "lw": 3.0, "alpha": 0.55, "zorder": 1} if conf == "full"
-                     else {"lw": 1.3, "ls": "--" if conf == "without_R" else "-", "zorder": 2})
-            line, = ax.plot(k, mean, label=conf.replace("_", " "), **style)
-            ax.fill_between(k, mean - 1.96 * sem, mean + 1.96 * sem, alpha=0.2,
-                            color=line.get_color(), lw=0)
-        ax.set_title(f"Task {task}: {gamma.shape[0]} runs, {spec.replications} replications")
-        ax.set_xlabel("iteration k")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, title="mean, 95% interval", title_fontsize=7)
-    axes[0, 0].set_ylabel(r"$\Gamma(k)$ (m): summed distance to the border")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    interval (mean +- 1.96 SEM)."""
+    runs = next(iter(results.values()))["gamma"].shape[0]
+    plot_gamma_tasks(results, spec, out, band=1.96,
+                     title=f": {runs} runs, {spec.replications} replications")
 
 
 def plot_heatmaps(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Path,
