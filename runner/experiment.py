@@ -229,16 +229,6 @@ def expected_cost(unit: Unit, iterations: int) -> float:
 
 
 def stored_experiment(out: str | Path) -> Experiment:
-    """The experiment whose results ``out`` holds (see :func:`_stored_experiment`), with the
-    number of replications it was last run with."""
-    experiment = _stored_experiment(out)
-    replications = ResultStore(Path(out)).manifest().get("replications", 1)
-    if isinstance(replications, int) and replications > 1:
-        experiment.spec = experiment.spec.model_copy(update={"replications": replications})
-    return experiment
-
-
-def _stored_experiment(out: str | Path) -> Experiment:
     """The experiment whose results ``out`` holds, rebuilt from the texts stored with them (its
     spec, and every scenario, program and sensor file as they were when it ran): what a report
     draws does not depend on the folder it is asked from, nor on files edited since."""
@@ -249,7 +239,9 @@ def _stored_experiment(out: str | Path) -> Experiment:
     store = ResultStore(Path(out))
     stored = store.manifest()
     try:
-        spec = ExperimentSpec.model_validate(stored["experiment"])
+        # the number of replications it was last run with is kept outside the hashed spec
+        spec = ExperimentSpec.model_validate(
+            {**stored["experiment"], "replications": stored.get("replications", 1)})
         files = {k: (Path(v["path"]), v["text"]) for k, v in stored["files"].items()}
         scenario_path = files["scenario"][0]
     except (KeyError, TypeError, ValidationError) as exc:

@@ -478,7 +478,7 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
     found = findings(rows, spec)
     atomic_write(folder / "statistics.json", json.dumps(_json_safe(rows), indent=1,
                                                         allow_nan=False).encode())
-    atomic_write(folder / "findings.json", json.dumps(_json_safe_tree(judged), indent=1,
+    atomic_write(folder / "findings.json", json.dumps(_json_safe(judged), indent=1,
                                                       allow_nan=False).encode())
     extra = perception_lines(scenario, rows, spec.tasks)
     if compare is not None:
@@ -570,21 +570,16 @@ def _table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _json_safe_tree(value: Any) -> Any:
-    """``value`` for JSON, every number that is not finite as null, at any depth."""
+def _json_safe(value: Any) -> Any:
+    """``value`` for JSON, every number that is not finite (no run reached the border) as
+    null, at any depth."""
     if isinstance(value, dict):
-        return {k: _json_safe_tree(v) for k, v in value.items()}
+        return {k: _json_safe(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_json_safe_tree(v) for v in value]
+        return [_json_safe(v) for v in value]
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
-
-
-def _json_safe(rows: list[dict]) -> list[dict]:
-    """Rows for JSON: a number that is not finite (no run reached the border) as null."""
-    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
-            for r in rows]
 
 
 def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str, str]],

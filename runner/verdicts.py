@@ -459,7 +459,6 @@ def judge_replications(replications: Sequence[Mapping[str, Mapping[str, np.ndarr
     resampled = Resampled(together, spec, borders)
     if set(resampled.keys()) != set(found):
         raise RuntimeError(f"findings {sorted(found)} judged, {resampled.keys()} resampled")
-    point = resampled(np.arange(resampled.runs)[None, :])
     drawn = bootstrap(resampled, resamples, seed)
     by = {(r["task"], r["configuration"]): r for r in rows}
     out = []
@@ -470,7 +469,9 @@ def judge_replications(replications: Sequence[Mapping[str, Mapping[str, np.ndarr
         t_p = _t_tests(together, spec.tasks, borders) if key == "T" else {}
         tasks = {}
         for t in spec.tasks:
-            effect = float(point[key][1][t][0])
+            full = by[(t, "full")]
+            effect = float(full["final_per_border_cell_mm"] if key == "T" else
+                           100 * (by[(t, f"without_{key}")]["auc_mean"] / full["auc_mean"] - 1))
             lo, hi = (float(v) for v in np.nanpercentile(effects[t], [2.5, 97.5]))
             p = t_p[t] if key == "T" else by[(t, f"without_{key}")].get(
                 "p_auc_holm", by[(t, f"without_{key}")]["p_auc"])
