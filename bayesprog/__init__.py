@@ -17,6 +17,8 @@
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
+from bayesprog import rich
+
 __version__ = "0.5.0"
 
 #: Where each public name lives. They are imported when first used, so that ``import
@@ -87,6 +89,15 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.limits import SizeError, check_size, limit
     from bayesprog.model import Term
     from bayesprog.program import Program, load, loads
+
+
+def _load_display() -> None:
+    from bayesprog import display  # noqa: F401  (its renderers register themselves)
+
+
+# Programs and answers render themselves in a notebook through the hooks of bayesprog.rich, the
+# package's lowest floor; the notebook display, near its top, is imported at the first display.
+rich.defer(_load_display)
 
 
 def __getattr__(name: str) -> Any:

@@ -285,7 +285,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     (hc). Missing values are used per family (available-case). The tables are then fitted as
     :meth:`Program.fit` fits them (EM when values are missing, ``max_iter``, ``tol``).
     """
-    import bayesprog
+    from bayesprog.program import loads
 
     if method not in METHODS:
         raise StructureError(f"method {method!r}: expected one of {', '.join(METHODS)}")
@@ -374,7 +374,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     prior = (equivalent_sample_size if method == "hc" and score == "bdeu" else 1.0)
     text = _program_text(coded, parents, title, method, prior,
                          k2=method == "hc" and score == "k2")
-    skeleton_program = bayesprog.loads(text, f"<{title}>")
+    skeleton_program = loads(text, f"<{title}>")
     fit = skeleton_program.fit(coded.frame, max_iter=max_iter, tol=tol)
     from bayesprog.model import StructureRecord
 
@@ -387,7 +387,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
         draft = Path(folder) / "discovered.yaml"
         draft.write_text(text, encoding="utf-8")
         fitted_text = fit.text(draft)
-    program = bayesprog.loads(fitted_text, f"<{title}>")
+    program = loads(fitted_text, f"<{title}>")
     return Discovery(program, fitted_text,
                      {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
                      coded.frame)
@@ -395,10 +395,9 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
 
 def _start(start: Any, names: Sequence[str]) -> list[set[int]]:
     """The parents of each column in a starting program (its terms over the data's columns)."""
-    import bayesprog
-    from bayesprog.program import Program
+    from bayesprog.program import Program, load
 
-    program = start if isinstance(start, Program) else bayesprog.load(start)
+    program = start if isinstance(start, Program) else load(start)
     index = {n: i for i, n in enumerate(names)}
     parents: list[set[int]] = [set() for _ in names]
     for term in program.terms:

@@ -58,10 +58,10 @@ from pathlib import Path
 import numpy as np
 from scipy.special import betaln, logsumexp
 
-from runner.cues import inhibition, uncertainty
-from runner.experiment import load_experiment, make_sensor, run_experiment, simulate
-from runner.explorer import CONFIGURATIONS, Explorer
-from runner.shape import MIN_POINTS, match
+from runner.attention.cues import inhibition, uncertainty
+from runner.attention.explorer import CONFIGURATIONS, Explorer
+from runner.attention.shape import MIN_POINTS, match
+from runner.experiments.experiment import load_experiment, make_sensor, run_experiment, simulate
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "models" / "experiments" / "paper.yaml"
@@ -123,7 +123,7 @@ class DirectExplorer(Explorer):
             nxt[r] = tied[self.rngs[r].integers(tied.size)] if tied.size > 1 else tied[0]
         self.target_probabilities = p
         self.timings["decision"] += time.perf_counter() - ask_start
-        from runner.explorer import Decision
+        from runner.attention.explorer import Decision
 
         self.last = Decision(len(self.path), i, s, u, None if reg is None else reg.error,
                              None if reg is None else reg.points, nxt, ready)
@@ -199,7 +199,7 @@ def _scaling_point(runs: int, shape: tuple[int, int]) -> dict:
     ``shape`` cells (the same 30 x 60 cm), ``runs`` runs in lockstep."""
     import yaml
 
-    from runner.scenario import load_scenario
+    from runner.world.scenario import load_scenario
 
     text = yaml.safe_load((ROOT / "models" / "scenarios" / "paper.yaml").read_text())
     cell = 0.30 / shape[0]
@@ -242,7 +242,7 @@ def scaling() -> list[dict]:
 
 
 def plot_scaling(points: list[dict], path: Path) -> None:
-    from runner import figures
+    from runner.report import figures
 
     fig = figures.figure(figsize=(9, 3.4))
     axes = fig.subplots(1, 2)
@@ -276,7 +276,7 @@ def plot_scaling(points: list[dict], path: Path) -> None:
 def whole(workers: int, repeats: int, report: bool = False) -> tuple[float, float | None]:
     """Median wall seconds of the experiment, and of its report (with the animation) when
     ``report``, each into a fresh folder."""
-    from runner.report import build_report
+    from runner.report.build import build_report
 
     experiment = load_experiment(PAPER)
     times, reports = [], []
@@ -394,7 +394,7 @@ def sweeps(trials: int = 4) -> dict[str, float | bool]:
     import yaml
     from dask.distributed import LocalCluster
 
-    from runner.tune import load_search, run_search
+    from runner.experiments.tune import load_search, run_search
 
     scenarios = ROOT / "models" / "scenarios"
     spec = {"experiment": 1, "name": "sweep", "runner": "haptic",
@@ -431,7 +431,7 @@ def split() -> dict[str, float]:
     runs = np.arange(spec.runs)
     out = Path(tempfile.mkdtemp())
     try:
-        from runner.store import ResultStore, Unit
+        from runner.experiments.store import ResultStore, Unit
 
         store = ResultStore(out)
         for task in spec.tasks:

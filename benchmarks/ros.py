@@ -40,8 +40,8 @@ class Robot:
     """The scenario's simulated sensor, probing wherever it is sent (seed 0, run 0)."""
 
     def __init__(self, scenario_path: Path):
-        from runner.loop import make_sensor, reading_seed, start_cell
-        from runner.scenario import load_scenario
+        from runner.experiments.loop import make_sensor, reading_seed, start_cell
+        from runner.world.scenario import load_scenario
 
         self.scenario = load_scenario(scenario_path)
         self.sensor = make_sensor(self.scenario, self.scenario.perception, [reading_seed(0, 0)])

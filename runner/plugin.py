@@ -75,13 +75,13 @@ def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
     """Run an experiment file (resuming what ``out`` already holds), then write its report.
     Local worker processes are started first: they import the simulation while this process
     reads the experiment."""
-    from runner.executors import process_pool, stop_pool
+    from runner.experiments.executors import process_pool, stop_pool
 
     pool = None
     if options.workers > 1 and options.scheduler is None:
-        pool = process_pool(options.workers, preload=("runner.experiment",), start=True)
+        pool = process_pool(options.workers, preload=("runner.experiments.experiment",), start=True)
     try:
-        from runner.experiment import load_experiment, run_experiment
+        from runner.experiments.experiment import load_experiment, run_experiment
 
         exp = load_experiment(_experiment_file(experiment), replications=options.replications)
         _say(exp.scenario.warnings)
@@ -102,8 +102,8 @@ def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
 
 def tune(experiment: Path, out: Path, options: TuneOptions = TuneOptions()) -> int:
     """Search the cue profiles named in the experiment's ``tune:`` section (see
-    :mod:`runner.tune`)."""
-    from runner.tune import tune as run_tune
+    :mod:`runner.experiments.tune`, :mod:`runner.report.tuning`)."""
+    from runner.report.tuning import tune as run_tune
 
     return run_tune(_experiment_file(experiment), out, trials=options.trials,
                     workers=options.workers, quiet=options.quiet, scheduler=options.scheduler)
@@ -115,13 +115,13 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
     reads the results."""
     import os
 
-    from runner.executors import process_pool, stop_pool
+    from runner.experiments.executors import process_pool, stop_pool
 
     _output_folder(out)
-    pool = process_pool(1, preload=("runner.report",), start=True) \
+    pool = process_pool(1, preload=("runner.report.build",), start=True) \
         if (os.cpu_count() or 1) >= 2 else None
     try:
-        from runner.report import build_report
+        from runner.report.build import build_report
 
         folder = build_report(out, animation=options.animation, compare=options.compare,
                               pool=pool)
@@ -138,7 +138,7 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
 
 def results(out: Path, table: Path) -> int:
     """Write the stored runs of ``out`` as one tidy table (Parquet or CSV)."""
-    from runner.tables import write_runs
+    from runner.report.tables import write_runs
 
     _output_folder(out)
     try:
@@ -220,15 +220,15 @@ def _scenario_path(target: Path) -> Path:
 def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
     """Serve the step interface on standard input/output, or as a ROS 2 node (``ros``)."""
     if options.ros:
-        from runner.ros.run import catch_signals
+        from runner.robot.ros.run import catch_signals
 
         catch_signals()  # a node stopped while it loads still ends cleanly
-        from runner.ros import require
+        from runner.robot.ros import require
 
         require()  # before the scenario is loaded: a missing extra is said at once
         print(f"bayesprog_explorer: loading {target}", file=sys.stderr, flush=True)
-    from runner.explorer import Explorer
-    from runner.scenario import load_scenario
+    from runner.attention.explorer import Explorer
+    from runner.world.scenario import load_scenario
 
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
@@ -240,24 +240,24 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
             raise BayesprogError(f"--ablate {term!r}: {exc}") from None
     explorer = Explorer(scenario, task, ablate=options.ablate)
     if options.ros:
-        from runner.ros.run import explore as explore_ros
-        from runner.session import Session
+        from runner.robot.ros.run import explore as explore_ros
+        from runner.robot.session import Session
 
         return explore_ros(Session(explorer, seed=options.seed), namespace=options.namespace,
                            frame=options.frame)
-    from runner.stdio import serve
+    from runner.robot.stdio import serve
 
     serve(explorer, sys.stdin, sys.stdout, seed=options.seed)
     return 0
 
 
 def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
-    """A simulated robot node that drives ``bayesprog explore --ros`` (see runner.ros)."""
-    from runner.ros.run import catch_signals
+    """A simulated robot node that drives ``bayesprog explore --ros`` (see runner.robot.ros)."""
+    from runner.robot.ros.run import catch_signals
 
     catch_signals()
-    from runner.ros import require
-    from runner.scenario import load_scenario
+    from runner.robot.ros import require
+    from runner.world.scenario import load_scenario
 
     require()
     print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
@@ -267,8 +267,8 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     if task not in scenario.spec.tasks:
         raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
                              f"{', '.join(scenario.spec.tasks)}")
-    from runner.ros.robot_node import RobotOptions
-    from runner.ros.run import robot as run_robot
+    from runner.robot.ros.robot_node import RobotOptions
+    from runner.robot.ros.run import robot as run_robot
 
     robot_options = RobotOptions(task=task, steps=options.steps, seed=options.seed,
                                  run=options.run, timeout=options.timeout)
@@ -353,20 +353,20 @@ def validate(path: str, kind: str) -> list | None:
     when it has a ``tune:`` section) or a sensor model; its warnings, or None for another
     kind. Problems raise, each at its place."""
     if kind == "scenario":
-        from runner.scenario import load_scenario
+        from runner.world.scenario import load_scenario
 
         return load_scenario(Path(path)).warnings
     if kind == "experiment":
-        from runner.experiment import load_experiment
+        from runner.experiments.experiment import load_experiment
 
         experiment = load_experiment(Path(path))
         if experiment.spec.tune is not None:
-            from runner.tune import load_search
+            from runner.experiments.tune import load_search
 
             load_search(path)
         return experiment.scenario.warnings
     if kind == "sensor model":
-        from runner.sensor import load_sensor_model
+        from runner.world.sensor import load_sensor_model
 
         load_sensor_model(path)
         return []

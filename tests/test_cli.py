@@ -784,7 +784,7 @@ def test_a_second_yaml_document_and_a_limit_below_one_are_refused(tmp_path, caps
 
 _FINALISER = """
 import signal, sys, time
-from bayesprog import cli
+from bayesprog.cli import signals as cli
 signal.signal(signal.SIGTERM, cli._terminate)
 sys.unraisablehook = cli._deliver_again
 class Stopped:
@@ -821,7 +821,7 @@ def test_other_errors_in_finalisers_are_still_reported():
 
 _SIGNAL_IN_FINALISER = """
 import os, signal, sys, time, weakref
-from bayesprog import cli
+from bayesprog.cli import signals as cli
 signal.signal(signal.SIGTERM, cli._terminate)
 signal.signal(signal.SIGINT, cli._interrupt)
 finished = []

@@ -1,5 +1,6 @@
 """The package's layering: no import circle between bayesprog's modules or its layers, and
-bayesprog never imports the haptic application (runner).
+bayesprog never imports the haptic application (runner); the application's rooms (runner's
+sub-packages) import one way, from the world up to the report and the robot.
 
 Imports are read from the source with ``ast`` (every import statement, wherever it stands:
 module level, inside functions, under ``TYPE_CHECKING``), so a lazy import counts too.
@@ -8,12 +9,14 @@ module level, inside functions, under ``TYPE_CHECKING``), so a lazy import count
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import networkx as nx
 import pytest
 
 PACKAGE = Path(__file__).parents[1] / "bayesprog"
+RUNNER = PACKAGE.parent / "runner"
 
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
@@ -56,8 +59,9 @@ def imports(path: Path) -> set[str]:
     return {name for name in found if name.split(".")[0] in ("bayesprog", "runner")}
 
 
-def graph() -> nx.DiGraph:
-    files = {module_name(p): p for p in PACKAGE.rglob("*.py")}
+@functools.cache  # read once: the tests only look at it
+def graph(package: Path = PACKAGE) -> nx.DiGraph:
+    files = {module_name(p): p for p in package.rglob("*.py")}
     g = nx.DiGraph()
     for name, path in files.items():
         g.add_node(name)
@@ -178,3 +182,65 @@ def test_no_code_outside_the_forms_compares_a_forms_name():
             if any(_is_form_name(o) for o in operands) or literals & names:
                 found.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}")
     assert not found, found
+
+
+#: runner's rooms from the bottom up: a room may import its own modules, the rooms below it and
+#: bayesprog; the report and the robot stand side by side and know nothing of each other.
+ROOMS = [
+    {"world"},
+    {"attention"},
+    {"experiments"},
+    {"report"},
+    {"robot"},
+    {"plugin", "sensor", "__init__"},
+]
+SIDE_BY_SIDE = {"report", "robot"}
+
+
+def room_of(module: str) -> int:
+    top = module.split(".")[1] if "." in module else "__init__"
+    for i, room in enumerate(ROOMS):
+        if top in room:
+            return i
+    raise AssertionError(f"{module} is in no room: add it to ROOMS")
+
+
+@functools.cache
+def runner_graph() -> nx.DiGraph:
+    g = graph(RUNNER)
+    return g.subgraph([n for n in g if n.startswith("runner")]).copy()
+
+
+def test_the_runner_graph_sees_the_imports():
+    g = runner_graph()
+    assert g.has_edge("runner.attention.explorer", "runner.world.scenario")
+    assert g.has_edge("runner.report.build", "runner.experiments.experiment")
+    assert g.has_edge("runner.robot.ros.robot_node", "runner.experiments.loop")
+    assert g.number_of_edges() > 40
+
+
+def test_no_import_circle_in_the_runner():
+    cycles = list(nx.simple_cycles(runner_graph()))
+    assert not cycles, f"import circles: {cycles}"
+
+
+@pytest.mark.parametrize("module", sorted(runner_graph().nodes - {"runner"}))
+def test_each_room_of_the_runner_imports_only_the_rooms_below(module):
+    g = runner_graph()
+    mine = room_of(module)
+    wrong = [t for t in g.successors(module) if t != "runner" and (
+        room_of(t) > mine
+        or ({t.split(".")[1], module.split(".")[1]} == SIDE_BY_SIDE))]
+    assert not wrong, f"{module} (room {mine}) imports rooms above or beside it: {wrong}"
+
+
+def test_the_runner_is_a_few_rooms_of_a_few_modules():
+    """At most 6 modules directly in runner/, at most 9 in each of its sub-packages (a
+    sub-package's own sub-packages counted apart), and every sub-package in a room."""
+    direct = sorted(p.name for p in RUNNER.glob("*.py"))
+    assert len(direct) <= 6, direct
+    for folder in sorted({p.parent for p in RUNNER.rglob("*.py")} - {RUNNER}):
+        modules = sorted(p.name for p in folder.glob("*.py"))
+        assert "__init__.py" in modules, f"{folder.name}: not a package"
+        assert len(modules) <= 9, (folder.name, modules)
+        room_of("runner." + folder.relative_to(RUNNER).parts[0])

@@ -282,8 +282,8 @@ def test_any_question_is_answered_or_refused(capsys, question):
 
 @pytest.fixture(scope="module")
 def explorer():
-    from runner.explorer import Explorer
-    from runner.scenario import load_scenario
+    from runner.attention.explorer import Explorer
+    from runner.world.scenario import load_scenario
 
     return Explorer(load_scenario(MODELS / "scenarios" / "paper.yaml"), "T1")
 
@@ -305,7 +305,7 @@ json_values = st.recursive(
               st.integers(-2, 70), st.integers(-2, 70), st.floats(), st.floats()),
 ), min_size=1, max_size=4))
 def test_any_robot_line_is_answered_and_the_session_goes_on(explorer, lines):
-    from runner.stdio import serve
+    from runner.robot.stdio import serve
 
     stdin = io.StringIO("".join(line.replace("\n", " ") + "\n" for line in lines))
     stdout = io.StringIO()

@@ -94,7 +94,7 @@ def test_the_command_freezes_its_heap_when_done_and_returns_the_status(tmp_path)
 def test_a_worker_freezes_what_it_imported_and_freezes_again_at_exit():
     """A worker process's imports are frozen out of the collector's reach at start, and an
     exit handler freezes what it made since (the last collections at exit skip them)."""
-    code = ("import atexit, gc\nfrom runner.executors import worker_init\n"
+    code = ("import atexit, gc\nfrom runner.experiments.executors import worker_init\n"
             "before = gc.get_freeze_count()\nworker_init(('json',))\n"
             "print(before == 0, gc.get_freeze_count() > 0, atexit._ncallbacks() >= 1)")
     assert _after(code).splitlines()[-1] == "True True True"
@@ -103,7 +103,7 @@ def test_a_worker_freezes_what_it_imported_and_freezes_again_at_exit():
 def test_the_report_freezes_its_heap_for_holms_collections_and_thaws_it():
     """statsmodels' Holm correction collects garbage at each call: the report runs it with the
     heap frozen, and thaws it after (a heap frozen before stays frozen)."""
-    code = ("import gc\nfrom runner.report import _heap_frozen\n"
+    code = ("import gc\nfrom runner.report.build import _heap_frozen\n"
             "with _heap_frozen():\n    inside = gc.get_freeze_count() > 0\n"
             "after = gc.get_freeze_count()\n"
             "gc.freeze(); frozen = gc.get_freeze_count()\n"

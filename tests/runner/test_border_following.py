@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 import bayesprog
-from runner.experiment import simulate
-from runner.explorer import Explorer
-from runner.metrics import behaviour
-from runner.scenario import load_scenario
+from runner.attention.explorer import Explorer
+from runner.experiments.experiment import simulate
+from runner.experiments.metrics import behaviour
+from runner.world.scenario import load_scenario
 
 MODELS = (Path(__file__).parents[2] / "models").resolve()
 
@@ -130,7 +130,7 @@ def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):
     """A small grid of wood probed everywhere (task T2, silicone): no cell has any saliency,
     so S is unobserved for every cell, and I and U choose. One cell read as silicone instead
     brings saliency back."""
-    from runner.explorer import Explorer
+    from runner.attention.explorer import Explorer
 
     # silicone laid out under one corner cell (a task's material must be in the layout); the
     # readings below are chosen by the test, whatever lies under the cells
@@ -156,7 +156,7 @@ def test_a_misperceived_cell_of_a_material_absent_from_the_workspace_is_no_disco
     """The task's discontinuity is between its material and the remaining materials of the
     workspace (the paper's Material_a and Material_b): a wood cell read as copper, which the
     workspace does not hold, says nothing about it; read as plush, it is a perceived edge."""
-    from runner.explorer import Explorer
+    from runner.attention.explorer import Explorer
 
     scenario = load_scenario(MODELS / "scenarios" / "paper.yaml")
     assert [scenario.materials[m] for m in scenario.counter_materials("T3")] == ["plush",
@@ -185,7 +185,7 @@ def test_a_misperceived_cell_of_a_material_absent_from_the_workspace_is_no_disco
 @pytest.mark.parametrize("path", sorted((MODELS / "experiments").glob("*.yaml")),
                          ids=lambda p: p.stem)
 def test_every_shipped_experiment_loads_and_each_task_has_a_border(path):
-    from runner.experiment import load_experiment
+    from runner.experiments.experiment import load_experiment
     experiment = load_experiment(path)
     scenario = experiment.scenario
     materials = scenario.material_map

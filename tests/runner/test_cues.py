@@ -1,4 +1,4 @@
-"""The per-cell cues of pi_tar (runner/cues.py) against independent computations.
+"""The per-cell cues of pi_tar (runner/attention/cues.py) against independent computations.
 
 * U, eq. (11): scipy.stats.entropy / log(10);
 * S, eq. (12): scipy.ndimage.sobel (``mode="nearest"``: edges replicated) and hand-made grids;
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy import ndimage, optimize, stats
 
-from runner.cues import inhibition, saliency, uncertainty
+from runner.attention.cues import inhibition, saliency, uncertainty
 
 MATERIALS = 10
 ALPHA, BETA = 1.01, 9.0  # design.md section 4
@@ -311,8 +311,8 @@ def test_nan_at_a_perceived_cell_is_refused_and_ignored_elsewhere():
 
 def test_the_explorers_inhibition_lookup_is_the_direct_formula():
     """The explorer reads I from a table of offsets (a window per run): the same numbers."""
-    from runner.explorer import Explorer
-    from runner.scenario import load_scenario
+    from runner.attention.explorer import Explorer
+    from runner.world.scenario import load_scenario
 
     scenario = load_scenario(Path(__file__).parents[2] / "models" / "scenarios" / "paper.yaml")
     explorer = Explorer(scenario, "T1", runs=5)

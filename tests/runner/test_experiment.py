@@ -11,10 +11,10 @@ import pytest
 from scipy import stats
 
 from bayesprog.cli import main
-from runner import experiment as experiment_module
-from runner.experiment import load_experiment, load_results, run_experiment, units
-from runner.report import area_under, paired_test
-from runner.store import ResultStore, StoreError
+from runner.experiments import experiment as experiment_module
+from runner.experiments.experiment import load_experiment, load_results, run_experiment, units
+from runner.experiments.store import ResultStore, StoreError
+from runner.report.build import area_under, paired_test
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -175,7 +175,7 @@ def test_report_html_shows_its_figures_in_a_browser(reference, screenshot):
 def test_p_values_are_holm_adjusted_over_the_experiment(reference):
     from statsmodels.stats.multitest import multipletests
 
-    from runner.report import statistics_table
+    from runner.report.build import statistics_table
 
     results = reference[1]
     spec = load_experiment(ResultStore(reference[0]).manifest()["files"]["experiment"]["path"]).spec
@@ -194,7 +194,7 @@ def test_report_of_a_folder_without_results(tmp_path, capsys):
 def test_statistics_against_scipy():
     rng = np.random.default_rng(0)
     gamma = rng.random((12, 30))
-    from runner.experiment import mean_sem
+    from runner.experiments.experiment import mean_sem
 
     mean, sem = mean_sem(gamma)
     np.testing.assert_allclose(mean, gamma.mean(axis=0))
@@ -240,7 +240,7 @@ def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
 def test_the_runs_table_holds_every_probe_with_its_cues(reference, tmp_path, capsys):
     import pandas as pd
 
-    from runner.report import replay
+    from runner.report.build import replay
 
     out, results = reference
     assert main(["results", str(out), "-o", str(tmp_path / "runs.parquet")]) == 0
@@ -280,7 +280,7 @@ def test_a_report_draws_what_was_stored_from_any_folder(tmp_path, monkeypatch, c
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    from runner.experiment import stored_experiment
+    from runner.experiments.experiment import stored_experiment
 
     assert stored_experiment(out).start_cells().tolist() == stored
     assert main(["report", str(out), "--no-animation"]) == 0  # no full model, one iteration
@@ -294,8 +294,8 @@ def test_a_report_draws_what_was_stored_from_any_folder(tmp_path, monkeypatch, c
 def _verdicts(areas: dict[str, dict[str, np.ndarray]]) -> tuple[dict[str, str], list[dict]]:
     """The report's verdicts and statistics on made-up results: per task and configuration,
     the per-run areas under a constant Gamma(k) of two steps (the area is the value itself)."""
-    from runner.experiment import ExperimentSpec
-    from runner.report import findings, statistics_table
+    from runner.experiments.experiment import ExperimentSpec
+    from runner.report.build import findings, statistics_table
 
     configurations = ["full", "without_R", "without_S", "without_I", "without_U"]
     spec = ExperimentSpec(name="made_up", scenario="none.yaml", tasks=list(areas),

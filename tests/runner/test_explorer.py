@@ -9,11 +9,11 @@ import pytest
 import yaml
 
 import bayesprog
-from runner.cues import saliency
-from runner.experiment import simulate
-from runner.explorer import CONFIGURATIONS, Explorer
-from runner.scenario import load_scenario
-from runner.sensor import material_normals
+from runner.attention.cues import saliency
+from runner.attention.explorer import CONFIGURATIONS, Explorer
+from runner.experiments.experiment import simulate
+from runner.world.scenario import load_scenario
+from runner.world.sensor import material_normals
 
 MODELS = Path(__file__).parents[2] / "models"
 

@@ -12,12 +12,12 @@ from scipy import stats
 
 import bayesprog
 from bayesprog.cli import main
-from runner.experiment import load_experiment, load_results, make_sensor, run_experiment
-from runner.report import build_report, replay
-from runner.scenario import load_scenario
-from runner.sensor import SensorModel, SimulatedSensor, confusion, load_sensor_model
-from runner.sensor import main as record_main
-from runner.store import ResultStore
+from runner.experiments.experiment import load_experiment, load_results, make_sensor, run_experiment
+from runner.experiments.store import ResultStore
+from runner.report.build import build_report, replay
+from runner.world.scenario import load_scenario
+from runner.world.sensor import SensorModel, SimulatedSensor, confusion, load_sensor_model
+from runner.world.sensor import main as record_main
 
 MODELS = Path(__file__).parents[2] / "models"
 MATERIALS = bayesprog.load(MODELS / "pi_per.yaml").variables["M"].states
@@ -29,6 +29,24 @@ def test_the_shipped_probes_are_recorded_from_the_sensor_model_with_their_seed(t
                         str(MODELS / "pi_per.yaml"), "--per-material", "300", "--seed", "1",
                         "-o", str(out)]) == 0
     assert out.read_bytes() == (MODELS / "data" / "probes.csv").read_bytes()
+
+
+def test_the_recording_command_keeps_its_address(tmp_path):
+    """``python -m runner.sensor`` records as it always did (the sensors moved to runner.world)."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "probes.csv"
+    done = subprocess.run([sys.executable, "-m", "runner.sensor",
+                           str(MODELS / "sensors" / "biotac_proxy.yaml"), "--perception",
+                           str(MODELS / "pi_per.yaml"), "--per-material", "300", "--seed", "1",
+                           "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes() == (MODELS / "data" / "probes.csv").read_bytes()
+    refused = subprocess.run([sys.executable, "-m", "runner.sensor", "nowhere.yaml", "-o",
+                              str(out)], capture_output=True, text=True, timeout=120)
+    assert refused.returncode == 2 and refused.stderr.startswith("runner.sensor: ")
+    assert "Traceback" not in refused.stderr
 
 
 def test_the_shipped_identified_pi_per_is_learned_from_the_shipped_probes(tmp_path):

@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from runner._kernels import (
+from runner.attention._kernels import (
     followed_border_2d,
     icp,
     icp_one_by_one,
     icp_side_by_side,
     marked_first,
 )
-from runner.cues import perceived_border
-from runner.shape import pad_outlines
+from runner.attention.cues import perceived_border
+from runner.attention.shape import pad_outlines
 
 
 def _closest(qx, qy, poly, nv):

@@ -28,8 +28,8 @@ from hypothesis import strategies as st
 
 from bayesprog import BayesprogError
 from bayesprog.cli import main
-from runner.experiment import load_experiment
-from runner.scenario import load_scenario
+from runner.experiments.experiment import load_experiment
+from runner.world.scenario import load_scenario
 
 MODELS = Path(__file__).parents[2] / "models"
 BAYESPROG = str(Path(sys.executable).with_name("bayesprog"))

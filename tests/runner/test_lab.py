@@ -12,11 +12,11 @@ import pytest
 from scipy import stats
 
 from bayesprog.cli import main
-from runner.experiment import ExperimentSpec
-from runner.explorer import Explorer
-from runner.metrics import area_under
-from runner.report import ALPHA, POWER, findings, statistics_table
-from runner.scenario import load_scenario
+from runner.attention.explorer import Explorer
+from runner.experiments.experiment import ExperimentSpec
+from runner.experiments.metrics import area_under
+from runner.report.build import ALPHA, POWER, findings, statistics_table
+from runner.world.scenario import load_scenario
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -217,7 +217,7 @@ def test_the_sensor_fitted_to_the_recordings_draws_like_them(tmp_path):
 
 
 def test_a_sensor_model_is_recovered_from_its_own_recordings():
-    from runner.sensor import SensorModel, load_sensor_model
+    from runner.world.sensor import SensorModel, load_sensor_model
 
     truth = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml")
     import pandas as pd
@@ -281,7 +281,7 @@ def test_the_shipped_lab_example_is_checked_whole(capsys):
 
 
 def test_the_notebook_speaks_the_labs_task_names(tmp_path):
-    from runner.notebook import Results, step_view
+    from runner.report.notebook import Results, step_view
 
     path = recorded(tmp_path)
     experiment = tmp_path / "exp.yaml"

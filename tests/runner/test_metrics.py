@@ -1,4 +1,4 @@
-"""Gamma (eq. 16), ground-truth borders and the polygon helpers of runner/scenario.py.
+"""Gamma (eq. 16), ground-truth borders and the polygon helpers of runner/world/scenario.py.
 
 Gamma is checked against ``gamma_brute_force`` and against scipy's ``cdist``; borders against
 sets of cells drawn by hand on a tiny scenario written here.
@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
-from runner.metrics import BorderDistance, behaviour, gamma_brute_force
-from runner.scenario import inside, load_scenario, outline_points
+from runner.experiments.metrics import BorderDistance, behaviour, gamma_brute_force
+from runner.world.scenario import inside, load_scenario, outline_points
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -265,7 +265,7 @@ def test_behaviour_metrics_by_brute_force(seed, runs, steps):
 
 
 def test_the_search_and_the_following_add_up_to_the_area_under_gamma():
-    from runner.metrics import area_under, phase_areas
+    from runner.experiments.metrics import area_under, phase_areas
 
     rng = np.random.default_rng(5)
     gamma = rng.random((40, 12))

@@ -14,10 +14,10 @@ from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
 from bayesprog.cli import main
-from runner.experiment import ExperimentSpec, load_experiment, run_experiment, units
-from runner.loop import decision_seed, reading_seed, start_cell, start_cells
-from runner.store import ResultStore
-from runner.verdicts import (
+from runner.experiments.experiment import ExperimentSpec, load_experiment, run_experiment, units
+from runner.experiments.loop import decision_seed, reading_seed, start_cell, start_cells
+from runner.experiments.store import ResultStore
+from runner.report.verdicts import (
     FINDINGS,
     Resampled,
     holm,
@@ -99,7 +99,7 @@ def test_replications_differ_and_findings_json_is_complete(replicated):
     _, once, thrice = replicated
     spec = load_experiment(replicated[0], replications=3).spec
     store = ResultStore(thrice)
-    from runner.experiment import load_replications
+    from runner.experiments.experiment import load_replications
 
     results = load_replications(store, spec)
     assert len(results) == 3
@@ -132,7 +132,7 @@ def test_the_runs_table_holds_every_replication(replicated, tmp_path):
     table = pd.read_csv(tmp_path / "runs.csv")
     assert sorted(table.replication.unique()) == [0, 1, 2]
     spec = load_experiment(replicated[0], replications=3).spec
-    from runner.experiment import load_replications
+    from runner.experiments.experiment import load_replications
 
     stored = load_replications(ResultStore(thrice), spec)[2]["T2/without_I"]
     rows = table[(table.task == "T2") & (table.configuration == "without_I")
@@ -143,7 +143,7 @@ def test_the_runs_table_holds_every_replication(replicated, tmp_path):
 def test_a_dask_cluster_gives_the_replications_the_same_numbers(replicated, tmp_path):
     from dask.distributed import LocalCluster
 
-    from runner.experiment import load_replications
+    from runner.experiments.experiment import load_replications
 
     path, _, thrice = replicated
     experiment = load_experiment(path, replications=3)
@@ -175,7 +175,7 @@ def test_replications_give_the_same_numbers_in_one_process(replicated, tmp_path)
     experiment = load_experiment(path, replications=3)
     run_experiment(experiment, tmp_path / "out", progress=False)
     spec = experiment.spec
-    from runner.experiment import load_replications
+    from runner.experiments.experiment import load_replications
 
     for a, b in zip(load_replications(ResultStore(tmp_path / "out"), spec),
                     load_replications(ResultStore(thrice), spec), strict=True):

@@ -1,6 +1,6 @@
-"""The ROS 2 nodes (runner/ros) over real DDS, across processes: ``bayesprog explore --ros`` and
-``bayesprog robot --ros`` as commands, and a client node in this process that holds them to the
-contract of docs/robot.md. Discovery stays on the loopback interface, on a domain of its own."""
+"""The ROS 2 nodes (runner/robot/ros) over real DDS, across processes: ``bayesprog explore
+--ros`` and ``bayesprog robot --ros`` as commands, and a client node in this process that holds
+them to the contract of docs/robot.md. Discovery stays on the loopback interface, on a domain of its own."""
 
 from __future__ import annotations
 
@@ -29,10 +29,10 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from runner.experiment import simulate, start_cells
-from runner.explorer import Explorer
-from runner.scenario import load_scenario
-from runner.session import Session
+from runner.attention.explorer import Explorer
+from runner.experiments.experiment import simulate, start_cells
+from runner.robot.session import Session
+from runner.world.scenario import load_scenario
 
 with warnings.catch_warnings():
     # the message type support loads lark, which imports the deprecated sre_parse (pytest runs
@@ -227,8 +227,8 @@ def same_session(lines: list[str], task: str = "T2", seed: int = 0, preamble: in
 
 
 def test_importing_the_packages_never_imports_rclpy():
-    code = ("import sys, bayesprog, runner, runner.plugin, runner.ros, runner.session, "
-            "runner.stdio; from bayesprog.cli import build_parser; build_parser(); "
+    code = ("import sys, bayesprog, runner, runner.plugin, runner.robot.ros, runner.robot.session, "
+            "runner.robot.stdio; from bayesprog.cli import build_parser; build_parser(); "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('rclpy', 'std_msgs', 'nav_msgs', 'geometry_msgs')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
@@ -306,7 +306,7 @@ def test_topics_types_node_and_qos(explorer_node):
     assert len(subs) == 1 and subs[0].topic_type == "std_msgs/msg/String"
     assert subs[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
     # the queues' depths are not sent over the wire: read them off a node made here
-    from runner.ros.explorer_node import ExplorerNode
+    from runner.robot.ros.explorer_node import ExplorerNode
 
     here = ExplorerNode(Session(Explorer(load_scenario(PAPER), "T2")), namespace="/depths",
                         context=client.context)
@@ -717,7 +717,7 @@ def test_the_documented_bridge_turns_a_drivers_presses_into_probes(paper):
 def test_the_shipped_rviz_view_shows_the_contracts_topics():
     import yaml
 
-    view = yaml.safe_load((ROOT / "runner" / "ros" / "bayesprog.rviz").read_text())
+    view = yaml.safe_load((ROOT / "runner" / "robot" / "ros" / "bayesprog.rviz").read_text())
     displays = {d["Topic"]["Value"]: d for d in view["Visualization Manager"]["Displays"]
                 if "Topic" in d}
     assert view["Visualization Manager"]["Global Options"]["Fixed Frame"] == "workspace"
@@ -742,7 +742,7 @@ def test_a_growing_path_serializes_as_the_whole_message(frame):
     from builtin_interfaces.msg import Time
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from runner.ros import messages
+    from runner.robot.ros import messages
 
     grown, centres = messages.GrowingPath(), []
     rng = np.random.default_rng(3)

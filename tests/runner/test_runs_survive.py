@@ -18,9 +18,9 @@ import pytest
 
 from bayesprog.cli import main
 from bayesprog.errors import BayesprogError
-from runner import experiment as experiment_module
-from runner.experiment import load_experiment, run_experiment, units
-from runner.store import ResultStore
+from runner.experiments import experiment as experiment_module
+from runner.experiments.experiment import load_experiment, run_experiment, units
+from runner.experiments.store import ResultStore
 from tests.runner.test_experiment import assert_same, results_of, write_experiment
 
 

@@ -1,4 +1,4 @@
-"""Rigid 2-D ICP (runner/shape.py) on the templates of the paper scenario.
+"""Rigid 2-D ICP (runner/attention/shape.py) on the templates of the paper scenario.
 
 Paths are made here: a contiguous run of a template's outline points, moved by a known rotation
 and shift inside the 0.30 x 0.60 m workspace, plus gaussian noise (sigma <= 2 mm). The references
@@ -35,8 +35,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
-from runner.scenario import load_scenario
-from runner.shape import ShapeTracker, match, pad_outlines
+from runner.attention.shape import ShapeTracker, match, pad_outlines
+from runner.world.scenario import load_scenario
 
 PAPER = Path(__file__).parents[2] / "models" / "scenarios" / "paper.yaml"
 K = 50  # template_points of the paper scenario
@@ -257,7 +257,7 @@ def test_tracker_leaves_a_wrong_basin_when_the_path_grows():
 
 # the chamfer search ------------------------------------------------------------------------------
 def test_the_chamfer_kernel_is_the_mean_distance_to_the_outline_at_each_pose():
-    from runner._kernels import chamfer
+    from runner.attention._kernels import chamfer
 
     _, polys, outlines, _ = templates()
     rng = np.random.default_rng(4)

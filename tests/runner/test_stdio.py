@@ -1,4 +1,4 @@
-"""The JSON-lines step interface (runner/stdio.py) driven by scripted sessions, in process and
+"""The JSON-lines step interface (runner/robot/stdio.py) driven by scripted sessions, in process and
 through the real ``bayesprog explore --stdio`` command."""
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from runner.explorer import Explorer
-from runner.scenario import load_scenario
-from runner.stdio import serve
+from runner.attention.explorer import Explorer
+from runner.robot.stdio import serve
+from runner.world.scenario import load_scenario
 
 ROOT = Path(__file__).parents[2]
 PAPER = ROOT / "models" / "scenarios" / "paper.yaml"
@@ -171,7 +171,7 @@ def test_cli_explore_stdio_subprocess():
     assert replies == session(lines)
 
 
-# --- lines that crashed the session at commit b2fab07 (fixed since in runner/stdio.py) ----------
+# --- lines that crashed the session at commit b2fab07 (fixed since in runner/robot/stdio.py) ---
 
 
 def test_huge_cell_index_gets_an_error_reply():

@@ -14,9 +14,8 @@ from statsmodels.stats.multitest import multipletests
 
 import bayesprog
 from bayesprog.cli import main
-from runner import tune as tune_module
-from runner.scenario import load_scenario
-from runner.tune import (
+from runner.experiments import tune as tune_module
+from runner.experiments.tune import (
     PARAMETERS,
     area_over_distance,
     areas,
@@ -26,6 +25,8 @@ from runner.tune import (
     run_search,
     terms_of,
 )
+from runner.report.tuning import search_and_report
+from runner.world.scenario import load_scenario
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -46,7 +47,7 @@ def write_search(folder: Path, **tune) -> Path:
 def fresh(tmp_path_factory):
     folder = tmp_path_factory.mktemp("fresh")
     search = load_search(write_search(folder))
-    return run_search(search, folder / "out", progress=False), folder / "out"
+    return search_and_report(search, folder / "out", progress=False), folder / "out"
 
 
 def test_the_hand_chosen_profiles_are_the_first_trial_and_the_best_is_no_worse(fresh):
@@ -256,7 +257,7 @@ def test_terms_of_inverts_file_values():
 
 def test_a_search_that_must_keep_border_precision_picks_a_candidate_that_keeps_it(tmp_path):
     search = load_search(write_search(tmp_path, min_precision=1.0, trials=5))
-    result = run_search(search, tmp_path / "out", progress=False)
+    result = search_and_report(search, tmp_path / "out", progress=False)
     hand = [scenario.border(task).ravel()[evaluate(scenario, task, None, 3, 25, 3)["paths"]]
             .mean() for scenario, task in search.pairs("training")]
     for trial in result["trials"][:2]:
@@ -272,7 +273,7 @@ def test_a_search_that_must_keep_border_precision_picks_a_candidate_that_keeps_i
 
 def test_parameters_not_searched_keep_the_files_values(tmp_path):
     search = load_search(write_search(tmp_path, parameters=["S.a", "shape_weight"], trials=3))
-    result = run_search(search, tmp_path / "out", progress=False)
+    result = search_and_report(search, tmp_path / "out", progress=False)
     hand = {p["name"]: p["hand"] for p in result["parameters"]}
     for trial in result["trials"]:
         assert set(trial["params"]) == {"S.a", "shape_weight"}

@@ -14,14 +14,14 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 import bayesprog
-from runner.cues import inhibition, saliency
-from runner.experiment import load_experiment, run_experiment, simulate, start_cells
-from runner.explorer import Explorer
-from runner.report import build_report
-from runner.scenario import load_scenario
-from runner.sensor import material_normals
-from runner.shape import _kabsch, match3d
-from runner.solids import SolidSpec, farthest_points
+from runner.attention.cues import inhibition, saliency
+from runner.attention.explorer import Explorer
+from runner.attention.shape import _kabsch, match3d
+from runner.experiments.experiment import load_experiment, run_experiment, simulate, start_cells
+from runner.report.build import build_report
+from runner.world.scenario import load_scenario
+from runner.world.sensor import material_normals
+from runner.world.solids import SolidSpec, farthest_points
 
 MODELS = Path(__file__).parents[2] / "models"
 
@@ -304,7 +304,7 @@ def test_nearest_grid_finds_the_k_d_trees_nearest_sample():
     diagonal of it."""
     from scipy.spatial import cKDTree
 
-    from runner.shape import NearestGrid
+    from runner.attention.shape import NearestGrid
 
     for solid in (SolidSpec(box=[0.08, 0.06, 0.05]), SolidSpec(ellipsoid=[0.045, 0.035, 0.03])):
         surface = solid.surface(1500)
@@ -331,7 +331,7 @@ def test_compiled_icp_3d_recovers_a_moved_solid_as_the_tree_does():
     resolution), the other template staying clearly farther."""
     from scipy.spatial import cKDTree
 
-    from runner.shape import NearestGrid
+    from runner.attention.shape import NearestGrid
 
     solids = [SolidSpec(box=[0.08, 0.06, 0.05]), SolidSpec(ellipsoid=[0.045, 0.035, 0.03])]
     surfaces = [s.surface(1500) for s in solids]
@@ -397,7 +397,7 @@ def test_experiment_and_report_on_a_volume(tmp_path, capsys):
     assert {(r["task"], r["configuration"]) for r in rows} == {
         (t, c) for t in ("T1", "T2") for c in ("full", "without_S")}
     assert all(np.isfinite(r["final_mean"]) and r["final_mean"] > 0 for r in rows)
-    from runner.tables import runs_table
+    from runner.report.tables import runs_table
 
     table = runs_table(tmp_path / "out")
     probed = load_scenario(scenario).centres[table["cell"].to_numpy()] * 100
@@ -410,7 +410,7 @@ def test_robot_session_in_a_volume(volume):
     [ix][iy][iz] as the explorer's own fields, a two-coordinate cell refused."""
     import io
 
-    from runner.stdio import serve
+    from runner.robot.stdio import serve
 
     explorer = Explorer(volume, "T1")
     means = material_normals(explorer.perception)
@@ -487,7 +487,7 @@ def test_a_solid_past_the_volumes_edge_is_clipped_with_a_warning_at_its_line(tmp
 def test_full_searches_at_multiples_or_as_the_set_grows(growth, expected, monkeypatch):
     """On a surface a run's full search is made again at each multiple of restart_every
     points; in a volume (growth) once its set has grown by the factor since the last."""
-    from runner.shape import Registration, ShapeTracker
+    from runner.attention.shape import Registration, ShapeTracker
 
     tracker = ShapeTracker(np.zeros((1, 4, 2)), np.zeros((1, 3, 2)), growth=growth)
     searched = []

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from runner._kernels import chamfer, distance3d, icp, icp3d, nearest3d
+from runner.attention._kernels import chamfer, distance3d, icp, icp3d, nearest3d
 
 ERROR_SCALE = 0.02  # metres: the mean distance at which L = 1/2
 MIN_POINTS = 10  # fewer probed cells than this on the perceived border: no shape evidence (R uniform)
@@ -231,7 +231,7 @@ def match3d(
     a third of a cell). ``counts``, ``points`` and the error are as in :func:`match`; ``trees``
     are the surfaces' ``scipy.spatial.cKDTree`` when already built. With ``grids``
     (:class:`NearestGrid`, one per surface) the steps run compiled
-    (:func:`runner._kernels.icp3d`), the same pairs found through the grid, but for the
+    (:func:`runner.attention._kernels.icp3d`), the same pairs found through the grid, but for the
     screening of the starts, which pairs each point with the sample nearest to its grid
     cell's centre (within half a cell's diagonal of its own nearest)."""
     from scipy.spatial import cKDTree
@@ -331,7 +331,7 @@ class NearestGrid:
     diagonal), which hold the nearest sample of every point of the cell. A cell farther, or
     with more than ``MAX_CANDIDATES`` of them, and a point outside the grid, are looked up
     among all the samples (a registered path lies within a few cells of the surface: the band
-    spares the lists of the cells it never reaches, most of the grid's making). The compiled 3-D ICP (:func:`runner._kernels.icp3d`) reads it: ``starts[c]`` is the slice of
+    spares the lists of the cells it never reaches, most of the grid's making). The compiled 3-D ICP (:func:`runner.attention._kernels.icp3d`) reads it: ``starts[c]`` is the slice of
     ``candidates`` of cell ``c`` (-1: all the samples)."""
 
     MAX_CANDIDATES = 64

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 
 from bayesprog import BayesprogError, atomic_write, require_extra
-from runner.executors import progress_bar
-from runner.experiment import CUES, load_replications, stored_experiment
-from runner.figures import centre_cm
-from runner.metrics import border_band
-from runner.store import ResultStore
+from runner.experiments.executors import progress_bar
+from runner.experiments.experiment import CUES, load_replications, stored_experiment
+from runner.experiments.metrics import border_band
+from runner.experiments.store import ResultStore
+from runner.report.figures import centre_cm
 
 #: the table's columns, in order, with what each holds
 COLUMNS = {

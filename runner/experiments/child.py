@@ -71,7 +71,7 @@ def _command_line(parent: int, stock: Callable[..., list[str]], **spawn: Any) ->
     """multiprocessing's command line of a spawned child, its program :func:`child_main`."""
     command = stock(**spawn)
     arguments = ", ".join(f"{k}={v!r}" for k, v in dict(spawn, parent=parent).items())
-    command[command.index("-c") + 1] = f"from runner.child import child_main; " \
+    command[command.index("-c") + 1] = f"from runner.experiments.child import child_main; " \
                                         f"child_main({arguments})"
     # -P: the current folder is not put first on the child's path (``python -c`` would), so a
     # folder named like one of the package's, where the command is run, cannot hide it

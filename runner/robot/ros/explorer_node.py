@@ -1,6 +1,6 @@
 """``bayesprog explore SCENARIO --ros``: the explorer as the ROS 2 node ``bayesprog_explorer``.
 
-Every ``probe`` line (``std_msgs/String``) is answered by a :class:`runner.session.Session`,
+Every ``probe`` line (``std_msgs/String``) is answered by a :class:`runner.robot.session.Session`,
 as ``explore --stdio`` answers it, on ``reply``; after a probe the node publishes the next cell
 (``next_target``), then the belief, pi_tar's posterior, the cues, the path and the registered
 shape. The topics, types and QoS are the contract of ``docs/robot.md``.
@@ -23,9 +23,9 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from runner.ros import messages
-from runner.session import Session
-from runner.shape import rotation
+from runner.attention.shape import rotation
+from runner.robot.ros import messages
+from runner.robot.session import Session
 
 #: replies and the next cell: reliable, for whoever listens now
 STREAM = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,

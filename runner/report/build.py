@@ -14,21 +14,19 @@ from typing import Any
 import numpy as np
 
 from bayesprog import BayesprogError
-from runner import figures
-from runner.executors import process_pool, progress_bar, stop_pool
-from runner.experiment import (
+from runner.attention.explorer import CONFIGURATIONS, Explorer
+from runner.experiments.executors import process_pool, progress_bar, stop_pool
+from runner.experiments.experiment import (
     Experiment,
     ExperimentSpec,
     load_results,
     mean_sem,
     stored_experiment,
 )
-from runner.explorer import CONFIGURATIONS, Explorer
-from runner.metrics import area_under, border_band, paired_test, visits  # noqa: F401
-from runner.scenario import Scenario
-from runner.sensor import SensorModel, confusion
-from runner.store import ResultStore, atomic_write, sweep_partial
-from runner.verdicts import (  # noqa: F401  (the report's statistics, read from here too)
+from runner.experiments.metrics import area_under, border_band, paired_test, visits  # noqa: F401
+from runner.experiments.store import ResultStore, atomic_write, sweep_partial
+from runner.report import figures
+from runner.report.verdicts import (  # noqa: F401  (the report's statistics, read from here too)
     ALPHA,
     FINDINGS,
     POWER,
@@ -41,6 +39,8 @@ from runner.verdicts import (  # noqa: F401  (the report's statistics, read from
     pooled,
     statistics_table,
 )
+from runner.world.scenario import Scenario
+from runner.world.sensor import SensorModel, confusion
 
 
 def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path, band: float = 1.0,
@@ -158,8 +158,8 @@ def plot_slices(results: dict, spec: ExperimentSpec, scenario: Scenario, out: Pa
 def replay(experiment: Experiment, task: str, configuration: str, run: int, steps: int
            ) -> Iterator[dict[str, Any]]:
     """Re-run one run (deterministic) and yield, per step, the fields behind its decision."""
-    from runner.loop import start_runs
-    from runner.loop import steps as loop_steps
+    from runner.experiments.loop import start_runs
+    from runner.experiments.loop import steps as loop_steps
 
     spec = experiment.spec
     scenario = experiment.scenario
@@ -430,8 +430,8 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
                  pool: Any = None) -> Path:
     """Write ``out/report/`` (figures, table, report.md, report.html) from stored results;
     ``compare``: another experiment's output folder whose findings are set beside these;
-    ``pool``: a process pool (:func:`~runner.executors.process_pool`) started beforehand, on
-    which Fig. 11 is drawn (else one is started here, where there is a second core)."""
+    ``pool``: a process pool (:func:`~runner.experiments.executors.process_pool`) started
+    beforehand, on which Fig. 11 is drawn (else one is started here, where there is a second core)."""
     store = ResultStore(out)
     manifest = store.manifest()
     experiment = stored_experiment(out)

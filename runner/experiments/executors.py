@@ -2,7 +2,7 @@
 soon as it is finished, workers that die replaced; and the progress bar. Every local process
 of the project comes from :func:`process_pool` (the experiment's units, the report's Fig. 11,
 the parameter search): its workers die with their parent whatever the moment, and leave
-Ctrl-C to it (:mod:`runner.child`)."""
+Ctrl-C to it (:mod:`runner.experiments.child`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import Any
 
 from bayesprog import BayesprogError
-from runner.store import ResultStore, Unit
+from runner.experiments.store import ResultStore, Unit
 
 
 def run_processes(workers: int, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
@@ -74,7 +74,7 @@ def process_pool(workers: int, preload: tuple[str, ...] = (), start: bool = Fals
     prepares the work."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from runner.child import WatchedContext
+    from runner.experiments.child import WatchedContext
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=WatchedContext(),
                                initializer=worker_init, initargs=(preload,))
@@ -93,7 +93,7 @@ def stop_pool(pool: Any) -> None:
 
 
 def worker_init(preload: tuple[str, ...] = ()) -> None:
-    """A worker process (already dying with its parent, :mod:`runner.child`): one
+    """A worker process (already dying with its parent, :mod:`runner.experiments.child`): one
     compiled-kernel thread, Ctrl-C left to the parent; stopped (SIGTERM), it ends as a Python
     program does, its files and semaphores released; its progress bars lock with a thread
     lock, not a semaphore of the machine's that a killed process would leave behind. The

@@ -1,11 +1,12 @@
 """The step loop of an exploration with a simulated sensor, written once.
 
 Probe the cells, perceive the readings, decide the next cells (:meth:`Explorer.step`): the
-experiment (:func:`runner.experiment.simulate`), the report's replay of a run and the notebook's
-step view (:func:`runner.report.replay`), and the parameter search (through ``simulate``) all
-iterate :func:`steps`; a robot driving the explorer line by line over stdio or ROS 2
-(:class:`runner.session.Session`) makes the same :meth:`Explorer.step` per probe. What makes a
-run the run it is, its start cell and the seeds of its readings and decisions, is here too.
+experiment (:func:`runner.experiments.experiment.simulate`), the report's replay of a run and
+the notebook's step view (:func:`runner.report.build.replay`), and the parameter search
+(through ``simulate``) all iterate :func:`steps`; a robot driving the explorer line by line over
+stdio or ROS 2 (:class:`runner.robot.session.Session`) makes the same :meth:`Explorer.step` per
+probe. What makes a run the run it is, its start cell and the seeds of its readings and
+decisions, is here too.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayesprog import Program
-from runner.explorer import Explorer
-from runner.scenario import Scenario
-from runner.sensor import HapticSensor, ProgramNormals, SimulatedSensor
+from runner.attention.explorer import Explorer
+from runner.world.scenario import Scenario
+from runner.world.sensor import HapticSensor, ProgramNormals, SimulatedSensor
 
 
 def _replicated(key: list[int], replication: int) -> list[int]:

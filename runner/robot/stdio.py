@@ -1,7 +1,7 @@
 """A step interface for a real robot: JSON lines in, JSON lines out.
 
-Each input line is answered by :class:`runner.session.Session` (its docstring gives the lines
-and the replies); the ROS 2 node (:mod:`runner.ros`) answers the same lines the same way.
+Each input line is answered by :class:`runner.robot.session.Session` (its docstring gives the lines
+and the replies); the ROS 2 node (:mod:`runner.robot.ros`) answers the same lines the same way.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import json
 from collections.abc import Iterable, Iterator
 from typing import IO
 
-from runner.explorer import Explorer
-from runner.session import MAX_LINE, Session
+from runner.attention.explorer import Explorer
+from runner.robot.session import MAX_LINE, Session
 
 
 def _lines(stdin: IO[str] | Iterable[str]) -> Iterator[str]:

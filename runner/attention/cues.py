@@ -16,7 +16,7 @@ from typing import cast
 import numpy as np
 from scipy.special import xlog1py, xlogy
 
-from runner._kernels import perceived_sobel_2d
+from runner.attention._kernels import perceived_sobel_2d
 
 INHIBITION_ALPHA = 1.01
 INHIBITION_BETA = 9.0

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from runner.scenario import Scenario
+from runner.world.scenario import Scenario
 
 #: the border line (over a 'viridis' map; over a 'hot' one, HOT_BORDER), the path, the start
 #: and the chosen cell: colours that stay distinct on either map

@@ -1,7 +1,7 @@
 """The haptic experiments in a notebook: an output folder shown as its findings and figures, and
 one exploration run replayed step by step (belief map, cue maps, path, chosen cell).
 
->>> from runner.notebook import Results, step_view      # doctest: +SKIP
+>>> from runner.report.notebook import Results, step_view      # doctest: +SKIP
 >>> Results("results/quick")                            # doctest: +SKIP
 >>> step_view("results/quick", task="T2", run=0)        # doctest: +SKIP
 """
@@ -15,10 +15,15 @@ from pathlib import Path
 from typing import Any
 
 from bayesprog import BayesprogError
-from runner.experiment import Experiment, ExperimentSpec, load_experiment, stored_experiment
-from runner.explorer import CONFIGURATIONS
-from runner.report import DecisionFigure, build_report, decision_slice, findings, replay
-from runner.store import ResultStore
+from runner.attention.explorer import CONFIGURATIONS
+from runner.experiments.experiment import (
+    Experiment,
+    ExperimentSpec,
+    load_experiment,
+    stored_experiment,
+)
+from runner.experiments.store import ResultStore
+from runner.report.build import DecisionFigure, build_report, decision_slice, findings, replay
 
 #: the figures of a report, in the order a reader meets them, with their captions
 FIGURES = [("fig10_gamma.png", "Gamma(k) (paper Fig. 10)"),

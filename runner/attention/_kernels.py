@@ -10,8 +10,8 @@ template, start) for a few starts.
 
 3-D ICP (:func:`icp3d`): the same for every pose of a batch against a solid's surface sample,
 each point paired with its nearest sample (exactly: the sample is looked for among the
-candidates its cell of a grid keeps, see ``runner.shape.NearestGrid``, or among all samples
-outside the grid's cells that keep candidates; or approximately, with the sample nearest to its
+candidates its cell of a grid keeps, see ``runner.attention.shape.NearestGrid``, or among all
+samples outside the grid's cells that keep candidates; or approximately, with the sample nearest to its
 cell's centre), then the Kabsch rotation (an SVD of the 3 x 3 cross-covariance, a reflection
 excluded); a pose stops where no pair changes.
 """
@@ -262,7 +262,8 @@ def _sobel_cell(d, mask, r, x, y):
 
 @njit(cache=True, parallel=True)
 def perceived_sobel_2d(d, mask):
-    """Saliency of the perceived stimulus on 2-D grids [R, nx, ny] (see runner.cues.saliency):
+    """Saliency of the perceived stimulus on 2-D grids [R, nx, ny] (see
+    runner.attention.cues.saliency):
     per cell the largest difference of the (1, 2, 1)-weighted means of perceived cells between
     the lines either side, along x and y; NaN where nothing is compared but a cell is perceived
     nearby, 0 where nothing is perceived nearby."""
@@ -294,8 +295,8 @@ def perceived_sobel_2d_around(d, mask, out, cells):
 @njit(cache=True, inline="always")
 def _on_border_2d(target, perceived, r, x, y):
     """Whether cell (x, y) of run r is a probed cell on the perceived border (see
-    runner.cues.perceived_border): perceived, with a perceived neighbour (3 x 3) of the other
-    side (the task's material or not)."""
+    runner.attention.cues.perceived_border): perceived, with a perceived neighbour (3 x 3) of the
+    other side (the task's material or not)."""
     if not perceived[r, x, y]:
         return False
     nx, ny = perceived.shape[1], perceived.shape[2]

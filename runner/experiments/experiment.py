@@ -6,8 +6,8 @@ and senses with ``default_rng([s, r, 1])``, in every configuration. So the same 
 numbers whatever the batching, and the configurations are compared on paired runs.
 
 ``replications: R`` runs the whole protocol R times, each on a sample of its own: replication
-``q`` draws its start cells and every stream from (seed, q) alone (:mod:`runner.loop`), and
-replication 0 is the experiment without replications, stored where it always was. The results
+``q`` draws its start cells and every stream from (seed, q) alone
+(:mod:`runner.experiments.loop`), and replication 0 is the experiment without replications, stored where it always was. The results
 do not depend on R: asking for more replications in a folder keeps the ones it holds.
 """
 
@@ -30,9 +30,9 @@ from bayesprog import (
     load_document,
     reference_problem,
 )
-from runner.executors import progress_bar, run_dask, run_processes
-from runner.explorer import CONFIGURATIONS, Explorer, state_entries
-from runner.loop import (  # noqa: F401  (re-exported: the runs' seeds and start cells)
+from runner.attention.explorer import CONFIGURATIONS, Explorer, state_entries
+from runner.experiments.executors import progress_bar, run_dask, run_processes
+from runner.experiments.loop import (  # noqa: F401  (re-exported: the runs' seeds and start cells)
     decision_seed,
     make_sensor,
     reading_seed,
@@ -41,13 +41,13 @@ from runner.loop import (  # noqa: F401  (re-exported: the runs' seeds and start
     start_runs,
     steps,
 )
-from runner.metrics import BorderDistance
-from runner.scenario import Scenario, load_scenario
-from runner.store import ResultStore, Unit, config_hash
+from runner.experiments.metrics import BorderDistance
+from runner.experiments.store import ResultStore, Unit, config_hash
+from runner.world.scenario import Scenario, load_scenario
 
 
 class TuneSpec(BaseModel):
-    """``tune:``: the search of ``bayesprog tune`` (see :mod:`runner.tune`)."""
+    """``tune:``: the search of ``bayesprog tune`` (see :mod:`runner.experiments.tune`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -329,7 +329,7 @@ def run_experiment(
     """Compute every unit not yet stored in ``out``, saving each as soon as it is finished.
 
     ``workers > 1`` uses local processes (those of ``pool`` first, when given: started by
-    :func:`~runner.executors.process_pool` while the caller prepared; it is shut down),
+    :func:`~runner.experiments.executors.process_pool` while the caller prepared; it is shut down),
     ``scheduler`` an existing Dask cluster; the numbers do not depend on either, nor on the
     chunk size (randomness is keyed by run).
     """

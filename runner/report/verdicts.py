@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from runner.experiment import ExperimentSpec, mean_sem
-from runner.metrics import area_under, behaviour, paired_test, phase_areas
-from runner.scenario import Scenario
+from runner.experiments.experiment import ExperimentSpec, mean_sem
+from runner.experiments.metrics import area_under, behaviour, paired_test, phase_areas
+from runner.world.scenario import Scenario
 
 
 def statistics_table(results: dict, spec: ExperimentSpec, borders: dict[str, int],
@@ -284,7 +284,7 @@ def signed_rank_p(d: np.ndarray) -> np.ndarray:
     [resamples, runs], one per row, by the normal approximation with the tie correction and
     zero differences dropped (scipy.stats.wilcoxon's ``method="approx"``, ``zero_method=
     "wilcox"``, no continuity correction); 1 where the two sides never differ (as
-    :func:`~runner.metrics.paired_test`)."""
+    :func:`~runner.experiments.metrics.paired_test`)."""
     from scipy import stats
 
     d = np.atleast_2d(np.asarray(d, dtype=float))

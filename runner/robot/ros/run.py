@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from bayesprog import BayesprogError
-from runner.ros import require
+from runner.robot.ros import require
 
 #: set by SIGINT or SIGTERM once :func:`catch_signals` has run: the node then ends cleanly
 STOP = threading.Event()
@@ -71,7 +71,7 @@ def _spin(node: Any, stop: threading.Event, until: Callable[[], bool] = lambda: 
 def explore(session: Any, namespace: str, frame: str) -> int:
     """Serve ``session`` as ``bayesprog_explorer`` until SIGINT or SIGTERM."""
     with _ros() as stop:
-        from runner.ros.explorer_node import ExplorerNode
+        from runner.robot.ros.explorer_node import ExplorerNode
 
         node = _node(lambda: ExplorerNode(session, namespace=namespace, frame=frame))
         e, name = session.explorer, node.get_fully_qualified_name()
@@ -88,7 +88,7 @@ def explore(session: Any, namespace: str, frame: str) -> int:
 def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) -> int:
     """Drive an explorer with the simulated robot; print the run's Gamma and path length."""
     with _ros() as stop:
-        from runner.ros.robot_node import RobotNode
+        from runner.robot.ros.robot_node import RobotNode
 
         node = _node(lambda: RobotNode(scenario, options, namespace=namespace))
         name = node.get_fully_qualified_name()

@@ -18,16 +18,16 @@ import numpy as np
 
 import bayesprog
 from bayesprog import Program, check_size
-from runner._kernels import followed_border_2d, marked_first, perceived_sobel_2d_around
-from runner.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
-from runner.scenario import Scenario
-from runner.shape import (
+from runner.attention._kernels import followed_border_2d, marked_first, perceived_sobel_2d_around
+from runner.attention.cues import inhibition_at_distance, perceived_border, saliency, uncertainty
+from runner.attention.shape import (
     MIN_POINTS,
     SEARCH_GROWTH_3D,
     Registration,
     ShapeTracker,
     pad_outlines,
 )
+from runner.world.scenario import Scenario
 
 #: The five configurations of the paper's ablation study (Fig. 9, 10): the term made uniform.
 CONFIGURATIONS: dict[str, tuple[str, ...]] = {
@@ -68,7 +68,7 @@ def state_entries(scenario: Scenario, runs: int) -> int:
 class Explorer:
     """Touch-attention exploration of a grid, for ``runs`` runs in lockstep.
 
-    >>> from runner.scenario import load_scenario
+    >>> from runner.world.scenario import load_scenario
     >>> scenario = load_scenario("models/scenarios/paper.yaml")
     >>> explorer = Explorer(scenario, task="T2")
     >>> explorer.reset(start=(5, 7), seed=1)

@@ -1,10 +1,10 @@
 """The explorer as a ROS 2 node, and a simulated robot node to drive it.
 
-``bayesprog explore SCENARIO --ros`` runs :class:`runner.ros.explorer_node.ExplorerNode`
+``bayesprog explore SCENARIO --ros`` runs :class:`runner.robot.ros.explorer_node.ExplorerNode`
 (node ``bayesprog_explorer``, namespace ``/bayesprog``): it answers every ``probe`` line as
-``explore --stdio`` does (:class:`runner.session.Session`) and publishes the next cell, the
+``explore --stdio`` does (:class:`runner.robot.session.Session`) and publishes the next cell, the
 belief, pi_tar's posterior, the cues, the path and the registered shape for RViz.
-``bayesprog robot SCENARIO --ros`` runs :class:`runner.ros.robot_node.RobotNode`, a robot
+``bayesprog robot SCENARIO --ros`` runs :class:`runner.robot.ros.robot_node.RobotNode`, a robot
 whose probes are drawn from the scenario's sensor. ``docs/robot.md`` gives the contract.
 
 rclpy and the message packages are an extra (``pip install "bayesprog[ros]"``); nothing here

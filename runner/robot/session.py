@@ -1,7 +1,7 @@
 """One exploration driven line by line: a JSON object in, a JSON object out.
 
-The step interfaces, JSON lines over standard input and output (:mod:`runner.stdio`) and the
-ROS 2 node (:mod:`runner.ros`), hand each input line to :meth:`Session.answer` and send back
+The step interfaces, JSON lines over standard input and output (:mod:`runner.robot.stdio`) and the
+ROS 2 node (:mod:`runner.robot.ros`), hand each input line to :meth:`Session.answer` and send back
 what it returns, so the same lines get the same replies whichever way they travel.
 
 A probe reports the cell just probed and its readings, ``{"cell": [ix, iy], "texture": e,
@@ -39,8 +39,8 @@ import numpy as np
 
 import bayesprog
 from bayesprog import BayesprogError, short_repr
-from runner.explorer import Explorer
-from runner.loop import decision_seed
+from runner.attention.explorer import Explorer
+from runner.experiments.loop import decision_seed
 
 #: The longest line read (characters); a longer one is answered with an error.
 MAX_LINE = 1 << 20
@@ -89,7 +89,7 @@ class Session:
     ``seed`` is the seed of the decisions' tie breaking until a reset names another. Lines are
     numbered from 1 as they arrive, blank ones included (they get no reply).
 
-    >>> from runner.scenario import load_scenario
+    >>> from runner.world.scenario import load_scenario
     >>> session = Session(Explorer(load_scenario("models/scenarios/paper.yaml"), "T2"))
     >>> reply = session.answer('{"cell": [5, 7], "texture": 0.52, "compliance": 0.08}')
     >>> reply["k"], reply["probed"]["material"], session.stepped

@@ -18,10 +18,10 @@ from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from runner.loop import make_sensor, reading_seed, start_cell
-from runner.metrics import BorderDistance, moves
-from runner.ros.explorer_node import PROBES, STREAM
-from runner.scenario import Scenario
+from runner.experiments.loop import make_sensor, reading_seed, start_cell
+from runner.experiments.metrics import BorderDistance, moves
+from runner.robot.ros.explorer_node import PROBES, STREAM
+from runner.world.scenario import Scenario
 
 
 @dataclass

@@ -25,8 +25,8 @@ from pydantic import (
 
 import bayesprog
 from bayesprog import SpecError, limit, load_document, reference_problem
-from runner.sensor import SensorModel, load_sensor_model
-from runner.solids import (
+from runner.world.sensor import SensorModel, load_sensor_model
+from runner.world.solids import (
     SOLID_KEYS,
     SolidSpec,
     check_outline,
@@ -195,7 +195,7 @@ class ScenarioSpec(_Strict):
                                  "Gaussian centres")
     shape_matcher: Literal["icp", "chamfer"] = Field(
         "icp", description="how the templates are registered onto the followed border: the "
-        "paper's ICP, or a chamfer search over a grid of poses (runner/shape.py)")
+        "paper's ICP, or a chamfer search over a grid of poses (runner/attention/shape.py)")
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)

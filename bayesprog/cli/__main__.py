@@ -1,0 +1,7 @@
+"""``python -m bayesprog.cli``: the command line, as ``bayesprog``."""
+
+import sys
+
+from bayesprog.cli import main
+
+sys.exit(main())

@@ -1,0 +1,147 @@
+"""What the commands share: the user error (printed as ``bayesprog: ...``, exit status 2,
+never a traceback), a program read from a file or a bundled name, the ``--ablate`` option, the
+readers of options given as ``NAME=VALUE`` (``--evidence``, ``--input``, ``--soft``,
+``--column``), ``.npy`` arrays and seeds, and the runner plugins found through the
+``bayesprog.runners`` entry point group.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bayesprog.errors import BayesprogError, SpecError
+
+if TYPE_CHECKING:
+    from bayesprog.program import Program
+
+#: The exit status of a user error (a file that does not load, an option out of range).
+EXIT_USER_ERROR = 2
+
+
+class UserError(Exception):
+    """A mistake in the command's arguments: printed as ``bayesprog: ...``, exit status 2."""
+
+
+def load_program(name: str) -> Program:
+    """The program file ``name``, or the bundled program of that name."""
+    from bayesprog.bundled import bundled_path
+    from bayesprog.program import load
+
+    path = str(bundled_path(name, "program"))
+    try:
+        return load(path)
+    except SpecError:
+        hint = _kind_hint(path)
+        if hint:
+            raise UserError(hint) from None
+        raise
+    except FileNotFoundError:
+        raise UserError(f"cannot read {path}: no such file, and no bundled program of that "
+                        "name (bayesprog examples lists them)") from None
+    except IsADirectoryError:
+        raise UserError(f"cannot read {path}: it is a directory") from None
+    except UnicodeDecodeError:
+        raise UserError(f"cannot read {path}: expected UTF-8 text") from None
+
+
+def ablated(program: Program, terms: Sequence[str]) -> Program:
+    """``program`` with each ``--ablate`` term uniform."""
+    for term in terms:
+        try:
+            program = program.ablate(term)
+        except BayesprogError as exc:
+            raise UserError(f"--ablate {term!r}: {exc}") from None
+    return program
+
+
+def _kind_hint(file: str) -> str | None:
+    """Why a file is not a program, when it is plainly another kind of file."""
+    from bayesprog.files import wrong_kind
+
+    return wrong_kind(file, "program", "this command reads programs; `bayesprog run` reads "
+                      "experiments and their scenarios")
+
+
+def plugins(quiet: bool = False) -> Iterator[tuple[str, Any]]:
+    """The runner plugins of the ``bayesprog.runners`` entry point group, by name, loaded; one
+    that cannot be loaded is left out, and says why on stderr unless ``quiet``."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group="bayesprog.runners"), key=lambda ep: ep.name):
+        try:
+            plugin = ep.load()
+        except Exception as exc:  # a broken plugin must not take the framework's CLI down
+            if not quiet:
+                print(f"bayesprog: runner {ep.name!r} not loaded: {exc}", file=sys.stderr)
+            continue
+        yield ep.name, plugin
+
+
+def column_renames(items: Sequence[str]) -> dict[str, str]:
+    """The ``--column COLUMN=VARIABLE`` options: the variable of each column renamed."""
+    columns: dict[str, str] = {}
+    for item in items:
+        column, eq, variable = item.partition("=")
+        if not eq or not column.strip() or not variable.strip():
+            raise UserError(f"--column {item!r}: expected COLUMN=VARIABLE")
+        if column.strip() in columns:
+            raise UserError(f"--column {column.strip()} is given twice: expected each column "
+                            "once")
+        columns[column.strip()] = variable.strip()
+    return columns
+
+
+def named_values(items: Sequence[str], option: str) -> dict[str, str]:
+    """The ``NAME=VALUE`` items of a repeatable ``option``, each name given once."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name or not value:
+            raise UserError(f"{option} {item!r}: expected NAME=VALUE")
+        name = name.strip()
+        if name in out:
+            raise UserError(f"{option} {name} is given twice ({name}={out[name]} and "
+                            f"{item.strip()}): expected each name once{_ONCE.get(option, '')}")
+        out[name] = value.strip()
+    return out
+
+
+#: how to give several values where one option takes one value per name
+_ONCE = {
+    "--evidence": "; for a batch of rows, VAR=FILE.npy; for one value per step of a program "
+                  "over time, VAR=v1,v2,... with --over-time",
+    "--soft": " (one likelihood per variable: VAR=p1,p2,...)",
+    "--input": " (one array per input: NAME=FILE.npy, with a batch axis for several rows)",
+}
+
+
+def read_npy(path: str, option: str) -> np.ndarray:
+    """The array in the ``.npy`` file ``path``, given to ``option``."""
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise UserError(f"{option}: cannot read {path}: no such file") from None
+    except IsADirectoryError:
+        raise UserError(f"{option}: cannot read {path}: it is a directory") from None
+    except (ValueError, OSError, EOFError):
+        raise UserError(f"{option}: cannot read {path} as an array: expected a .npy file "
+                        "of numbers written by numpy.save") from None
+
+
+def evidence_value(text: str) -> object:
+    """A ``.npy`` file (arrays: fields, batches), else the text: a state, a value or an index,
+    read by the engine according to the variable's kind."""
+    if text.endswith(".npy"):
+        return read_npy(text, "--evidence")
+    return text
+
+
+def check_seed(seed: int) -> int:
+    """The ``--seed``, refused when negative."""
+    if seed < 0:
+        raise UserError(f"--seed: expected a non-negative integer, found {seed}")
+    return seed
