@@ -14,8 +14,13 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bayesprog import BayesprogError, wrong_kind
+
+if TYPE_CHECKING:
+    from runner.world.physics import ProbeSpec
+    from runner.world.scenario import Scenario
 
 RUNNER = "haptic"
 
@@ -68,6 +73,20 @@ class RobotCommand:
     namespace: str = "/bayesprog"
     timeout: float = 60.0
     json: bool = False
+    #: readings from the simulated fingertip (MuJoCo); without ``ros``, the loop in one process
+    physics: bool = False
+    ros: bool = True
+
+
+@dataclass(frozen=True)
+class RecordOptions:
+    presses: int = 50
+    seed: int = 1
+    #: physics probes even when the scenario's sensor is not ``physics:``
+    physics: bool = False
+    #: where the per-step traces of physics probes go (a compressed .npz)
+    traces: Path | None = None
+    quiet: bool = False
 
 
 def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
@@ -252,7 +271,15 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
 
 
 def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
-    """A simulated robot node that drives ``bayesprog explore --ros`` (see runner.robot.ros)."""
+    """A simulated robot: a ROS 2 node that drives ``bayesprog explore --ros`` (see
+    runner.robot.ros), or with ``physics`` and not ``ros`` the closed loop in one process
+    (runner.robot.closed)."""
+    if options.physics:
+        from runner.world.physics import require as require_physics
+
+        require_physics()
+    if not options.ros:
+        return _closed_loop(target, options)
     from runner.robot.ros.run import catch_signals
 
     catch_signals()
@@ -263,16 +290,78 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
-    task = options.task or next(iter(scenario.spec.tasks))
-    if task not in scenario.spec.tasks:
-        raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
-                             f"{', '.join(scenario.spec.tasks)}")
+    task = _task(scenario, options.task)
     from runner.robot.ros.robot_node import RobotOptions
     from runner.robot.ros.run import robot as run_robot
 
     robot_options = RobotOptions(task=task, steps=options.steps, seed=options.seed,
-                                 run=options.run, timeout=options.timeout)
+                                 run=options.run, timeout=options.timeout,
+                                 physics=_probe_spec(scenario) if options.physics else None)
     return run_robot(scenario, robot_options, namespace=options.namespace, as_json=options.json)
+
+
+def _probe_spec(scenario: Scenario) -> ProbeSpec:
+    """How the fingertip probes: the scenario's ``sensor: {physics:}``, else the defaults."""
+    from runner.world.physics import ProbeSpec
+
+    return scenario.spec.sensor.physics or ProbeSpec()
+
+
+def _task(scenario: Scenario, task: str | None) -> str:
+    task = task or next(iter(scenario.spec.tasks))
+    if task not in scenario.spec.tasks:
+        raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
+                             f"{', '.join(scenario.spec.tasks)}")
+    return task
+
+
+def _closed_loop(target: Path, options: RobotCommand) -> int:
+    """``robot --physics`` without ``--ros``: explorer and fingertip in one process."""
+    from runner.robot.closed import closed_loop
+    from runner.world.scenario import load_scenario
+
+    scenario = load_scenario(_scenario_path(target))
+    _say(scenario.warnings)
+    task = _task(scenario, options.task)
+    outcome = closed_loop(scenario, task, options.steps, seed=options.seed, run=options.run,
+                          physics=_probe_spec(scenario))
+    if options.json:
+        print(json.dumps(outcome))
+    else:
+        print(f"bayesprog robot: task {task}, {outcome['steps']} probe(s) by the simulated "
+              f"fingertip; Gamma (eq. 16) {outcome['gamma_m']:.4f} m over "
+              f"{outcome['border_cells']} border cells; path {outcome['path_m']:.3f} m")
+    return 0
+
+
+def record(target: Path, out: Path, options: RecordOptions = RecordOptions()) -> int:
+    """``bayesprog record``: labelled presses of every material of a scenario's layout."""
+    if options.physics:
+        from runner.world.physics import require as require_physics
+
+        require_physics()
+    from runner.experiments.executors import progress_bar
+    from runner.robot.presses import record as record_presses
+    from runner.robot.presses import write
+    from runner.world.scenario import load_scenario
+
+    scenario = load_scenario(_scenario_path(target))
+    _say(scenario.warnings)
+    physics = _probe_spec(scenario) if options.physics else None
+    kinds = len({int(m) for m in scenario.material_map.ravel()})
+    bar = progress_bar(kinds * options.presses, "record", unit="press",
+                       enabled=False if options.quiet else None)
+    try:
+        table, traces = record_presses(scenario, options.presses, options.seed, physics,
+                                       keep_traces=options.traces is not None,
+                                       progress=lambda done: bar.update(done - bar.n))
+    finally:
+        bar.close()
+    write(table, out, traces, options.traces)
+    source = "physics probes" if physics or scenario.spec.sensor.physics else "the sensor"
+    print(f"{out}: {options.presses} presses of each of {kinds} materials ({source}, seed "
+          f"{options.seed})" + (f"; traces in {options.traces}" if options.traces else ""))
+    return 0
 
 
 # the command line ---------------------------------------------------------------------------
@@ -333,9 +422,10 @@ def _cmd_explore(args: argparse.Namespace) -> int:
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
-    if not args.ros:
+    if not args.ros and not args.physics:
         raise BayesprogError("robot needs --ros (it talks to `bayesprog explore --ros` over "
-                             "ROS 2)")
+                             "ROS 2) or --physics (the closed loop with a simulated fingertip, "
+                             "in one process)")
     _at_least("--steps", args.steps, 1)
     _at_least("--seed", args.seed, 0)
     _at_least("--run", args.run, 0)
@@ -344,7 +434,17 @@ def _cmd_robot(args: argparse.Namespace) -> int:
                              f"{args.timeout}")
     return robot(Path(args.target), RobotCommand(
         task=args.task, steps=args.steps, seed=args.seed, run=args.run,
-        namespace=args.namespace, timeout=args.timeout, json=args.json))
+        namespace=args.namespace, timeout=args.timeout, json=args.json, physics=args.physics,
+        ros=args.ros))
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    presses = _whole_number("--presses", args.presses, 1)
+    seed = _whole_number("--seed", args.seed, 0)
+    return record(Path(args.target), Path(args.output), RecordOptions(
+        presses=50 if presses is None else presses, seed=1 if seed is None else seed,
+        physics=args.physics, traces=Path(args.traces) if args.traces else None,
+        quiet=args.quiet))
 
 
 def validate(path: str, kind: str) -> list | None:
@@ -454,7 +554,8 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("target", metavar="SCENARIO_OR_MODELS",
                    help="a scenario file, or a models folder (its scenarios/paper.yaml)")
     p.add_argument("--ros", action="store_true",
-                   help="talk to the explorer over ROS 2 (required: the only interface)")
+                   help="talk to the explorer over ROS 2 (this, or --physics alone for the "
+                   "closed loop in one process)")
     p.add_argument("--task", help="task of the scenario, for Gamma (default: its first)")
     p.add_argument("--steps", type=int, default=100, metavar="N",
                    help="probes to make, the start cell's included (default: %(default)s)")
@@ -470,7 +571,28 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    "(default: %(default)s)")
     p.add_argument("--json", action="store_true",
                    help="print the outcome as one JSON object, with the path (default: a line)")
+    p.add_argument("--physics", action="store_true",
+                   help="probe with a simulated fingertip (MuJoCo; install bayesprog[physics]): "
+                   "without --ros, the closed loop in one process")
     p.set_defaults(func=_cmd_robot)
+
+    p = commands.add_parser("record", help="record labelled presses of every material of a "
+                            "scenario (CSV: material,texture,compliance, the cell, raw figures)")
+    p.add_argument("target", metavar="SCENARIO_OR_MODELS",
+                   help="a scenario file, or a models folder (its scenarios/paper.yaml)")
+    p.add_argument("--physics", action="store_true",
+                   help="presses by a simulated fingertip (MuJoCo; install bayesprog[physics]) "
+                   "(default: the scenario's sensor)")
+    p.add_argument("--presses", metavar="N", default=None,
+                   help="presses per material, at random cells of it (default: 50)")
+    p.add_argument("--seed", metavar="S", default=None,
+                   help="press i of material m is seeded by (S, m, i) (default: 1)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE.csv",
+                   help="where the presses are written")
+    p.add_argument("--traces", metavar="FILE.npz", default=None,
+                   help="also write each physics press's force and height traces")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_record)
 
 
 def _report_arguments(p: argparse.ArgumentParser) -> None:

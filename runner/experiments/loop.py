@@ -18,6 +18,7 @@ import numpy as np
 
 from bayesprog import Program
 from runner.attention.explorer import Explorer
+from runner.world.physics import PhysicsSensor, ProbeSpec
 from runner.world.scenario import Scenario
 from runner.world.sensor import HapticSensor, ProgramNormals, SimulatedSensor
 
@@ -59,10 +60,14 @@ def start_cells(shape: tuple[int, ...], runs: int, seed: int, replication: int =
                      for r in range(runs)]).reshape(runs, len(shape))
 
 
-def make_sensor(scenario: Scenario, perception: Program,
-                seeds: list) -> HapticSensor:
-    """The simulated sensor of a scenario: its sensor model when it names one (so perception
-    is misspecified, as on a robot), else the perception program's own Normals."""
+def make_sensor(scenario: Scenario, perception: Program, seeds: list,
+                physics: ProbeSpec | None = None) -> HapticSensor:
+    """The simulated sensor of a scenario, one seed per run: the physics probes when its
+    sensor is ``physics:`` or ``physics`` is given (a probe is seeded by its run's seed and its
+    step), its sensor model when it names one (so perception is misspecified, as on a robot),
+    else the perception program's own Normals."""
+    if physics is not None or scenario.spec.sensor.physics is not None:
+        return PhysicsSensor(scenario.physics_scene(physics), seeds)
     noise = scenario.spec.sensor.extra_noise
     model = ProgramNormals(perception) if scenario.sensor_model is None else scenario.sensor_model
     return SimulatedSensor(scenario.material_map, model, seeds, noise)

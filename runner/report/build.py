@@ -359,23 +359,57 @@ def plot_decision(experiment: Experiment, task: str, configuration: str, run: in
 HELD_OUT, HELD_OUT_SEED = 2000, 7
 
 
+#: held-out presses per material of a physics sensor (each a simulation of a few milliseconds)
+HELD_OUT_PRESSES = 200
+
+
+def physics_confusion(scenario: Scenario, per_material: int, seed: int) -> np.ndarray:
+    """Single-press confusion of the scenario's perception program on fresh presses of the
+    simulated fingertip at random cells of each material of the layout (seeded by ``seed``,
+    the material and the press, so none is a press it was learned from unless it was learned
+    with that seed): row = true material, column = the MAP material; rows of materials not
+    laid stay zero."""
+    from runner.world.physics import press_cells
+
+    scene = scenario.physics_scene()
+    k = len(scenario.materials)
+    out = np.zeros((k, k))
+    for m, cells in press_cells(scenario.material_map, per_material, seed):
+        probes = [scene.probe(int(c), np.random.default_rng([seed, m, i]))
+                  for i, c in enumerate(cells)]
+        post = scenario.perception.posterior("P(M | E, C)", {
+            "E": np.array([p.texture for p in probes]),
+            "C": np.array([p.compliance for p in probes])}).probabilities
+        np.add.at(out[m], post.argmax(-1), 1.0 / per_material)
+    return out
+
+
 def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> list[str]:
     """Which materials the perception program recognises from one probe of the scenario's
     sensor, and whether the least accurately followed task has the least recognised material."""
-    model = scenario.sensor_model or SensorModel.from_program(scenario.perception)
     noise = scenario.spec.sensor.extra_noise
-    matrix = confusion(scenario.perception, model, HELD_OUT, HELD_OUT_SEED, noise)
+    held_out = HELD_OUT
+    if scenario.spec.sensor.physics is not None:
+        held_out = HELD_OUT_PRESSES
+        matrix = physics_confusion(scenario, held_out, HELD_OUT_SEED)
+        source = ("Probes are presses and strokes of a simulated fingertip (MuJoCo; the "
+                  "materials' properties from models/physics/materials.yaml and the scenario's "
+                  "physics:)")
+    else:
+        model = scenario.sensor_model or SensorModel.from_program(scenario.perception)
+        matrix = confusion(scenario.perception, model, held_out, HELD_OUT_SEED, noise)
+        source = "Probes are simulated from " + (
+            f"the sensor model `{model.spec.name}`" if scenario.sensor_model is not None
+            else "the perception program's own Normals")
     names = list(scenario.materials)
-    source = (f"the sensor model `{model.spec.name}`" if scenario.sensor_model is not None
-              else "the perception program's own Normals")
     learned = scenario.perception.learned
     origin = ("written by hand" if not learned else
               f"learned from {learned[-1].rows_used} probes of `{learned[-1].data}` "
               f"({learned[-1].method})")
     lines = ["## Perception (pi_per)", "",
-             f"pi_per's parameters are {origin}. Probes are simulated from {source}"
+             f"pi_per's parameters are {origin}. {source}"
              + (f" plus white noise of sd {noise}" if noise else "") + f". Single-probe "
-             f"recognition on {HELD_OUT} held-out probes per material (seed {HELD_OUT_SEED}): "
+             f"recognition on {held_out} held-out probes per material (seed {HELD_OUT_SEED}): "
              f"{100 * np.diag(matrix).mean():.1f}% on average over the {len(names)} materials.", "",
              "| material in the scenario | recognised | most often taken for |", "|---|---|---|"]
     used = list(dict.fromkeys([scenario.spec.background]

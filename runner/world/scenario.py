@@ -20,11 +20,20 @@ from pydantic import (
     Discriminator,
     Field,
     Tag,
+    field_validator,
     model_validator,
 )
 
 import bayesprog
 from bayesprog import SpecError, limit, load_document, reference_problem
+from runner.world.physics import (
+    MaterialPhysics,
+    MaterialPhysicsPatch,
+    ProbeSpec,
+    Scene,
+    default_materials,
+    merged,
+)
 from runner.world.sensor import SensorModel, load_sensor_model
 from runner.world.solids import (
     SOLID_KEYS,
@@ -164,12 +173,23 @@ class SensorSpec(_Strict):
     recordings: str | None = Field(None, description="draw the simulated probes from a sensor "
                                    "model fitted to these recordings (per material, a "
                                    "skew-normal per feature and their correlation)")
+    physics: ProbeSpec | None = Field(None, description="every reading from a simulated "
+                                      "fingertip pressing and stroking the surface (MuJoCo, "
+                                      "the physics extra): how it probes, its noise, how its "
+                                      "signals become features; {} or true for the defaults")
     extra_noise: float = Field(0.0, ge=0)
+
+    @field_validator("physics", mode="before")
+    @classmethod
+    def _physics_switch(cls, value: Any) -> Any:
+        return {} if value is True else (None if value is False else value)
 
     @model_validator(mode="after")
     def _one_source(self) -> SensorSpec:
-        if self.model is not None and self.recordings is not None:
-            raise ValueError("expected a sensor model or recordings, not both")
+        given = [name for name in ("model", "recordings", "physics")
+                 if getattr(self, name) is not None]
+        if len(given) > 1:
+            raise ValueError(f"expected one source of readings, found {' and '.join(given)}")
         return self
 
 
@@ -199,6 +219,11 @@ class ScenarioSpec(_Strict):
     objects: list[ObjectSpec] = Field(default_factory=list)
     tasks: dict[str, str] = Field(min_length=1)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
+    physics: dict[str, MaterialPhysicsPatch] = Field(
+        default_factory=dict, description="physical properties of materials, for physics "
+        "probes (sensor: {physics: ...}): per material any of stiffness (N/m), damping "
+        "(N s/m), friction, roughness (m); the others from the bundled defaults "
+        "(models/physics/materials.yaml)")
 
 
 @dataclass
@@ -216,10 +241,30 @@ class Scenario:
     #: what the scenario does that is allowed but may not be meant (an object clipped by the
     #: grid's edge), at its place in the file: the commands print them
     warnings: list = field(default_factory=list)
+    _scenes: dict[str, Scene] = field(default_factory=dict, repr=False)
 
     @property
     def name(self) -> str:
         return self.spec.name
+
+    @cached_property
+    def physics(self) -> dict[str, MaterialPhysics]:
+        """Each material's physical properties: the bundled defaults, the scenario's over them."""
+        return merged(default_materials(), self.spec.physics)[0]
+
+    def physics_scene(self, probe: ProbeSpec | None = None) -> Scene:
+        """The MuJoCo scene of this surface, probed as ``probe`` says (by default the
+        scenario's ``sensor: {physics:}``, else the defaults); built once per probe settings.
+        Needs the physics extra (the error names it)."""
+        from runner.world.physics import require
+
+        require()
+        probe = probe or self.spec.sensor.physics or ProbeSpec()
+        key = probe.model_dump_json()
+        if key not in self._scenes:
+            self._scenes[key] = Scene(self.material_map, self.cell, self.materials,
+                                      self.physics, probe)
+        return self._scenes[key]
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -450,6 +495,7 @@ def load_scenario(path: str | Path) -> Scenario:
                                             f"{spec.sensor.model!r}: {problem}"))
         else:
             sensor_model = load_sensor_model(model_path, materials)
+    diags += _physics_problems(spec, located, materials)
     if diags:
         raise SpecError(diags)
     scenario = Scenario(spec, path, materials, perception, target, sensor_model)
@@ -527,11 +573,13 @@ def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayes
     materials of the recordings (as written), a Normal per material and feature fitted by
     maximum likelihood (as ``bayesprog learn --states-from-data M`` does)."""
     where = ("programs", "perception", "recordings")
-    file, _, rename = _recordings_frame(path, spec.recordings, spec.columns, located, where)
+    file, frame, rename = _recordings_frame(path, spec.recordings, spec.columns, located, where)
     template = (path.parent / spec.program).resolve() if spec.program else perception_template()
+    # columns beyond the three (a recording's cell, its raw figures) are not the program's
+    data: Any = str(file) if set(frame.columns) <= {"M", "E", "C"} else frame[["M", "E", "C"]]
     try:
-        return bayesprog.load(template).fit(str(file), columns=rename or None,
-                                            states_from_data=["M"]).program
+        return bayesprog.load(template).fit(data, columns=(rename or None) if isinstance(
+            data, str) else None, states_from_data=["M"]).program
     except bayesprog.BayesprogError as exc:
         raise SpecError([located.diagnostic(where, f"recordings {spec.recordings!r}: "
                                             f"{exc}")]) from None
@@ -556,6 +604,31 @@ def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
     except ValueError as exc:
         raise SpecError([located.diagnostic(where, f"recordings {spec.sensor.recordings!r}: "
                                             f"{exc}")]) from None
+
+
+def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ...]) -> list:
+    """A physics entry for a material the perception program does not know, one that lacks
+    properties, and (with physics probes) a laid material that has none, or a volume."""
+    diags = [located.diagnostic(("physics", name), f"unknown material {name!r}: expected one "
+                                f"of {', '.join(materials)}", at_key=True)
+             for name in spec.physics if name not in materials]
+    defaults = default_materials()
+    properties, lacking = merged(defaults, spec.physics)
+    diags += [located.diagnostic(("physics", name), f"{name} has no bundled physical "
+                                 f"properties: give {', '.join(missing)} too", at_key=True)
+              for name, missing in lacking.items()]
+    if spec.sensor.physics is not None:
+        if len(spec.grid.shape) != 2:
+            diags.append(located.diagnostic(("sensor", "physics"), "physics probes press a "
+                                            "surface: a volume (a 3-D grid) is not modelled",
+                                            at_key=True))
+        laid = {spec.background, *(o.material for o in spec.objects)}
+        diags += [located.diagnostic(("sensor", "physics"), f"material {name!r} has no "
+                                     "physical properties: give them under physics:",
+                                     at_key=True)
+                  for name in sorted(laid) if name in materials and name not in properties
+                  and name not in lacking]
+    return diags
 
 
 def _extent(spec: ScenarioSpec) -> str:

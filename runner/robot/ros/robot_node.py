@@ -2,7 +2,10 @@
 
 It probes its start cell with the scenario's sensor, publishes the reading on ``probe`` (one
 JSON line, as ``explore --stdio`` reads it), and on each ``next_target`` probes that cell and
-publishes again, for N probes. With ``--seed S --run R`` its start cell and readings are run
+publishes again, for N probes. With ``--physics`` its readings come from the simulated
+fingertip (:mod:`runner.world.physics`) and it publishes the fingertip's pose after each probe
+(``fingertip``, a ``geometry_msgs/TransformStamped`` from the workspace frame to
+``fingertip``). With ``--seed S --run R`` its start cell and readings are run
 R's of an experiment of seed S, and it asks the explorer to decide as in that run
 (``{"reset": {"seed": S, "run": R}}``), so the closed loop repeats that run's path.
 """
@@ -14,13 +17,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, TransformStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
 from runner.robot.ros.explorer_node import PROBES, STREAM
+from runner.world.physics import ProbeSpec
 from runner.world.scenario import Scenario
 
 
@@ -33,6 +37,10 @@ class RobotOptions:
     run: int = 0
     #: seconds to wait for the explorer to appear, and for each of its answers
     timeout: float = 60.0
+    #: the simulated fingertip's probes (MuJoCo) instead of the scenario's sensor
+    physics: ProbeSpec | None = None
+    #: the frame the fingertip's pose is given in
+    frame: str = "workspace"
 
 
 @dataclass
@@ -52,7 +60,12 @@ class RobotNode(Node):
         super().__init__("bayesprog_robot", namespace=namespace)
         self.scenario, self.options = scenario, options
         seed, run = options.seed, options.run
-        self.sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)])
+        self.sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)],
+                                  options.physics)
+        # the fingertip's pose, where a TF broadcaster would put it: frame ``fingertip`` in
+        # the workspace frame (tf2's messages are not among the extra's wheels)
+        self.fingertip = (self.create_publisher(TransformStamped, "fingertip", STREAM)
+                          if options.physics is not None else None)
         self.start = start_cell(scenario.shape, seed, run)
         self.gamma = BorderDistance(scenario.centres, scenario.border(options.task), 1)
         self.outcome = Outcome()
@@ -138,12 +151,27 @@ class RobotNode(Node):
     def probe_cell(self, cell: np.ndarray) -> None:
         flat = int(np.ravel_multi_index(tuple(int(i) for i in cell), self.scenario.shape))
         texture, compliance = self.sensor.probe(np.array([flat]))
+        self.publish_fingertip()
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
         self._answered = False
         self.send(json.dumps({"cell": [int(i) for i in cell], "texture": float(texture[0]),
                               "compliance": float(compliance[0])}))
         self._waiting_since = time.monotonic()
+
+    def publish_fingertip(self) -> None:
+        """Where the fingertip pressed last (its positioning error included), on the surface."""
+        probes = getattr(self.sensor, "last", [])
+        if self.fingertip is None or not probes:
+            return
+        pose = TransformStamped()
+        pose.header.stamp = self.get_clock().now().to_msg()
+        pose.header.frame_id = self.options.frame
+        pose.child_frame_id = "fingertip"
+        x, y = probes[-1].at
+        pose.transform.translation.x, pose.transform.translation.y = float(x), float(y)
+        pose.transform.rotation.w = 1.0
+        self.fingertip.publish(pose)
 
     def send(self, line: str) -> None:
         self.probe.publish(String(data=line))

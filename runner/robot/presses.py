@@ -1,0 +1,79 @@
+"""``bayesprog record SCENARIO --presses N --seed S -o FILE.csv``: labelled presses, as a lab
+records them to learn pi_per: N presses at random cells of each material of the scenario's
+layout, one row each, ``material,texture,compliance`` first (the columns a scenario's
+``programs: perception: {recordings: FILE.csv}`` reads), then the cell and, with physics probes,
+the raw figures (normal force in N, depth in m, friction ratio, the tangential force's
+fluctuation in N). With ``--traces FILE.npz`` the per-step force and height traces too.
+
+Press i of material m is seeded by (S, m, i): its cell, its positioning error and its noise, so
+a file is the same whatever else is recorded.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bayesprog import BayesprogError, atomic_write
+from runner.experiments.loop import make_sensor
+from runner.world.physics import Probe, ProbeSpec, press_cells
+from runner.world.scenario import Scenario
+
+#: the most presses per material a command may ask for
+MAX_PRESSES = 10_000
+
+
+def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | None = None,
+           keep_traces: bool = False, progress: Any = None
+           ) -> tuple[dict[str, list], dict[str, np.ndarray]]:
+    """The table of the presses (columns as written) and, with physics probes and
+    ``keep_traces``, their traces [rows, steps] per signal. ``progress``: called with the
+    presses done after each material."""
+    if not 1 <= presses <= MAX_PRESSES:
+        raise BayesprogError(f"--presses: expected 1 to {MAX_PRESSES:,}, found {presses}")
+    table: dict[str, list] = {"material": [], "texture": [], "compliance": [], "ix": [],
+                              "iy": []}
+    traces: dict[str, list] = {}
+    done = 0
+    for m, cells in press_cells(scenario.material_map, presses, seed):
+        seeds = [(seed, m, i) for i in range(presses)]
+        sensor = make_sensor(scenario, scenario.perception, seeds, physics)
+        texture, compliance = sensor.probe(cells)
+        probes: list[Probe] = getattr(sensor, "last", [])
+        index = np.unravel_index(cells, scenario.shape)
+        table["material"] += [scenario.materials[m]] * presses
+        table["texture"] += [float(f"{v:.6g}") for v in texture]
+        table["compliance"] += [float(f"{v:.6g}") for v in compliance]
+        table["ix"] += [int(i) for i in index[0]]
+        table["iy"] += [int(i) for i in index[1]]
+        for probe in probes:
+            for key, unit in zip(Probe.RAW, ("force_n", "depth_m", "friction_ratio",
+                                               "tangential_sd_n"), strict=True):
+                name = key if key == "friction_ratio" else unit
+                table.setdefault(name, []).append(float(f"{getattr(probe, key):.6g}"))
+            for key, values in probe.traces.items() if keep_traces else ():
+                traces.setdefault(key, []).append(values)
+        done += presses
+        if progress is not None:
+            progress(done)
+    return table, {key: np.stack(rows) for key, rows in traces.items()}
+
+
+def write(table: dict[str, list], out: Path, traces: dict[str, np.ndarray] | None = None,
+          traces_out: Path | None = None) -> None:
+    """The table as CSV at ``out`` (and the traces as a compressed ``.npz``), each written
+    whole or not at all."""
+    import io
+
+    import pandas as pd
+
+    atomic_write(out, pd.DataFrame(table).to_csv(index=False).encode())
+    if traces_out is not None:
+        if not traces:
+            raise BayesprogError("--traces: only physics probes have traces (add --physics, or "
+                                 "a scenario whose sensor is physics:)")
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **traces)  # type: ignore[arg-type]
+        atomic_write(traces_out, buffer.getvalue())
