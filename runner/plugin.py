@@ -104,6 +104,11 @@ def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
 
         exp = load_experiment(_experiment_file(experiment), replications=options.replications)
         _say(exp.scenario.warnings)
+        if exp.scenario.spec.sensor.physics is not None:
+            from runner.world.physics import require as require_physics
+
+            # said here, in one line, rather than by every worker
+            require_physics(f"the sensor: {{physics:}} of {exp.scenario.path.name}")
         run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
                        progress=False if options.quiet else None, pool=pool)
     except KeyboardInterrupt:

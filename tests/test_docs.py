@@ -141,7 +141,7 @@ def _model_files() -> list[Path]:
     out = []
     for path in sorted(MODELS.rglob("*.yaml")) + sorted(MODELS.rglob("*.yml")):
         rel = path.relative_to(MODELS)
-        if rel.parts[0] in ("scenarios", "experiments", "sensors"):
+        if rel.parts[0] in ("scenarios", "experiments", "sensors", "physics"):
             data = yaml.safe_load(path.read_text(encoding="utf-8"))
             if not (isinstance(data, dict) and "bayesprog" in data):
                 continue  # a scenario or experiment description, not a program

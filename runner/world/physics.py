@@ -17,10 +17,11 @@ F_n (mu + s) along its path), and lowered going down.
 
 A probe (:meth:`Scene.probe`), all in simulated time steps of one millisecond:
 
-1. approach: the fingertip starts 0.2 mm above the surface, over the cell's centre plus the
-   hand's positioning error (``jitter``), and is pushed down at the set force;
-2. press: it settles for ``press`` seconds; the depth is how far it moved from its first
-   contact (a normal force above 2 % of the set force), the normal force the contact's;
+1. approach: the fingertip starts 0.1 mm above the surface, over the cell's centre plus the
+   hand's positioning error (``jitter``), and comes down at 2 mm/s;
+2. press: it settles for ``press`` seconds; the depth is how far it moved from where it met
+   the surface (the height at which the normal force starts to rise, from a line through the
+   force against the height while it rises), the normal force the contact's;
 3. stroke: the stage moves it ``stroke`` metres along x at ``speed``; the tangential force is
    what the x axis's force sensor reads, over the last three quarters of the stroke;
 4. lift: the simulation of the probe ends (the next probe starts afresh).
@@ -70,14 +71,19 @@ RELIEF_SPACING = 0.00025
 BUMP = 0.001
 VARIANTS = 4
 MIN_FRICTION = 0.02
+#: first contact: a normal force above this share of the set force
+ONSET = 0.02
 #: the friction's own time constant and damping ratio (s, -): slip builds up over 20 ms,
 #: critically damped, so that a stiff surface does not chatter at the time step
 FRICTION_SOLREF = "0.02 1"
 #: points spread over the unit disc: the contact patch's share of each cell
 DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(-0.8, 0.8, 5)
                  if u * u + v * v <= 0.8])
-#: first contact: a normal force above this share of the set force
-ONSET = 0.02
+#: the approach: from this gap above the surface (m) at this speed (m/s); then the z axis's
+#: own damping (N s/m)
+APPROACH_GAP = 1e-4
+APPROACH_SPEED = 0.002
+Z_DAMPING = 5.0
 
 
 class _Strict(BaseModel):
@@ -168,11 +174,11 @@ class MaterialsFile(_Strict):
     materials: dict[str, MaterialPhysics]
 
 
-def require() -> None:
-    """MuJoCo, or the one-line error that names the extra."""
+def require(feature: str = "--physics") -> None:
+    """MuJoCo, or the one-line error that names the extra (and ``feature``, what needs it)."""
     from bayesprog import require_extra
 
-    require_extra(EXTRA[0], EXTRA[1], "--physics")
+    require_extra(EXTRA[0], EXTRA[1], feature)
 
 
 @dataclass
@@ -200,11 +206,9 @@ def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, pre
     """(texture, compliance, raw figures) of one probe's traces: ``normal``, ``tangential``
     forces and ``height`` per step, the first ``press_steps`` of them the press."""
     press_n, press_z = normal[:press_steps], height[:press_steps]
-    touching = np.flatnonzero(press_n > ONSET * spec.force)
-    onset = press_z[touching[0]] if touching.size else press_z[-1]
     settled = slice(max(press_steps - press_steps // 5, 1), press_steps)  # the last fifth
     force = float(press_n[settled].mean())
-    depth = float(onset - press_z[settled].mean())
+    depth = float(_contact_height(press_n, press_z, force) - press_z[settled].mean())
     stroke_n, stroke_t = normal[press_steps:], tangential[press_steps:]
     steady = slice(len(stroke_t) // 4, len(stroke_t))
     n, t = stroke_n[steady], stroke_t[steady]
@@ -216,6 +220,21 @@ def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, pre
     texture = sd / mean_n / spec.texture_scale + spec.friction_weight * ratio
     return texture, compliance, {"force": force, "depth": depth, "friction_ratio": ratio,
                                  "tangential_sd": sd}
+
+
+def _contact_height(normal: np.ndarray, height: np.ndarray, force: float) -> float:
+    """Where the surface was met: the height at which the normal force starts to rise, from a
+    straight line through the force against the height while it rises to half the press's
+    force (the first sample in contact when fewer than two lie there)."""
+    rising = np.flatnonzero(normal > ONSET * force)
+    if not rising.size:
+        return float(height[-1])
+    first = rising[0]
+    end = first + int(np.argmax(normal[first:] >= 0.5 * force))
+    if end - first < 2:
+        return float(height[first])
+    slope, intercept = np.polyfit(normal[first:end], height[first:end], 1)
+    return float(intercept)
 
 
 def _slopes(roughness: float, samples: int, spacing: float, rng: np.random.Generator
@@ -312,7 +331,7 @@ class Scene:
     <body name="fingertip" pos="0 0 0">
       <joint name="x" type="slide" axis="1 0 0"/>
       <joint name="y" type="slide" axis="0 1 0"/>
-      <joint name="z" type="slide" axis="0 0 1" damping="5"/>
+      <joint name="z" type="slide" axis="0 0 1" damping="{Z_DAMPING}"/>
       <geom name="fingertip" type="sphere" size="{r}" mass="{TIP_MASS}" rgba="0.9 0.8 0.2 1"/>
       <site name="fingertip" size="{r * 1.05:.6g}"/>
     </body>
@@ -372,7 +391,9 @@ class Scene:
         x0 = (ix + 0.5) * self.cell + error[0] - spec.stroke / 2
         y0 = (iy + 0.5) * self.cell + error[1]
         mujoco.mj_resetData(model, data)
-        data.qpos[:] = (x0, y0, spec.radius + 2e-4)
+        data.qpos[:] = (x0, y0, spec.radius + APPROACH_GAP)
+        # the approach at a slow, steady speed (the z axis damped); once in contact, the press
+        model.dof_damping[2] = spec.force / APPROACH_SPEED
         data.ctrl[:] = (x0, y0, -spec.force)
         press_steps = int(round(spec.press / TIMESTEP))
         stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
@@ -382,8 +403,11 @@ class Scene:
                                   np.linspace(0, spec.stroke, stroke_steps)])
         qpos, ctrl, sensordata = data.qpos, data.ctrl, data.sensordata
         at = (np.inf, np.inf, np.inf)  # where the contact was last set
+        touching = False
         for k in range(steps):
             x, y, z = qpos
+            if not touching and sensordata[0] > 0:
+                model.dof_damping[2], touching = Z_DAMPING, True
             depth = spec.radius - z
             if abs(x - at[0]) > RELIEF_SPACING / 2 or abs(depth - at[2]) > 0.05 * abs(at[2]) \
                     + 1e-5:

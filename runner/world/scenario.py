@@ -258,7 +258,7 @@ class Scenario:
         Needs the physics extra (the error names it)."""
         from runner.world.physics import require
 
-        require()
+        require(f"the sensor: {{physics:}} of {self.path.name}")
         probe = probe or self.spec.sensor.physics or ProbeSpec()
         key = probe.model_dump_json()
         if key not in self._scenes:

@@ -758,3 +758,43 @@ def test_a_growing_path_serializes_as_the_whole_message(frame):
     assert len(data) == len(serialize_message(whole))
     grown.clear()
     assert deserialize_message(grown.serialized(head), PathMsg) == PathMsg(header=head)
+
+
+# --- the physics robot ------------------------------------------------------------------------
+
+
+def test_the_physics_robot_drives_the_explorer_and_publishes_its_fingertip():
+    """``robot --physics --ros`` against ``explore --ros``: the contract unchanged (the same
+    path as the closed loop in one process, which shares its seeds), and after each probe the
+    fingertip's pose, from the workspace frame to ``fingertip``."""
+    from geometry_msgs.msg import TransformStamped
+
+    from runner.robot.closed import closed_loop
+
+    scenario_file = ROOT / "models" / "scenarios" / "paper_physics.yaml"
+    namespace = f"/t{random.SystemRandom().randrange(10**6)}"
+    explorer = start("explore", str(scenario_file), "--ros", "--namespace", namespace,
+                     "--task", "T2")
+    client = Client(namespace)
+    poses: list = []
+    client.node.create_subscription(TransformStamped, f"{namespace}/fingertip", poses.append, 10)
+    try:
+        client.spin(client.connected, timeout=60)
+        robot = start("robot", str(scenario_file), "--physics", "--ros", "--json", "--task",
+                      "T2", "--steps", "10", "--namespace", namespace)
+        client.spin(lambda: robot.poll() is not None, timeout=120)
+        out, err = robot.communicate()
+        assert robot.returncode == 0, err
+        client.spin(lambda: len(poses) >= 10, timeout=10)
+    finally:
+        client.close()
+        stop(explorer)
+    outcome = json.loads(out)
+    alone = closed_loop(load_scenario(scenario_file), "T2", 10)
+    assert outcome["path"] == [p["cell"] for p in alone["probes"]]
+    assert outcome["gamma"] == pytest.approx(alone["gamma_m"])
+    assert [(p.header.frame_id, p.child_frame_id) for p in poses] == [("workspace", "fingertip")] * 10
+    centres = [(np.array(c) + 0.5) * 0.01 for c in outcome["path"]]
+    for pose, centre in zip(poses, centres, strict=True):  # where it pressed: near the centre
+        at = np.array([pose.transform.translation.x, pose.transform.translation.y])
+        assert np.linalg.norm(at - centre) < 0.005
