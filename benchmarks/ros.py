@@ -32,8 +32,11 @@ import numpy as np
 
 ROOT = Path(__file__).parents[1]
 BAYESPROG = str(Path(sys.executable).with_name("bayesprog"))
-os.environ.update({"ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 100)),
-                   "ROS_LOCALHOST_ONLY": "1", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+# DDS stays on this machine's loopback, on a domain of its own unless the user chose one: a
+# setting already made is kept
+for name, value in (("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100))),
+                    ("ROS_LOCALHOST_ONLY", "1"), ("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")):
+    os.environ.setdefault(name, value)
 
 
 class Robot:

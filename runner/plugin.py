@@ -91,35 +91,39 @@ class RecordOptions:
 
 def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
         report_options: ReportOptions = ReportOptions()) -> int:
-    """Run an experiment file (resuming what ``out`` already holds), then write its report.
-    Local worker processes are started first: they import the simulation while this process
-    reads the experiment."""
+    """Run an experiment file (resuming what ``out`` already holds), then write its report,
+    holding ``out`` throughout (a second command on it is refused). Local worker processes
+    are started first: they import the simulation while this process reads the experiment."""
     from runner.experiments.executors import process_pool, stop_pool
+    from runner.experiments.store import hold
 
-    pool = None
-    if options.workers > 1 and options.scheduler is None:
-        pool = process_pool(options.workers, preload=("runner.experiments.experiment",), start=True)
-    try:
-        from runner.experiments.experiment import load_experiment, run_experiment
+    experiment = _experiment_file(experiment)
+    with hold(out, "run"):  # the run and its report, nobody else between them
+        pool = None
+        if options.workers > 1 and options.scheduler is None:
+            pool = process_pool(options.workers, preload=("runner.experiments.experiment",),
+                                start=True)
+        try:
+            from runner.experiments.experiment import load_experiment, run_experiment
 
-        exp = load_experiment(_experiment_file(experiment), replications=options.replications)
-        _say(exp.scenario.warnings)
-        if exp.scenario.spec.sensor.physics is not None:
-            from runner.world.physics import require as require_physics
+            exp = load_experiment(experiment, replications=options.replications)
+            _say(exp.scenario.warnings)
+            if exp.scenario.spec.sensor.physics is not None:
+                from runner.world.physics import require as require_physics
 
-            # said here, in one line, rather than by every worker
-            require_physics(f"the sensor: {{physics:}} of {exp.scenario.path.name}")
-        run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
-                       progress=False if options.quiet else None, pool=pool)
-    except KeyboardInterrupt:
-        print(f"interrupted: the finished chunks are kept in {out}; run the same command "
-              "again to resume", file=sys.stderr)
-        return 130
-    finally:
-        if pool is not None:  # (shut down by the run, unless it stopped before)
-            stop_pool(pool)
-    if options.report:
-        return report(out, report_options)
+                # said here, in one line, rather than by every worker
+                require_physics(f"the sensor: {{physics:}} of {exp.scenario.path.name}")
+            run_experiment(exp, out, workers=options.workers, scheduler=options.scheduler,
+                           progress=False if options.quiet else None, pool=pool)
+        except KeyboardInterrupt:
+            print(f"interrupted: the finished chunks are kept in {out}; run the same command "
+                  "again to resume", file=sys.stderr)
+            return 130
+        finally:
+            if pool is not None:  # (shut down by the run, unless it stopped before)
+                stop_pool(pool)
+        if options.report:
+            return report(out, report_options)
     print(f"results written to {out}")
     return 0
 
@@ -140,22 +144,24 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
     import os
 
     from runner.experiments.executors import process_pool, stop_pool
+    from runner.experiments.store import hold
 
-    _output_folder(out)
-    pool = process_pool(1, preload=("runner.report.build",), start=True) \
-        if (os.cpu_count() or 1) >= 2 else None
-    try:
-        from runner.report.build import build_report
+    with hold(out, "report", make=False):  # before the pool: a refusal starts nothing
+        _output_folder(out)
+        pool = process_pool(1, preload=("runner.report.build",), start=True) \
+            if (os.cpu_count() or 1) >= 2 else None
+        try:
+            from runner.report.build import build_report
 
-        folder = build_report(out, animation=options.animation, compare=options.compare,
-                              pool=pool)
-    except KeyboardInterrupt:
-        print(f"interrupted while drawing the report: the results are kept in {out}; "
-              f"bayesprog report {out} draws it", file=sys.stderr)
-        return 130
-    finally:
-        if pool is not None:
-            stop_pool(pool)
+            folder = build_report(out, animation=options.animation, compare=options.compare,
+                                  pool=pool)
+        except KeyboardInterrupt:
+            print(f"interrupted while drawing the report: the results are kept in {out}; "
+                  f"bayesprog report {out} draws it", file=sys.stderr)
+            return 130
+        finally:
+            if pool is not None:
+                stop_pool(pool)
     print(f"report written to {folder / 'report.md'} (and report.html)")
     return 0
 
@@ -267,7 +273,8 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
         from runner.robot.ros.run import explore as explore_ros
         from runner.robot.session import Session
 
-        return explore_ros(Session(explorer, seed=options.seed), namespace=options.namespace,
+        return explore_ros(Session(explorer, seed=options.seed, frame=options.frame),
+                           namespace=options.namespace,
                            frame=options.frame)
     from runner.robot.stdio import serve
 

@@ -42,7 +42,7 @@ from runner.experiments.loop import (  # noqa: F401  (re-exported: the runs' see
     steps,
 )
 from runner.experiments.metrics import BorderDistance
-from runner.experiments.store import ResultStore, Unit, config_hash
+from runner.experiments.store import ResultStore, Unit, config_hash, hold
 from runner.world.scenario import Scenario, load_scenario
 
 
@@ -331,8 +331,15 @@ def run_experiment(
     ``workers > 1`` uses local processes (those of ``pool`` first, when given: started by
     :func:`~runner.experiments.executors.process_pool` while the caller prepared; it is shut down),
     ``scheduler`` an existing Dask cluster; the numbers do not depend on either, nor on the
-    chunk size (randomness is keyed by run).
+    chunk size (randomness is keyed by run). The folder is held while the run writes it
+    (:func:`~runner.experiments.store.hold`): a second run, report or search of it is refused.
     """
+    with hold(out, "run"):
+        return _run(experiment, out, workers, scheduler, progress, pool)
+
+
+def _run(experiment: Experiment, out: Path, workers: int, scheduler: str | None,
+         progress: bool | None, pool: Any) -> ResultStore:
     store = ResultStore(out)
     store.open(manifest(experiment))
     todo = [u for u in units(experiment.spec) if not store.done(u, experiment.spec.iterations)]

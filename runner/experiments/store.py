@@ -9,10 +9,14 @@ different configuration is refused, never mixed in.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
+import os
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,6 +71,68 @@ def sweep_partial(folder: Path) -> list[Path]:
                 path.unlink(missing_ok=True)
                 gone.append(path)
     return gone
+
+
+#: the lock file of a results folder, and the folders this process holds (with how many times
+#: it took each: a run holds its folder, then its report takes it again)
+LOCK = ".lock"
+_HELD: dict[Path, list[int]] = {}
+
+
+@contextmanager
+def hold(folder: Path, what: str, make: bool = True) -> Iterator[None]:
+    """Take ``folder`` for ``what`` (a run, a report, a search) while the block runs: an
+    advisory lock on ``folder/.lock`` (made, with the folder when ``make``, when missing), which
+    the kernel releases if the process dies. A second process asking for it is refused with one
+    line that names the holder's command and pid; the same process may take it again. A folder
+    that is not there and is not to be made is not held (the caller says what is missing)."""
+    import fcntl
+
+    folder = Path(folder)
+    if not make and not folder.is_dir():
+        yield
+        return
+    if folder.exists() and not folder.is_dir():
+        raise StoreError(f"--out {folder}: is a file, expected a folder")
+    key = folder.resolve()
+    if key in _HELD:
+        _HELD[key][1] += 1
+        try:
+            yield
+        finally:
+            _HELD[key][1] -= 1
+        return
+    made = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as exc:
+        raise StoreError(f"--out {folder}: cannot write results there "
+                         f"({exc.strerror or exc}): expected a folder that can be created or "
+                         "written") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 200).decode("utf-8", "replace").strip() or "another process"
+        os.close(fd)
+        raise StoreError(f"{folder} is in use by {holder}: wait for it to end, or give another "
+                         "--out folder") from None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"bayesprog {what} (pid {os.getpid()})".encode())
+    _HELD[key] = [fd, 1]
+    try:
+        yield
+    finally:
+        _HELD[key][1] -= 1
+        if not _HELD[key][1]:
+            del _HELD[key]
+            if made and [f.name for f in folder.iterdir()] == [LOCK]:
+                # a folder made for a command that wrote nothing (a user error) is not left
+                (folder / LOCK).unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
 
 class ResultStore:

@@ -42,6 +42,7 @@ from runner.attention.explorer import Explorer
 from runner.experiments.executors import progress_bar
 from runner.experiments.experiment import ExperimentSpec, TuneSpec, simulate, start_cells
 from runner.experiments.metrics import area_under, behaviour, moves, paired_test, visits
+from runner.experiments.store import LOCK, hold
 from runner.world.scenario import Scenario, load_scenario
 
 
@@ -367,7 +368,8 @@ def _open_journal(search: Search, out: Path) -> Any:
 
     if out.exists() and not out.is_dir():
         raise BayesprogError(f"--out {out}: is a file, expected a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).exists():
+    if out.is_dir() and any(f.name != LOCK for f in out.iterdir()) \
+            and not (out / MANIFEST).exists():
         raise BayesprogError(f"--out {out}: holds files but no search ({MANIFEST}): choose an "
                              "empty or new folder")
     out.mkdir(parents=True, exist_ok=True)
@@ -413,6 +415,12 @@ def run_search(search: Search, out: Path, trials: int | None = None, workers: in
     """Run (or resume) the search in ``out``, then validate its best profiles; returns what
     ``tune.json`` holds and writes it with the tuned program (what the search reports,
     ``tune.md`` and its figures, is :func:`runner.report.tuning.write_report`'s)."""
+    with hold(out, "tune"):
+        return _run_search(search, out, trials, workers, progress, scheduler)
+
+
+def _run_search(search: Search, out: Path, trials: int | None, workers: int,
+                progress: bool | None, scheduler: str | None) -> dict:
     import optuna
 
     trials = trials or search.tune.trials

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from bayesprog import BayesprogError, require_extra
+from runner.experiments.store import hold
 from runner.experiments.tune import (
     JOURNAL,
     Search,
@@ -28,9 +29,10 @@ def search_and_report(search: Search, out: Path, trials: int | None = None, work
                       progress: bool | None = None, scheduler: str | None = None) -> dict:
     """Run (or resume) the search in ``out`` (:func:`~runner.experiments.tune.run_search`), then
     write its report beside ``tune.json``; returns what ``tune.json`` holds."""
-    result = run_search(search, out, trials=trials, workers=workers, progress=progress,
-                        scheduler=scheduler)
-    write_report(search, out, result)
+    with hold(out, "tune"):
+        result = run_search(search, out, trials=trials, workers=workers, progress=progress,
+                            scheduler=scheduler)
+        write_report(search, out, result)
     return result
 
 

@@ -72,6 +72,30 @@ def _natural(value: object, what: str) -> int:
     return value
 
 
+#: the keys a probe line may hold, and a reset's options
+PROBE_KEYS = frozenset({"cell", "texture", "compliance", "maps", "k", "session"})
+RESET_KEYS = frozenset({"seed", "run", "task", "start", "session"})
+
+
+def _did_you_mean(unknown: list[str], known: frozenset[str]) -> str:
+    """`` (did you mean 'compliance'?)`` for the first unknown key close to a known one."""
+    import difflib
+
+    for key in unknown:
+        close = difflib.get_close_matches(str(key), sorted(known), n=1, cutoff=0.6)
+        if close:
+            return f" (did you mean {close[0]!r}?)"
+    return ""
+
+
+def _session_id(value: object) -> str | int:
+    """A session's name: a non-empty string or an integer."""
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or value == "":
+        raise ValueError(f"expected a session as a non-empty string or an integer, found "
+                         f"{_short(value)}")
+    return value
+
+
 def _number(x: float) -> float | None:
     return float(x) if math.isfinite(float(x)) else None
 
@@ -81,6 +105,25 @@ def _grid(values: np.ndarray, shape: tuple[int, ...]) -> list:
     grid = np.asarray(values, float).reshape(shape)
     out: list = np.vectorize(_number, otypes=[object])(grid).tolist()
     return out
+
+
+def declared_range(program: bayesprog.Program, name: str) -> tuple[float, float]:
+    """The range a program declares for a real variable: its support where it is bounded, else
+    the range its description states as ``(LOW ... .. HIGH ...)`` (``"texture (0 smooth .. 1
+    rough)"``), else the whole line."""
+    import re
+
+    variable = program.variables.get(name)
+    if variable is None:
+        return -math.inf, math.inf
+    low, high = float(getattr(variable, "low", -math.inf)), float(getattr(variable, "high", math.inf))
+    if math.isfinite(low) or math.isfinite(high):
+        return low, high
+    found = re.search(r"\(\s*([-+]?\d+(?:\.\d*)?)\b[^()]*?\.\.\s*([-+]?\d+(?:\.\d*)?)\b",
+                      getattr(variable, "description", "") or "")
+    if found:
+        return float(found.group(1)), float(found.group(2))
+    return -math.inf, math.inf
 
 
 class Session:
@@ -100,8 +143,14 @@ class Session:
     True
     """
 
-    def __init__(self, explorer: Explorer, seed: int = 0):
+    def __init__(self, explorer: Explorer, seed: int = 0, frame: str = "workspace"):
         self.explorer = explorer
+        #: the frame the workspace's positions are given in (a reset's reply names it)
+        self.frame = frame
+        #: the session that holds the explorer (a reset claimed it), or None
+        self.holder: str | int | None = None
+        #: the cell the last reply asked to probe next (None before any)
+        self.expected: list[int] | None = None
         #: the explorers of the tasks a reset has named (built once each)
         self._by_task = {explorer.task: explorer}
         self.seed = seed
@@ -165,6 +214,13 @@ class Session:
                 "uncertainty": _grid(e.last.uncertainty[0], shape),
                 "posterior": _grid(e.target_probabilities[0], shape)}
 
+    def workspace(self) -> dict:
+        """The grid's geometry, for a driver that moves a hand in metres: the size of a cell,
+        the cells along each axis, and the frame positions are given in."""
+        scenario = self.explorer.scenario
+        return {"cell_m": scenario.spec.grid.cell, "size": list(scenario.shape),
+                "frame": self.frame}
+
     def position(self, cell: list[int] | tuple[int, ...]) -> list[float]:
         """The centre of ``cell`` in metres (origin at the grid's corner, axes along ix, iy, iz)."""
         size = self.explorer.scenario.spec.grid.cell
@@ -191,6 +247,26 @@ class Session:
         return ("; ".join(far) + ": outside what the perception program was built for (a "
                 "sensor on another scale?); the decision is made all the same")
 
+    def support_warnings(self, texture: float, compliance: float) -> list[str]:
+        """A reading outside the range the perception program declares for its cue: its
+        variable's support, or the range its description gives (``(0 smooth .. 1 rough)``)."""
+        out = []
+        for variable, value, what in (("E", texture, "texture"), ("C", compliance, "compliance")):
+            low, high = self.ranges.get(variable, (-math.inf, math.inf))
+            if not low <= value <= high:
+                out.append(f"{what} {value:g} is outside [{low:g}, {high:g}], the range the "
+                           f"perception program declares for it ({variable})")
+        return out
+
+    @property
+    def ranges(self) -> dict[str, tuple[float, float]]:
+        """Per cue variable of the perception program, the range it declares."""
+        program = self.explorer.perception
+        if getattr(self, "_ranges_of", None) is not program:
+            self._ranges = {v: declared_range(program, v) for v in ("E", "C")}
+            self._ranges_of = program
+        return self._ranges
+
     # one line --------------------------------------------------------------------------------
     def answer(self, line: str) -> dict | None:
         """The reply to one input line (None for a blank line, which is counted all the same)."""
@@ -213,27 +289,53 @@ class Session:
             raise ValueError("JSON nested too deeply: expected one flat JSON object") from None
         if not isinstance(obj, dict):
             raise ValueError("expected a JSON object")
-        if set(obj) == {"maps"}:
+        if "reset" in obj:
+            return self._reset(obj)
+        self._check_holder(obj)
+        if set(obj) - {"session"} == {"maps"}:
             if obj["maps"] is not True:
                 raise ValueError(f'expected {{"maps": true}}, found {_short(obj)}')
             return {"k": self.k - 1, "maps": self.maps()}
-        if "reset" in obj:
-            return self._reset(obj)
         return self._probe(obj)
+
+    def _check_holder(self, obj: dict) -> None:
+        """A line of another session than the one holding the explorer changes nothing."""
+        if "session" not in obj and self.holder is None:
+            return
+        given = _session_id(obj["session"]) if "session" in obj else None
+        if self.holder is None:
+            raise ValueError(f"no session {_short(given)} holds the explorer: claim it with "
+                             f'{{"reset": {{"session": {json.dumps(given)}}}}} first')
+        if given != self.holder:
+            raise ValueError(f"the explorer is held by session {json.dumps(self.holder)}: "
+                             f"send its lines with \"session\": {json.dumps(self.holder)}, or "
+                             "take it over with a reset that names another session "
+                             f"(this line {'named ' + json.dumps(given) if given is not None else 'named none'}; nothing changed)")
 
     def _reset(self, obj: dict) -> dict:
         if set(obj) != {"reset"}:
             raise ValueError('expected {"reset": {"seed": S}} alone, found other keys: '
                              + ", ".join(sorted(set(obj) - {"reset"})))
         opts = obj["reset"]
-        if not isinstance(opts, dict) or set(opts) - {"seed", "run", "task", "start"}:
-            raise ValueError('expected {"reset": {...}} with any of task, seed, run and start, '
-                             f'found {_short(opts)}')
+        if not isinstance(opts, dict) or set(opts) - RESET_KEYS:
+            unknown = sorted(set(opts) - RESET_KEYS) if isinstance(opts, dict) else []
+            raise ValueError('expected {"reset": {...}} with any of task, seed, run, start and '
+                             f"session, found {_short(opts)}" + _did_you_mean(unknown,
+                                                                             RESET_KEYS))
+        claim = _session_id(opts["session"]) if "session" in opts else None
+        if self.holder is not None and claim is None:
+            raise ValueError(f"the explorer is held by session {json.dumps(self.holder)}: a "
+                             "reset must name a session to take it over (nothing changed)")
         seed = _natural(opts.get("seed", self.seed), "seed")
         start = self._cell(opts["start"], "start") if "start" in opts else None
         if "task" in opts:
             self._use_task(opts["task"])
         reply: dict = {"reset": True, "task": self.explorer.task, "seed": seed}
+        if claim is not None:
+            reply["session"] = claim
+            if self.holder is not None and self.holder != claim:
+                reply["taken_over_from"] = self.holder
+        reply["workspace"] = self.workspace()
         if "run" in opts:
             run = _natural(opts["run"], "run")
             self._seeds = [decision_seed(seed, run)]
@@ -241,10 +343,12 @@ class Session:
         else:
             self._seeds = seed
         self.seed = seed
-        self.k, self._started = 0, False
+        self.holder = claim
+        self.k, self._started, self.expected = 0, False, None
         self.explorer.last = None  # the maps of the last session are not this one's
         if start is not None:
             reply["next"], reply["position"] = start, self.position(start)
+            self.expected = start
         return reply
 
     def _use_task(self, task: object) -> None:
@@ -272,27 +376,44 @@ class Session:
         explorer = self.explorer
         shape = explorer.scenario.shape
         axes = ("ix", "iy", "iz")[:len(shape)]
+        extra = sorted(set(obj) - PROBE_KEYS)
         missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
+        if extra:  # named first: a misspelt key is why a required one is missing
+            raise ValueError(f"unknown key(s) {', '.join(map(repr, extra))}"
+                             + _did_you_mean(extra, PROBE_KEYS)
+                             + (f" (missing {', '.join(missing)})" if missing else "")
+                             + ": expected cell, texture, compliance and maybe k, maps, session")
         if missing:
             raise ValueError(f"missing {', '.join(missing)}: expected "
                              f'{{"cell": [{", ".join(axes)}], "texture": e, "compliance": c}}')
+        if "k" in obj:
+            k = _natural(obj["k"], "k (the step the probe answers)")
+            if k != self.k:
+                raise ValueError(f"stale probe: it answers step {k}, the explorer waits for "
+                                 f"step {self.k} (nothing changed)")
         cell = self._cell(obj["cell"], "cell")
         texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
+        if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
+            raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
         if not self._started:
             explorer.reset(start=cell, seed=self._seeds)
             self._started = True
-        extra = set(obj) - {"cell", "texture", "compliance", "maps"}
-        if extra:
-            raise ValueError(f"unknown key(s) {', '.join(sorted(extra))}: expected cell, "
-                             "texture, compliance and maybe maps")
-        if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
-            raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
+        warnings = []
+        if self.expected is not None and cell != self.expected:
+            warnings.append(f"probed {cell}, not the cell asked for, {self.expected} (a missed "
+                            "target?): the reading is taken where it was made")
         nxt = explorer.observe(cell, texture, compliance)
         reply = {"k": self.k, "next": list(nxt), "position": self.position(nxt),
                  "probed": self.probed(cell), "chosen": self.chosen(), "shape": self.shape()}
-        warning = self.warning(texture, compliance)
-        if warning:
-            reply["warning"] = warning
+        if self.holder is not None:
+            reply["session"] = self.holder
+        warnings += self.support_warnings(texture, compliance)
+        far = self.warning(texture, compliance)
+        if far:
+            warnings.append(far)
+        if warnings:
+            reply["warning"] = "; ".join(warnings)
+        self.expected = list(nxt)
         if obj.get("maps"):
             reply["maps"] = self.maps()
         self.k += 1

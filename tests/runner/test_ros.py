@@ -798,3 +798,23 @@ def test_the_physics_robot_drives_the_explorer_and_publishes_its_fingertip():
     for pose, centre in zip(poses, centres, strict=True):  # where it pressed: near the centre
         at = np.array([pose.transform.translation.x, pose.transform.translation.y])
         assert np.linalg.norm(at - centre) < 0.005
+
+
+def test_when_the_explorer_dies_the_robot_prints_what_it_did_and_exits_1(paper):
+    namespace = f"/t{random.SystemRandom().randrange(10**6)}"
+    explorer = start("explore", str(PAPER), "--ros", "--namespace", namespace, "--task", "T2")
+    client = Client(namespace)
+    try:
+        client.spin(client.connected, timeout=60)
+        robot = start("robot", str(PAPER), "--ros", "--json", "--task", "T2", "--steps", "500",
+                      "--timeout", "3", "--namespace", namespace)
+        client.spin(lambda: len(client.got["reply"]) >= 6, timeout=60)
+        explorer.kill()
+        out, err = robot.communicate(timeout=60)
+    finally:
+        client.close()
+    assert robot.returncode == 1
+    assert "the explorer is gone" in err and "Traceback" not in err
+    outcome = json.loads(out)
+    assert 6 <= outcome["probes"] < 500 and len(outcome["path"]) == outcome["probes"]
+    assert outcome["gamma"] > 0 and outcome["path_length"] > 0

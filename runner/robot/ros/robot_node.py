@@ -111,8 +111,9 @@ class RobotNode(Node):
             if len(self.outcome.cells) >= self.options.steps:
                 self.done = True  # every probe was sent; the last one's answer is not needed
                 return
-            self.fail(f"no next_target after {self.options.timeout:g} s (probe "
-                      f"{len(self.outcome.cells)})")
+            self.fail(f"the explorer is gone: no next_target after {self.options.timeout:g} s "
+                      f"(after probe {len(self.outcome.cells)}); the outcome above is what was "
+                      "done until then")
 
     def on_reply(self, msg: String) -> None:
         """The explorer's answers, read for our reset and for a refusal of our probe; replies
@@ -155,8 +156,10 @@ class RobotNode(Node):
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
         self._answered = False
+        # the step it answers: a late or repeated message is refused, never taken as another
         self.send(json.dumps({"cell": [int(i) for i in cell], "texture": float(texture[0]),
-                              "compliance": float(compliance[0])}))
+                              "compliance": float(compliance[0]),
+                              "k": len(self.outcome.cells) - 1}))
         self._waiting_since = time.monotonic()
 
     def publish_fingertip(self) -> None:

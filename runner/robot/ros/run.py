@@ -94,9 +94,9 @@ def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) ->
         name = node.get_fully_qualified_name()
         _spin(node, stop, until=lambda: node.done, tick=node.advance)
         outcome, summary = node.outcome, node.summary()
-    if outcome.error is not None:
+    if outcome.error is not None and outcome.no_explorer:
         print(f"{name}: {outcome.error}", file=sys.stderr)
-        return 2 if outcome.no_explorer else 1
+        return 2
     if as_json:
         print(json.dumps({k: (None if isinstance(v, float) and v != v else v)  # NaN: null
                           for k, v in summary.items()}))
@@ -108,4 +108,7 @@ def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) ->
               f"over {summary['border_cells']} border cells "
               f"({summary['gamma_per_border_cell_mm']:.1f} mm per cell); path length "
               f"{summary['path_length']:.3f} m")
+    if outcome.error is not None:  # what it had done is printed above, then why it stopped
+        print(f"{name}: {outcome.error}", file=sys.stderr)
+        return 1
     return 0
