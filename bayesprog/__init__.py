@@ -42,6 +42,7 @@ _WHERE = {
     "MapResult": "bayesprog.inference",
     "Posterior": "bayesprog.inference",
     "Density": "bayesprog.inference.density",
+    "Probability": "bayesprog.inference.event",
     "load_document": "bayesprog.language.document",
     "Located": "bayesprog.language.loader",
     "load_yaml": "bayesprog.language.loader",
@@ -62,11 +63,12 @@ _WHERE = {
     "require_extra": "bayesprog.extras",
     "compare": "bayesprog.learning.evidence",
     "Discovery": "bayesprog.discovery",
+    "StructureWarning": "bayesprog.discovery",
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.bundled import bundled_path, bundled_root
-    from bayesprog.discovery import Discovery, discover
+    from bayesprog.discovery import Discovery, StructureWarning, discover
     from bayesprog.display import show_inference
     from bayesprog.errors import (
         BayesprogError,
@@ -82,6 +84,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
     from bayesprog.inference import MapResult, Posterior
     from bayesprog.inference.density import Density
+    from bayesprog.inference.event import Probability
     from bayesprog.language.document import load_document
     from bayesprog.language.loader import Located, load_yaml
     from bayesprog.learning.evidence import compare
@@ -122,6 +125,7 @@ __all__ = [
     "MapResult",
     "Param",
     "Posterior",
+    "Probability",
     "Program",
     "Question",
     "QuestionError",
@@ -135,6 +139,7 @@ __all__ = [
     "show_inference",
     # structure: a decomposition discovered from data, programs compared by their evidence
     "Discovery",
+    "StructureWarning",
     "compare",
     "discover",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own

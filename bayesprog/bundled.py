@@ -16,7 +16,7 @@ NAME DIR`` copies one, with every file it names, into a folder of one's own to e
 
 from __future__ import annotations
 
-import shutil
+import os
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -175,20 +175,25 @@ def _strings(data: object) -> list[str]:
 
 
 def copy(name: str, folder: Path, *, force: bool = False) -> list[Path]:
-    """Copy the bundled model ``name`` and every file it names into ``folder``, in the same
-    layout as under the root (so its relative references still hold); returns the written
-    files, the model's own first. An existing file is not overwritten unless ``force``."""
+    """Copy the bundled model ``name`` and every file it names into ``folder``; returns the
+    written files, the model's own first. A model that is one file lands as that file in
+    ``folder`` (``student`` as ``folder/student.yaml``); a model with the files it names keeps
+    their layout from the folder that holds them all (so its relative references still hold:
+    ``paper`` as ``experiments/paper.yaml`` beside ``scenarios/`` and its programs). An
+    existing file is not overwritten unless ``force``."""
     source = find(name)
     if source is None:
         raise BayesprogError(f"no bundled model called {name!r} (bayesprog examples lists "
                              "them)")
-    base = bundled_root().resolve()
     files = references(source)
+    base = Path(os.path.commonpath([f.parent for f in files]))
     targets = [folder / f.relative_to(base) for f in files]
     existing = [str(t) for t in targets if t.exists()]
     if existing and not force:
         raise BayesprogError(f"{existing[0]} exists: not overwritten (--force overwrites"
                              + (f"; {len(existing)} files in all)" if len(existing) > 1 else ")"))
+    import shutil
+
     for file, target in zip(files, targets, strict=True):
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(file, target)

@@ -13,6 +13,7 @@ import json
 import math
 import re
 import time
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -242,6 +243,66 @@ def read_tiers(tiers: Any, names: Sequence[str]) -> list[int]:
     return tier
 
 
+# what the data's independences cannot show ------------------------------------------------
+
+class StructureWarning(UserWarning):
+    """A discovered arc that the data contradict in a way the search cannot see (an arc into a
+    variable that is a function of its other parents)."""
+
+
+#: rows per configuration of the determining variables, on average, before a variable is
+#: said to be a function of them (fewer rows make a function of chance)
+ROWS_PER_CONFIGURATION = 5
+
+
+def determined_by(codes: np.ndarray, child: int, candidates: Sequence[int]) -> list[int] | None:
+    """The smallest set of ``candidates`` (the first of its size) of which the column ``child``
+    is a function in the data: each configuration of them seen (rows where all are known)
+    shows one value of ``child``, with ``ROWS_PER_CONFIGURATION`` rows per configuration on
+    average; None when there is none, or ``child`` takes one value only."""
+    import itertools
+
+    for size in range(1, len(candidates)):
+        for subset in itertools.combinations(sorted(candidates), size):
+            columns = codes[:, [child, *subset]]
+            known = columns[(columns >= 0).all(axis=1)]
+            if len(known) == 0 or len(np.unique(known[:, 0])) < 2:
+                continue
+            pairs = np.unique(known, axis=0)
+            configurations = np.unique(pairs[:, 1:], axis=0)
+            if (len(pairs) == len(configurations)
+                    and len(known) >= ROWS_PER_CONFIGURATION * len(configurations)):
+                return list(subset)
+    return None
+
+
+def deterministic_warnings(coded: Coded, parents: Sequence[Sequence[int]],
+                           method: str) -> list[str]:
+    """An arc into a variable that the data show to be a function of its other parents: the
+    independence tests (pc) or the scores (hc) cannot place it, since given those parents it
+    carries nothing more (the faithfulness the search assumes fails there); such arcs usually
+    point the wrong way (the variable's children taken for its parents)."""
+    names = coded.names
+    out = []
+    for v, ps in enumerate(parents):
+        if len(ps) < 2:
+            continue
+        determining = determined_by(coded.codes, v, ps)
+        if determining is None:
+            continue
+        extra = [names[p] for p in sorted(ps) if p not in determining]
+        by = ", ".join(names[p] for p in determining)
+        arcs = ", ".join(f"{e} -> {names[v]}" for e in extra)
+        out.append(f"{names[v]} is a function of {by} in the data (each of their "
+                   f"configurations shows one value of {names[v]}): the arcs {arcs} contradict "
+                   f"that deterministic table, which needs no other parent. {method} cannot "
+                   "place the arcs at a variable its other parents determine (given them it "
+                   "tells nothing more, which the search reads as independence) and often "
+                   f"takes its children for parents: check them, and forbid those that point "
+                   f"the wrong way (--forbid {extra[0]}->{names[v]})")
+    return out
+
+
 # discovery ---------------------------------------------------------------------------------
 
 @dataclass
@@ -260,7 +321,7 @@ class Discovery:
         from bayesprog.files import atomic_write
 
         path = Path(path)
-        atomic_write(path, self.text.encode("utf-8"))
+        atomic_write(path, self.text.encode("utf-8"), parents=False)
         return path
 
 
@@ -363,6 +424,9 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
                             f"{len(coded.frame)} rows miss a value")
     structure["constraints"] = constraints
     structure["discretised"] = coded.bins
+    structure["warnings"] = deterministic_warnings(coded, parents, method)
+    for message in structure["warnings"]:
+        warnings.warn(message, StructureWarning, stacklevel=2)
     for v, ps in enumerate(parents):
         cells = scores.cells(v, ps)
         if cells > MAX_FAMILY_CELLS:
@@ -376,7 +440,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
                          k2=method == "hc" and score == "k2")
     skeleton_program = loads(text, f"<{title}>")
     fit = skeleton_program.fit(coded.frame, max_iter=max_iter, tol=tol)
-    from bayesprog.model import StructureRecord
+    from bayesprog.records import StructureRecord
 
     record = fit.record.model_copy(update=dict(
         data=coded.source, sha256=coded.sha256, structure=StructureRecord(**structure)))

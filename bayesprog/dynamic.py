@@ -474,25 +474,36 @@ PARTICLES = 2_000
 
 def _particles(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,
                inputs: Mapping[str, Any] | None, options: Mapping[str, Any]) -> Density:
-    """A filter question over real states answered by a particle filter (the bootstrap
-    filter): particles drawn from the belief before the first step; at each step each particle
-    moves by the step's own terms (drawn as likelihood weighting draws, the states before
-    given), is weighted by the likelihood of what the step observes, and the particles are
-    resampled (systematic resampling) after their weighted summary is kept. Seeded by ``rng``
-    (step ``t``, sequence ``b`` and particle ``i`` use their own streams), whatever the batch.
+    """A filter or smooth question over real states answered by particles.
+
+    The filter is the bootstrap filter: particles drawn from the belief before the first step;
+    at each step each particle moves by the step's own terms (drawn as likelihood weighting
+    draws, the states before given), is weighted by the likelihood of what the step observes,
+    and the particles are resampled (systematic resampling) after their weighted summary is
+    kept. Seeded by ``rng`` (step ``t``, sequence ``b`` and particle ``i`` use their own
+    streams), whatever the batch.
+
+    The smoother is forward filtering, backward smoothing (FFBSm, Doucet, Godsill and Andrieu
+    2000): each step's weighted particles of the filter reweighted, from the last step back,
+    by the step program's density of the pair of states (the transition and what the next
+    step observes, :func:`_pair_log_density`),
+    ``w_t|T(i) = w_t(i) sum_j w_t+1|T(j) psi(x_t^i, x_t+1^j) / sum_k w_t(k) psi(x_t^k, x_t+1^j)``,
+    ``n^2`` densities a step: no randomness beyond the filter's, so the same seed gives the
+    same answer.
+
     The answer gives each step's weighted mean and covariance of the particles (its density
-    and quantiles are those of the Gaussian with these moments), the effective sample size
-    before resampling (``ess``) and ``log_evidence[t]``, the estimate of
-    ``log p(y_t | y_1..t-1)``."""
+    and quantiles are those of the Gaussian with these moments), the effective sample size of
+    the weights (``ess``: before resampling for the filter, of the smoothing weights for the
+    smoother) and ``log_evidence[t]``, the estimate of ``log p(y_t | y_1..t-1)``."""
     from bayesprog.inference.answers import seed_of
     from bayesprog.inference.binding import bind
     from bayesprog.inference.sampling import draw
 
     expr = question.expression
-    if question.kind != "filter":
-        raise QuestionError(f"a particle filter answers filter questions, found a "
-                            f"{question.kind} question (smoothing by particles is not "
-                            "available)")
+    if question.kind not in ("filter", "smooth"):
+        raise QuestionError(f"particles answer filter and smooth questions, found a "
+                            f"{question.kind} question (the most likely sequence is asked of "
+                            "discrete states)")
     previous = [p for p, _ in program.time]
     states = [s for _, s in program.time]
     n = int(options.get("samples") or PARTICLES)
@@ -508,6 +519,7 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
     terms = list(step.active_terms)
     means, covs, ess, log_evidence = [], [], [], []
+    kept: list[tuple[np.ndarray, np.ndarray]] = []  # each step's particles and weights
     q = Question(Expression(tuple(states), tuple(previous) + tuple(observed),
                             dict(expr.values)))
     for t in range(steps):
@@ -532,10 +544,11 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
         w = w / total
         log_evidence.append((top[:, 0] + np.log(total[:, 0] / n)).reshape(batch))
         ess.append((1.0 / (w**2).sum(axis=1)).reshape(batch))
-        mean = np.einsum("bn,bnd->bd", w, moved)
-        dev = moved - mean[:, None, :]
-        means.append(mean)
-        covs.append(np.einsum("bn,bnd,bne->bde", w, dev, dev))
+        if question.kind == "smooth":
+            kept.append((moved, w))
+        else:
+            means.append(_weighted_mean(w, moved))
+            covs.append(_weighted_covariance(w, moved, means[-1]))
         # systematic resampling, one stream per sequence
         u = np.array([np.random.default_rng([seed, t + 1, b, n]).random()
                       for b in range(sequences)])
@@ -543,14 +556,104 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
         picks = np.stack([np.minimum(np.searchsorted(np.cumsum(w[b]), points[b]), n - 1)
                           for b in range(sequences)])
         particles = np.take_along_axis(moved, picks[..., None], axis=1)
+    if question.kind == "smooth":
+        ess = []
+        smoothed = _smoothed_weights(step, kept, previous, states, observed, known, batch,
+                                     inputs)
+        for (moved, _), w in zip(kept, smoothed, strict=True):
+            means.append(_weighted_mean(w, moved))
+            covs.append(_weighted_covariance(w, moved, means[-1]))
+            ess.append((1.0 / (w**2).sum(axis=1)).reshape(batch))
     order = [states.index(v) for v in expr.left]
     shape = (steps,) + batch
     rows = int(np.prod(shape))
     mean_t = np.stack(means)[..., order].reshape(rows, 1, len(order))
     cov_t = np.stack(covs)[..., order, :][..., :, order].reshape(rows, 1, len(order),
                                                                      len(order))
+    smooth = question.kind == "smooth"
     return Density(
-        f"{expr}   (filtered, {_steps_text(steps)})", tuple(expr.left), shape,
-        np.stack(log_evidence).reshape(shape), ablated=program.ablated, method="pf",
+        f"{expr}   ({'smoothed' if smooth else 'filtered'}, {_steps_text(steps)})",
+        tuple(expr.left), shape, np.stack(log_evidence).reshape(shape),
+        ablated=program.ablated, method="pf-smooth" if smooth else "pf",
         weights=np.ones((rows, 1)), means=mean_t, covariances=cov_t,
         ess=np.stack(ess).reshape(shape))
+
+
+def _weighted_mean(w: np.ndarray, particles: np.ndarray) -> np.ndarray:
+    """``[sequences, d]``: the mean of each sequence's particles ``[sequences, n, d]``."""
+    return np.einsum("bn,bnd->bd", w, particles)
+
+
+def _weighted_covariance(w: np.ndarray, particles: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    dev = particles - mean[:, None, :]
+    return np.einsum("bn,bnd,bne->bde", w, dev, dev)
+
+
+#: most pairs of particles whose density one call of the engine computes (a smoother's step
+#: has n^2 per sequence)
+PAIRS_PER_CALL = 1 << 20
+
+
+def _smoothed_weights(step: Any, kept: list[tuple[np.ndarray, np.ndarray]],
+                      previous: list[str], states: list[str], observed: list[str],
+                      known: dict[str, np.ndarray], batch: tuple[int, ...],
+                      inputs: Mapping[str, Any] | None) -> list[np.ndarray]:
+    """The smoothing weights ``[sequences, n]`` of each step's filter particles (FFBSm, see
+    :func:`_particles`), from the last step back, in logarithms."""
+    steps = len(kept)
+    sequences, n = kept[0][1].shape
+    with np.errstate(divide="ignore"):
+        log_smooth = np.log(kept[-1][1])
+    out = [kept[-1][1]]
+    for t in range(steps - 2, -1, -1):
+        before, w_before = kept[t]
+        after = kept[t + 1][0]
+        with np.errstate(divide="ignore"):
+            log_w = np.log(w_before)
+        new = np.empty((sequences, n))
+        for b in range(sequences):
+            values = {name: np.broadcast_to(known[name][t + 1], batch).reshape(-1)[b]
+                      for name in observed}
+            log_psi = _pair_log_density(step, before[b], after[b], previous, states, values,
+                                        inputs)  # [n before, n after]
+            # sum_k w_t(k) psi(x_t^k, x_t+1^j): each particle after's predictive density
+            log_predictive = scipy.special.logsumexp(log_w[b][:, None] + log_psi, axis=0)
+            with np.errstate(invalid="ignore"):
+                terms = log_psi + (log_smooth[b] - log_predictive)[None, :]
+            terms = np.where(np.isfinite(log_smooth[b])[None, :], terms, -np.inf)
+            new[b] = log_w[b] + scipy.special.logsumexp(terms, axis=1)
+        new -= scipy.special.logsumexp(new, axis=1, keepdims=True)
+        log_smooth = new
+        out.append(np.exp(new))
+    return out[::-1]
+
+
+def _pair_log_density(step: Any, before: np.ndarray, after: np.ndarray, previous: list[str],
+                      states: list[str], observed: dict[str, Any],
+                      inputs: Mapping[str, Any] | None) -> np.ndarray:
+    """``[n, m]``: the log-density of the step program (the states before's own term
+    uniform) at each pair of the states before ``before`` ``[n, d]`` and after ``after``
+    ``[m, d]``, with what the step after observes: the transition's density times the
+    likelihood of the observations (which may read the states before), the step's other
+    unknown variables summed or integrated out by the engine."""
+    from bayesprog.inference.binding import bind
+    from bayesprog.inference.dispatch import compute_posterior
+
+    n, m = len(before), len(after)
+    question = Question(Expression((), (*previous, *states, *observed)))
+    out = np.empty((n, m))
+    rows_per_call = max(1, PAIRS_PER_CALL // m)
+    for start in range(0, n, rows_per_call):
+        stop = min(n, start + rows_per_call)
+        evidence: dict[str, Any] = {
+            p: np.repeat(before[start:stop, i], m) for i, p in enumerate(previous)}
+        evidence.update({s: np.tile(after[:, i], stop - start) for i, s in enumerate(states)})
+        evidence.update(observed)
+        bound = bind(step, question, evidence, inputs, None)
+        try:
+            answer = compute_posterior(step, question, bound, None, {})
+        except QuestionError as exc:
+            raise QuestionError(f"a particle smoother needs the step's density at a pair of "
+                                f"states before and after: {exc}") from None
+        out[start:stop] = np.asarray(answer.log_evidence, float).reshape(stop - start, m)
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 
@@ -9,6 +10,23 @@ def short_repr(value: object, limit: int = 60) -> str:
     """``repr(value)``, cut to ``limit`` characters for an error message."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """``: did you mean 'lung'?`` when one of ``choices`` is close to ``word`` (a misspelt
+    variable, state or question), else nothing: the tail of a message that names ``word``.
+
+    >>> did_you_mean("lugn", ["asia", "smoke", "lung"])
+    ": did you mean 'lung'?"
+    >>> did_you_mean("Smoke", ["smoke"]), did_you_mean("x", ["smoke"])
+    (": did you mean 'smoke'?", '')
+    """
+    import difflib  # (only when a message is written)
+
+    options = [str(c) for c in choices]
+    near = [c for c in options if c.lower() == word.lower()] or difflib.get_close_matches(
+        word, options, n=1, cutoff=0.6)
+    return f": did you mean {near[0]!r}?" if near else ""
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,11 @@
 Expression(left=('A', 'B'), right=('C', 'D'), values={'C': 'c1', 'D': '0.3'})
 >>> str(parse_expression("P(S|O,T)"))
 'P(S | O, T)'
+
+A question whose searched variables all take a value asks the probability of that event:
+
+>>> parse_expression("P(smoke=yes, dysp=yes | asia=no)").event
+{'smoke': 'yes', 'dysp': 'yes'}
 """
 
 from __future__ import annotations
@@ -28,7 +33,8 @@ class ExpressionError(BayesprogError, ValueError):
 
 @dataclass(frozen=True)
 class Expression:
-    """``P(left | right)``; ``values`` holds the ``Name=value`` bindings written on the right."""
+    """``P(left | right)``; ``values`` holds the ``Name=value`` bindings written, on the right
+    (known values) and, for the probability of an event, on the left (:attr:`event`)."""
 
     left: tuple[str, ...]
     right: tuple[str, ...] = ()
@@ -37,12 +43,19 @@ class Expression:
     def __str__(self) -> str:
         text = self.__dict__.get("_text")  # written once: every answer carries it
         if text is None:
-            left = " ".join(self.left)
+            left = (", ".join(f"{n}={self.values[n]}" for n in self.left) if self.event
+                    else " ".join(self.left))
             right = ", ".join(f"{n}={self.values[n]}" if n in self.values else n
                               for n in self.right)
             text = f"P({left} | {right})" if self.right else f"P({left})"
             object.__setattr__(self, "_text", text)
         return text
+
+    @property
+    def event(self) -> dict[str, str]:
+        """The values of the searched variables, when the expression asks the probability of
+        an event (``P(A=a, B=b | C)``); empty otherwise."""
+        return {n: self.values[n] for n in self.left if n in self.values}
 
     @property
     def key(self) -> tuple[tuple[str, ...], frozenset[str]]:
@@ -58,6 +71,32 @@ def _names(text: str, what: str, original: str) -> list[str]:
                 f"{what} of {original!r}: expected variable names, found {name!r}"
             )
     return names
+
+
+def _event(text: str, original: str, values: dict[str, str]) -> list[str]:
+    """The names of an event ``A=a, B=b`` (the left of ``P(A=a, B=b | C)``), their values put
+    in ``values``: every name takes one."""
+    items = [tuple(s.strip() for s in item.partition("=")) for item in text.split(",")]
+    for name, _, value in items:
+        if not _NAME.match(name):
+            raise ExpressionError(f"the searched part of {original!r}: expected a name, found "
+                                  f"{name!r}")
+        if "=" in value:
+            raise ExpressionError(f"the searched part of {original!r}: expected one value "
+                                  f"after '{name}=', found {value!r} (separate the variables "
+                                  "of an event by commas: P(A=a, B=b))")
+    bare = [name for name, eq, _ in items if not eq]
+    if bare:
+        raise ExpressionError(
+            f"the searched part of {original!r}: {', '.join(bare)} without a value beside "
+            f"{', '.join(name for name, eq, _ in items if eq)}; expected a value for every "
+            "searched variable (the probability of an event, P(A=a, B=b)) or for none (a "
+            "distribution, P(A B))")
+    for name, _, value in items:
+        if not value:
+            raise ExpressionError(f"expected a value after '{name}=' in {original!r}")
+        values[name] = value
+    return [name for name, _, _ in items]
 
 
 def parse_expression(text: str) -> Expression:
@@ -82,11 +121,12 @@ def _parse_general(text: str) -> Expression:
     if body.count("|") > 1:
         raise ExpressionError(f"expected at most one '|' in {text!r}")
     left_text, _, right_text = body.partition("|")
-    left = _names(left_text, "the searched part", text)
+    values: dict[str, str] = {}
+    left = (_event(left_text, text, values) if "=" in left_text
+            else _names(left_text, "the searched part", text))
     if not left:
         raise ExpressionError(f"expected at least one variable before '|' in {text!r}")
     right: list[str] = []
-    values: dict[str, str] = {}
     for item in (i.strip() for i in right_text.split(",")):
         if not item:
             if right_text.strip():
@@ -120,7 +160,9 @@ def canonical(text: object) -> str | None:
 
 @dataclass(frozen=True)
 class Question:
-    """A question ``P(searched | known)`` of kind ``posterior`` or ``map``."""
+    """A question ``P(searched | known)`` of kind ``posterior`` or ``map`` (``filter``,
+    ``smooth``, ``sequence`` over time steps), or ``probability`` for the probability of an
+    event, ``P(A=a, B=b | C=c)``."""
 
     expression: Expression
     kind: str = "posterior"

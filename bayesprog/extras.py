@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 from types import ModuleType
+from typing import Any
 
 from bayesprog.errors import BayesprogError
 
@@ -22,3 +23,23 @@ def require_extra(module: str, extra: str, feature: str) -> ModuleType:
     except ImportError:
         raise BayesprogError(f"{feature} needs {module}, which is not installed: install it "
                              f'with pip install "bayesprog[{extra}]"') from None
+
+
+class LazyModule:
+    """A module imported at the first read of one of its names, then read as the module itself:
+    a required library that only some questions use (``special = LazyModule("scipy.special")``;
+    ``special.ndtr(x)`` imports scipy.special the first time), so that the package and a
+    question that does not use it do not wait for it.
+
+    >>> special = LazyModule("math")
+    >>> special.sqrt(16.0)
+    4.0
+    """
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+
+    def __getattr__(self, attribute: str) -> Any:
+        value = getattr(importlib.import_module(self._name), attribute)
+        setattr(self, attribute, value)  # read directly from now on
+        return value

@@ -3,15 +3,28 @@ the kinds of the project's YAML files, told apart by their first key before they
 
 from __future__ import annotations
 
+import errno
 import os
 import re
-import tempfile
 from pathlib import Path
 
 
-def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that a reader never sees a partial file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+def atomic_write(path: Path, data: bytes, *, parents: bool = True) -> None:
+    """Write ``data`` to ``path`` so that a reader never sees a partial file.
+
+    ``parents``: make the missing folders above ``path`` (an application's own folders, such
+    as a results folder's chunks). A path the user names (``-o``) is written with
+    ``parents=False``: a folder that does not exist is then a ``FileNotFoundError`` that names
+    it, never a new tree made from a typing mistake."""
+    import tempfile  # (with the first file written, not with the package)
+
+    path = Path(path)
+    if parents:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    elif not path.parent.is_dir():
+        what = "not a folder" if path.parent.exists() else "no such folder"
+        raise FileNotFoundError(errno.ENOENT, f"{what}: {path.parent} (make it first)",
+                                str(path))
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         umask = os.umask(0)

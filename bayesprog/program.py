@@ -22,6 +22,7 @@ from bayesprog.errors import (
     ProgramCycleError,
     QuestionError,
     SpecError,
+    did_you_mean,
     short_repr,
 )
 from bayesprog.expressions import (
@@ -36,18 +37,21 @@ from bayesprog.forms import ParamValue, get_form
 from bayesprog.inference import MapResult, Posterior, quick
 from bayesprog.inference.density import Density
 from bayesprog.language.check import check_document, question_problem
-from bayesprog.language.document import Document, validate_located
 from bayesprog.language.loader import Located, load_yaml
-from bayesprog.model import FitRecord, InputDecl, Term
+from bayesprog.language.plain import PlainDocument, read_plain
+from bayesprog.model import InputDecl, Term
 from bayesprog.variables import Discrete, Variable
 
 if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayesprog is
     import networkx as nx
     import pandas as pd
 
+    from bayesprog.inference.event import Probability
     from bayesprog.inference.mixed import Joint
+    from bayesprog.language.document import Document
     from bayesprog.learning import Estimate
     from bayesprog.learning.evidence import Evidence
+    from bayesprog.records import FitRecord
 
 
 class Program:
@@ -167,8 +171,11 @@ class Program:
         for t in self.terms:
             if not t.soft and t.expression.key == expr.key:
                 return t
-        known = ", ".join(str(t.expression) for t in self.terms if not t.soft)
-        raise QuestionError(f"no term {expr} in {self.name} (terms: {known})")
+        terms = [str(t.expression) for t in self.terms if not t.soft]
+        defined = next((t for t in terms if parse_expression(t).left == expr.left), None)
+        hint = (f": did you mean {defined!r}?" if defined is not None
+                else did_you_mean(str(expr), terms))
+        raise QuestionError(f"no term {expr} in {self.name}{hint} (terms: {', '.join(terms)})")
 
     def table(self, term: str) -> pd.DataFrame:
         """The probabilities of a discrete term as a pandas DataFrame: one row per
@@ -225,7 +232,7 @@ class Program:
         if isinstance(question, Question):
             q = question
         elif isinstance(question, Expression):
-            q = Question(question)
+            q = Question(question, "probability" if question.event else "posterior")
         elif question in self.questions:
             q = self.questions[question]
         elif question in self._parsed:
@@ -235,17 +242,27 @@ class Program:
                 expr = parse_expression(question)
             except ExpressionError as exc:
                 names = ", ".join(self.questions) or "none"
-                raise QuestionError(f"{exc} (named questions of {self.name}: {names})") from None
+                hint = ""
+                if isinstance(question, str) and "(" not in question:  # a name misspelt
+                    hint = (f": ask P({question}) for its distribution"
+                            if question in self.variables else
+                            did_you_mean(question, self.questions))
+                raise QuestionError(f"{exc} (named questions of {self.name}: {names}){hint}"
+                                    ) from None
             problem = question_problem(expr, self.variables)
             if problem:
                 raise QuestionError(problem)
-            q = Question(expr)
+            q = Question(expr, "probability" if expr.event else "posterior")
             if len(self._parsed) < 1024:  # a question asked again is parsed once
                 self._parsed[question] = q
         if kind is not None and kind != q.kind:
-            if kind not in ("posterior", "map", "filter", "smooth", "sequence"):
-                raise QuestionError(f"kind must be 'posterior', 'map', 'filter', 'smooth' or "
-                                    f"'sequence', got {kind!r}")
+            if kind not in ("posterior", "map", "filter", "smooth", "sequence", "probability"):
+                raise QuestionError(f"kind must be 'posterior', 'map', 'filter', 'smooth', "
+                                    f"'sequence' or 'probability', got {kind!r}")
+            if q.expression.event:
+                raise QuestionError(f"{q.expression} asks the probability of an event, not a "
+                                    f"{kind} question: ask P(searched | known) without values "
+                                    "on the left for a distribution")
             q = Question(q.expression, kind, q.name, q.description)
         return q
 
@@ -264,7 +281,7 @@ class Program:
         burn_in: int | None = None,
         thin: int | None = None,
         ablate: Mapping[str, Any] | None = None,
-    ) -> Posterior | MapResult | Density | Joint:
+    ) -> Posterior | MapResult | Density | Joint | Probability:
         """Answer ``question`` for the evidence (arrays with leading batch dimensions allowed).
 
         Parameters
@@ -342,6 +359,14 @@ class Program:
             raise QuestionError(f"ablate=: a term made uniform on some rows is answered for "
                                 f"questions on discrete variables, not {q.expression} "
                                 f"({q.kind}): ablate the term for every row (Program.ablate)")
+        if q.kind == "probability":
+            if rows_ablated:
+                raise QuestionError(f"ablate=: the probability of {q.expression} is asked with "
+                                    "each term as written or ablated for every row "
+                                    "(Program.ablate)")
+            from bayesprog.inference.event import probability
+
+            return probability(self, q, evidence, inputs, soft, method, dict(options, rng=rng))
         if q.kind in ("filter", "smooth", "sequence"):
             from bayesprog.dynamic import over_time
 
@@ -372,14 +397,72 @@ class Program:
 
     def posterior(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
                   **kw: Any) -> Posterior:
+        """The posterior of discrete searched variables (:meth:`ask` of kind ``posterior``);
+        a question on real variables is asked with :meth:`density`."""
         result = self.ask(question, evidence, kind="posterior", **kw)
-        assert isinstance(result, Posterior)
+        if not isinstance(result, Posterior):
+            raise QuestionError(_other_answer(result, "posterior"))
+        return result
+
+    def density(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
+                **kw: Any) -> Density:
+        """The posterior density of real searched variables (:meth:`ask` of kind
+        ``posterior``): a :class:`~bayesprog.inference.density.Density` with ``mean``,
+        ``sd``, ``quantile``, ``pdf`` and ``map``.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {X: {continuous: [-.inf, .inf]}, Y: {continuous: [-.inf, .inf]}}
+        ... decomposition:
+        ...   - {term: P(X), form: normal, mean: 0, sigma: 1}
+        ...   - {term: P(Y | X), form: normal, mean: X, sigma: 1}
+        ... ''')
+        >>> d = p.density("P(X | Y)", {"Y": 2.0})
+        >>> round(float(d.mean("X")), 12), round(float(d.sd("X")) ** 2, 12)
+        (1.0, 0.5)
+        """
+        result = self.ask(question, evidence, kind="posterior", **kw)
+        if not isinstance(result, Density):
+            raise QuestionError(_other_answer(result, "density"))
+        return result
+
+    def probability(self, question: str | Question,
+                    evidence: Mapping[str, Any] | None = None, **kw: Any) -> Probability:
+        """The probability of an event given known values, ``P(A=a, B=b | C=c)``: a number per
+        row of evidence (a density where the event fixes a real variable). The event's values
+        are written in the question or given in ``evidence`` (a batch of events at once);
+        ``log_probability`` keeps the precision of very small ones.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {A: {states: [a0, a1]}, B: {states: [b0, b1]}}
+        ... decomposition:
+        ...   - {term: P(A), form: table, table: [0.3, 0.7]}
+        ...   - {term: P(B | A), form: table, table: [[0.9, 0.1], [0.2, 0.8]]}
+        ... ''')
+        >>> round(float(p.probability("P(B=b0)")), 12)  # 0.3 * 0.9 + 0.7 * 0.2
+        0.41
+        >>> p.probability("P(A=a0 | B)", {"B": ["b0", "b1"]}).probability.round(6).tolist()
+        [0.658537, 0.050847]
+        """
+        from bayesprog.inference.event import Probability
+
+        result = self.ask(question, evidence, kind="probability", **kw)
+        if not isinstance(result, Probability):
+            raise QuestionError(f"{question}: not the probability of an event: ask it with "
+                                f"program.ask(...) (here a {type(result).__name__})")
         return result
 
     def map(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
             **kw: Any) -> MapResult:
         result = self.ask(question, evidence, kind="map", **kw)
-        assert isinstance(result, MapResult)
+        if not isinstance(result, MapResult):  # real variables searched: a density's mode
+            raise QuestionError(f"{question}: searches real variables, whose most probable "
+                                f"values are not a table's MAP: ask it with "
+                                f"program.ask(...) (here a {type(result).__name__}, whose "
+                                f".map gives them) or program.density(...).map")
         return result
 
     def sample(self, n: int, evidence: Mapping[str, Any] | None = None, *,
@@ -621,12 +704,16 @@ class Fit:
     def converged(self) -> bool:
         return self.estimate.converged
 
-    def text(self, source: str | Path | None = None) -> str:
+    def text(self, source: str | Path | None = None, *, rounded: bool = False) -> str:
         """The fitted program file: ``source`` (by default the file the program was loaded
         from) with the learned values in place, comments and layout kept, and the fit's record
-        appended under ``learned:``."""
+        appended under ``learned:``. The values are written as fitted (15 significant digits),
+        so that the file loads as :attr:`program`; ``rounded`` writes them to the precision their rows support
+        instead (the significant digits of :func:`~bayesprog.learning.write.supported_digits`,
+        a mean to a twentieth of its standard error), the digits in the record."""
         from bayesprog.forms.base import simplex as simplex_constraint
         from bayesprog.learning import render_fitted
+        from bayesprog.learning.write import supported_digits
 
         path = Path(source) if source is not None else self.source
         if path is None:
@@ -636,24 +723,52 @@ class Fit:
                    for t in self.program.terms}
         locations = {t.label: t.form.location_scale for t in self.program.terms
                      if t.form.location_scale is not None}
+        record = self.record
+        if rounded:
+            rows = record.rows_supporting or record.rows_used
+            record = record.model_copy(update={"digits": supported_digits(rows)})
         text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
-                             self.program.variables, self.record, simplex, locations,
-                             self.states)
-        loads(text, str(path), path.parent)  # the fitted file must load as a program
+                             self.program.variables, record, simplex, locations, self.states)
+        # the fitted file must load as a program; where it would not, the lines said are the
+        # fitted text's, not the input's
+        loads(text, f"{path} (as fitted)", path.parent)
         return text
 
-    def save(self, path: str | Path, source: str | Path | None = None) -> Path:
-        """Write the fitted program file to ``path`` at once (never half-written)."""
+    def save(self, path: str | Path, source: str | Path | None = None, *,
+             rounded: bool = False) -> Path:
+        """Write the fitted program file (:meth:`text`) to ``path`` at once (never
+        half-written)."""
         path = Path(path)
-        atomic_write(path, self.text(source).encode("utf-8"))
+        atomic_write(path, self.text(source, rounded=rounded).encode("utf-8"), parents=False)
         return path
 
 
-def _document(located: Located) -> tuple[Document | None, list[Diagnostic]]:
+def _other_answer(result: Any, asked: str) -> str:
+    """Why :meth:`Program.posterior` or :meth:`Program.density` cannot give ``result``, and
+    which method does."""
+    question = getattr(result, "question", "the question")
+    if isinstance(result, Density):
+        return (f"{question} searches real variables ({', '.join(result.variables)}): its "
+                "posterior is a density; ask it with program.density(...) (mean, sd, "
+                "quantile, pdf, map) or program.ask(...)")
+    if isinstance(result, Posterior):
+        return (f"{question} searches discrete variables ({', '.join(result.variables)}): "
+                "its posterior is a table; ask it with program.posterior(...)")
+    return (f"{question} searches discrete and real variables together: ask it with "
+            f"program.ask(...) (a Joint: the discrete configurations' weights, the real "
+            f"variables' density given each), not program.{asked}(...)")
+
+
+def _document(located: Located) -> tuple[Document | PlainDocument | None, list[Diagnostic]]:
     if not isinstance(located.data, dict):
         return None, [located.diagnostic((), "expected a program: a mapping with bayesprog, "
                                          f"variables, decomposition; found {type(located.data).__name__}")]
     _names_as_written(located)
+    plain = read_plain(located.data)
+    if plain is not None:  # the common shape, read without building pydantic's validators
+        return plain, []
+    from bayesprog.language.document import Document, validate_located
+
     return validate_located(located, Document)
 
 
@@ -671,7 +786,7 @@ def _names_as_written(located: Located) -> None:
                     states[i] = text
 
 
-def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
+def loads(text: str | bytes, file: str = "<string>", base_dir: Path | None = None,
           variables: Mapping[str, Any] | None = None,
           terms: Mapping[str, Mapping[str, Any]] | None = None) -> Program:
     """Load a program from YAML text. Raises :class:`SpecError` listing every problem.
@@ -690,9 +805,15 @@ def loads(text: str, file: str = "<string>", base_dir: Path | None = None,
     >>> p.variables["O"].card
     16
     """
-    if not isinstance(text, (str, bytes)):
-        raise ArgumentError(f"loads: expected the text of a program (a string), found "
-                            f"{type(text).__name__} {short_repr(text)}")
+    if isinstance(text, (bytes, bytearray)):  # a file's bytes: UTF-8, as files are read
+        try:
+            text = bytes(text).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ArgumentError(f"loads: expected the text of a program, found bytes that are "
+                                f"not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    if not isinstance(text, str):
+        raise ArgumentError(f"loads: expected the text of a program (a string, or UTF-8 "
+                            f"bytes), found {type(text).__name__} {short_repr(text)}")
     if variables is not None and not isinstance(variables, Mapping):
         raise ArgumentError(f"variables: expected a mapping of variable names to "
                             f"declarations, found {short_repr(variables)}")

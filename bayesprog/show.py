@@ -10,6 +10,7 @@ import numpy as np
 from bayesprog.forms import FormulaParam, InputRef, ParamValue
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
+from bayesprog.inference.event import Probability
 from bayesprog.inference.mixed import Joint
 from bayesprog.model import Term
 from bayesprog.program import Program
@@ -211,11 +212,13 @@ def format_density(result: Density) -> str:
     how = {"gaussian": "exact, Gaussian algebra",
            "grid": "on a grid of " + ", ".join(f"{n} bins for {v}"
                                                for v, n in result.resolution.items()),
-           "kalman": "exact, Kalman filter", "kalman-rts": "exact, Rauch-Tung-Striebel"}
+           "kalman": "exact, Kalman filter", "kalman-rts": "exact, Rauch-Tung-Striebel",
+           "pf": "particle filter: the particles' moments",
+           "pf-smooth": "particle smoother (FFBSm): the particles' moments"}
     out = [f"{result.question}" + _ablated(result.ablated)
            + (f"   ({how.get(result.method, result.method)})" if result.method else "")]
     summary = result.summary()
-    over_time = result.method in ("kalman", "kalman-rts")
+    over_time = result.method in ("kalman", "kalman-rts", "pf", "pf-smooth")
     for pos in np.ndindex(*result.batch_shape):
         if over_time:
             rest = f", batch row [{', '.join(map(str, pos[1:]))}]" if pos[1:] else ""
@@ -235,6 +238,8 @@ def format_density(result: Density) -> str:
             out.append(f"     quantiles  {quantiles}"
                        + (f"   (+- {float(np.asarray(result.error['quantiles'][v])[pos]):.2g})"
                           if result.error else ""))
+        if result.ess is not None:
+            out.append(f"  effective sample size {float(np.asarray(result.ess)[pos]):.0f}")
     return "\n".join(out)
 
 
@@ -269,8 +274,11 @@ def format_joint(result: Joint) -> str:
     return "\n".join(out)
 
 
-def format_result(result: Posterior | MapResult | Density | Joint, limit: int = 20) -> str:
+def format_result(result: Posterior | MapResult | Density | Joint | Probability,
+                  limit: int = 20) -> str:
     """A readable table (one block per batch row when batched)."""
+    if isinstance(result, Probability):
+        return format_probability(result, limit)
     if isinstance(result, Joint):
         return format_joint(result)
     if isinstance(result, Density):
@@ -299,6 +307,21 @@ def format_result(result: Posterior | MapResult | Density | Joint, limit: int = 
         out += _table(result, result.probabilities[pos], limit, stderr)
         if result.ess is not None:
             out.append(f"  effective sample size {float(result.ess[pos]):.0f}")
+    return "\n".join(out)
+
+
+def format_probability(result: Probability, limit: int = 20) -> str:
+    """The probability of an event (a density where it fixes a real variable), with its
+    logarithm; one line per batch row."""
+    word = "density" if result.density else "probability"
+    out = [result.question + _ablated(result.ablated)]
+    rows = list(np.ndindex(*result.batch_shape))
+    for pos in rows[:limit]:
+        label = f"[{', '.join(map(str, pos))}] " if pos else ""
+        out.append(f"  {label}{word} {_fmt(float(result.probability[pos]))}   (log "
+                   f"{_fmt(float(result.log_probability[pos]))})")
+    if len(rows) > limit:
+        out.append(f"  ... {len(rows) - limit} more rows (--limit)")
     return "\n".join(out)
 
 

@@ -709,6 +709,32 @@ def test_import_of_a_file_without_variables_writes_nothing(tmp_path, capsys):
     assert not (tmp_path / "x.yaml").exists()
 
 
+@pytest.mark.parametrize("command, output", [
+    (["learn", str(SPRINKLER), "DATA"], "x.yaml"),
+    (["discover", "DATA"], "x.yaml"),
+    (["sample", str(SPRINKLER), "-n", "5"], "x.csv"),
+    (["graph", str(SPRINKLER)], "x.dot"),
+    (["export", str(SPRINKLER)], "x.bif"),
+    (["schema"], "x.json"),
+])
+def test_an_output_in_a_missing_folder_is_refused_and_no_folder_is_made(capsys, tmp_path,
+                                                                         command, output):
+    data = tmp_path / "data.csv"
+    bayesprog.load(SPRINKLER).sample(2000, rng=1).to_csv(data, index=False)
+    command = [str(data) if a == "DATA" else a for a in command]
+    missing = tmp_path / "nonexistent" / "dir"
+    line = user_error(capsys, *command, "-o", missing / output)
+    assert f"the folder {missing} does not exist" in line
+    assert not (tmp_path / "nonexistent").exists()
+    # a file where the folder should be
+    line = user_error(capsys, *command, "-o", data / output)
+    assert f"{data} is a file, not a folder" in line
+    # from Python, a fitted file is not written into a folder that does not exist either
+    with pytest.raises(FileNotFoundError, match="no such folder"):
+        bayesprog.load(SPRINKLER).fit(data).save(missing / "fitted.yaml")
+    assert not (tmp_path / "nonexistent").exists()
+
+
 def test_every_subcommand_documents_its_arguments_and_defaults():
     from bayesprog.cli import build_parser
 
@@ -750,6 +776,20 @@ def test_a_file_of_the_wrong_kind_is_named(capsys, tmp_path, command, kind):
     ("bayesprog: 1\nvariables:\n  A: \"abc\n",
      "4:1: malformed YAML: expected the closing quote of a string, found the end of the file"),
     ("a: b: c\n", "1:5: malformed YAML: expected one 'key: value' per line, found a second ':'"),
+    # a key indented less than the key above it is said to be so, with where it may go
+    ("bayesprog: 1\ndecomposition:\n  - term: P(B | A)\n   form: table\n",
+     "4:4: malformed YAML: expected the key 'form' lined up with the keys beside it, found it "
+     "indented less than 'term' on line 3 (column 5): indent it to the column of the key it "
+     "goes beside: 5 ('term', line 3) or 1 ('decomposition', line 2)"),
+    # and one indented more, under a key that has its value: not a quoting matter
+    ("bayesprog: 1\ndecomposition:\n  - term: P(B | A)\n      form: table\n",
+     "4:11: malformed YAML: expected the key 'form' lined up with the keys beside it, found it "
+     "indented more than 'term' on line 3 (column 5), which already has a value (read as that "
+     "value going on over a second line): indent 'form' to column 5"),
+    ("bayesprog: 1\nvariables:\n  A: {states: [a0, a1]}\n   B: {states: [b0, b1]}\n",
+     "4:4: malformed YAML: expected the key 'B' lined up with the keys beside it, found it "
+     "indented more than 'A' on line 3 (column 3): only the keys of a mapping opened by 'A:' "
+     "with nothing after the ':' go further in; indent it to column 3"),
 ])
 def test_yaml_syntax_errors_say_what_was_expected_and_found(tmp_path, capsys, text, message):
     path = tmp_path / "broken.yaml"
@@ -792,7 +832,8 @@ class Stopped:
         raise {raised}
 try:
     Stopped()
-    time.sleep(1.5)
+    for _ in range({steps}):  # a stop comes back within milliseconds: waited for, up to 30 s
+        time.sleep(0.05)
     print("went on")
 except KeyboardInterrupt:
     print("interrupted")
@@ -806,15 +847,16 @@ except cli._Terminated:
 def test_a_stop_that_lands_in_a_finaliser_is_not_lost(raised, seen):
     """Ctrl-C or SIGTERM raised inside a finaliser or weakref callback (where Python can only
     print "Exception ignored") still stops the command, where it is, without a traceback."""
-    done = subprocess.run([sys.executable, "-c", _FINALISER.format(raised=raised)],
-                          capture_output=True, text=True, timeout=30)
+    done = subprocess.run([sys.executable, "-c", _FINALISER.format(raised=raised, steps=600)],
+                          capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == seen
     assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr
 
 
 def test_other_errors_in_finalisers_are_still_reported():
-    done = subprocess.run([sys.executable, "-c", _FINALISER.format(raised="ValueError('x')")],
-                          capture_output=True, text=True, timeout=30)
+    done = subprocess.run([sys.executable, "-c",
+                           _FINALISER.format(raised="ValueError('x')", steps=20)],
+                          capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == "went on"
     assert "Exception ignored" in done.stderr and "ValueError" in done.stderr
 
@@ -841,7 +883,8 @@ else:
     Thing.__del__ = __del__
 try:
     del thing
-    time.sleep(1.5)
+    for _ in range(600):  # the stop comes back within milliseconds: waited for, up to 30 s
+        time.sleep(0.05)
     print("went on")
 except KeyboardInterrupt:
     print("interrupted", finished)
@@ -859,6 +902,6 @@ def test_a_signal_inside_a_finaliser_waits_for_it_to_finish(name, seen, how):
     reported at exit); the stop comes right after it."""
     done = subprocess.run([sys.executable, "-c", _SIGNAL_IN_FINALISER.format(name=name,
                                                                              how=how)],
-                          capture_output=True, text=True, timeout=30)
+                          capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == seen, done.stdout + done.stderr
     assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr

@@ -776,6 +776,43 @@ def test_question_errors(sprinkler, question, evidence, words):
         assert w in message, message
 
 
+@pytest.mark.parametrize("question, evidence, soft, suggested", [
+    ("P(Rian | Grass=wet)", {}, {}, "undeclared variable 'Rian' in P(Rian | Grass=wet): did "
+     "you mean 'Rain'?"),
+    ("P(Rain | grass=wet)", {}, {}, "did you mean 'Grass'?"),
+    ("P(Rain | Grass=wte)", {}, {}, "unknown state 'wte' of Grass: did you mean 'wet'?"),
+    ("P(Rain | Grass)", {"Grass": "Wet"}, {}, "unknown state 'Wet' of Grass: did you mean "
+     "'wet'?"),
+    ("P(Rain | Grass)", {"Gras": "wet"}, {}, "unknown variable 'Gras': did you mean 'Grass'?"),
+    ("P(Rain | Grass)", {"Grass": "wet"}, {"Sprinkle": [0.5, 0.5]}, "did you mean "
+     "'Sprinkler'?"),
+    ("P(Rain=yse)", {}, {}, "unknown state 'yse' of Rain"),
+    ("Rain", {}, {}, "ask P(Rain) for its distribution"),
+])
+def test_a_misspelt_name_in_a_question_is_pointed_at_the_one_meant(sprinkler, question,
+                                                                   evidence, soft, suggested):
+    with pytest.raises(bayesprog.QuestionError) as info:
+        sprinkler.ask(question, evidence, soft=soft or None)
+    assert suggested in str(info.value), str(info.value)
+    with pytest.raises(bayesprog.QuestionError, match="did you mean 'P\\(Grass \\| Sprinkler, "
+                       "Rain\\)'"):
+        sprinkler.ablate("P(Grass | Rain)")
+
+
+def test_a_misspelt_variable_on_the_command_line_is_pointed_at(tmp_path, capsys):
+    from bayesprog.cli import main
+
+    (tmp_path / "sprinkler.yaml").write_text(SPRINKLER)
+    assert main(["query", str(tmp_path / "sprinkler.yaml"), "P(Rian | Grass=wet)"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'Rain'?" in err and "Traceback" not in err
+    # and in a term of a file, as in a question
+    (tmp_path / "bad.yaml").write_text(SPRINKLER.replace("P(Sprinkler | Rain)",
+                                                         "P(Sprinkler | Rian)"))
+    assert main(["validate", str(tmp_path / "bad.yaml")]) == 2
+    assert "undeclared variable 'Rian': did you mean 'Rain'?" in capsys.readouterr().err
+
+
 # a program with a grid, fields, beta, gmm, runtime inputs and a soft-evidence sub-program ------------
 OBJ = (PROGRAMS / "obj.yaml").read_text(encoding="utf-8")
 

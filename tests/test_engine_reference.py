@@ -1199,3 +1199,129 @@ def test_grid_with_many_fields_multiplying_small_values():
     np.testing.assert_allclose(result.probabilities, softmax(log_joint, axis=None), rtol=1e-6,
                                atol=1e-12)
     np.testing.assert_allclose(result.log_evidence, logsumexp(log_joint), rtol=1e-12)
+
+
+# the probability of an event --------------------------------------------------------------------
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=SLOW_OK)
+@given(data=st.data())
+def test_the_probability_of_an_event_against_enumeration_and_pgmpy(data):
+    net = data.draw(nets())
+    q = data.draw(queries(net, styles=("inline", "name")))
+    event = {v: data.draw(st.integers(0, net.cards[v] - 1)) for v in q.searched}
+    program = net.program()
+    left = ", ".join(f"{v}={net.states[v][i]}" for v, i in event.items())
+    right = [f"{v}={net.states[v][i]}" if q.style[v] == "inline" else v for v, i in q.known.items()]
+    text = f"P({left}" + (f" | {', '.join(right)})" if right else ")")
+    known = net.unnormalised([], q.known).sum()
+    both = net.unnormalised(list(event), q.known)[tuple(event.values())]
+    if known == 0:
+        with pytest.raises(ZeroEvidenceError, match="probability zero"):
+            program.probability(text, q.evidence(net))
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warnings.filterwarnings("ignore", "divide by zero", RuntimeWarning)
+        result = program.probability(text, q.evidence(net))
+    assert result.batch_shape == () and result.variables == tuple(event)
+    assert abs(float(result) - both / known) <= 1e-9  # brute force
+    # pgmpy: the joint of the event's variables given the known ones, read at the event
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        factor = VariableElimination(to_bayesian_network(program)).query(
+            list(event), evidence={v: net.states[v][i] for v, i in q.known.items()} or None,
+            joint=True, show_progress=False)
+    cell = tuple(factor.state_names[v].index(net.states[v][event[v]]) for v in factor.variables)
+    assert abs(float(result) - factor.values[cell] / factor.values.sum()) <= 1e-9
+
+
+ASIA = (PROGRAMS / "asia.yaml").read_text(encoding="utf-8")
+
+
+def _pgmpy_probability(program, event: dict, known: dict) -> float:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        engine = VariableElimination(to_bayesian_network(program))
+        factor = engine.query(list(event), evidence=known or None, joint=True,
+                              show_progress=False)
+    cell = tuple(factor.state_names[v].index(event[v]) for v in factor.variables)
+    return float(factor.values[cell] / factor.values.sum())
+
+
+def test_the_probability_of_evidence_of_asia_from_the_command_line_matches_pgmpy(tmp_path,
+                                                                                 capsys):
+    import json
+
+    from bayesprog.cli import main
+
+    path = tmp_path / "asia.yaml"
+    path.write_text(ASIA)
+    program = bayesprog.load(path)
+    for text, event, known in [
+            ("P(smoke=yes, dysp=yes)", {"smoke": "yes", "dysp": "yes"}, {}),
+            ("P(xray=yes, dysp=no | asia=yes)", {"xray": "yes", "dysp": "no"}, {"asia": "yes"}),
+            ("P(lung=yes | smoke=no, xray=yes)", {"lung": "yes"}, {"smoke": "no", "xray": "yes"})]:
+        assert main(["query", str(path), text, "--json"]) == 0
+        answer = json.loads(capsys.readouterr().out)
+        reference = _pgmpy_probability(program, event, known)
+        assert answer["kind"] == "probability" and answer["question"] == text
+        assert abs(answer["probability"] - reference) <= 1e-9, text
+        assert answer["log_probability"] == pytest.approx(np.log(reference), abs=1e-9)
+        assert main(["query", str(path), text]) == 0
+        assert f"probability {reference:.6g}" in capsys.readouterr().out
+    # the probability of evidence is the log_evidence of any question on that evidence
+    evidence = program.ask("P(asia | smoke=yes, dysp=yes)").log_evidence
+    assert program.probability("P(smoke=yes, dysp=yes)").log_probability == pytest.approx(
+        float(evidence), abs=1e-12)
+    # a batch of events at once, the event's values given as evidence
+    batch = program.probability("P(smoke dysp)", {"smoke": ["yes", "no"], "dysp": "yes"})
+    assert batch.batch_shape == (2,)
+    for row, smoke in enumerate(["yes", "no"]):
+        assert abs(batch.probability[row]
+                   - _pgmpy_probability(program, {"smoke": smoke, "dysp": "yes"}, {})) <= 1e-9
+    # an impossible event has probability 0 (log -inf); impossible known values are refused
+    assert float(program.probability("P(either=no | tub=yes)")) == 0.0
+    with pytest.raises(ZeroEvidenceError, match="probability zero"):
+        program.probability("P(xray=yes | tub=yes, either=no)")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("P(smoke=yes, dysp)", "dysp without a value beside smoke"),
+    ("P(smoke=yes dysp=yes)", "separate the variables of an event by commas"),
+    ("P(smoke=maybe)", "unknown state 'maybe' of smoke"),
+    ("P(smok=yes)", "undeclared variable 'smok'"),
+])
+def test_a_malformed_event_is_refused_with_its_fix(tmp_path, capsys, text, message):
+    from bayesprog.cli import main
+
+    path = tmp_path / "asia.yaml"
+    path.write_text(ASIA)
+    assert main(["query", str(path), text]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert main(["query", str(path), "P(smoke=yes)", "--map"]) == 2
+    assert "asks the probability of an event, not a map question" in capsys.readouterr().err
+
+
+def test_an_event_that_fixes_a_real_variable_has_a_density():
+    program = _loads("""
+bayesprog: 1
+variables:
+  M: {states: [wood, silicone]}
+  E: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(M), form: table, table: [0.3, 0.7]}
+  - {term: P(E | M), form: normal, mean: {wood: 0.5, silicone: 0.1}, sigma: 0.1}
+""")
+    given = program.probability("P(E=0.45 | M=wood)")
+    assert given.density and float(given) == pytest.approx(stats.norm.pdf(0.45, 0.5, 0.1),
+                                                           rel=1e-12)
+    marginal = program.probability("P(E=0.45)")
+    assert float(marginal) == pytest.approx(0.3 * stats.norm.pdf(0.45, 0.5, 0.1)
+                                            + 0.7 * stats.norm.pdf(0.45, 0.1, 0.1), rel=1e-12)
+    assert marginal.to_json()["density"] == pytest.approx(float(marginal))
+    # a discrete event given a real value is a probability, Bayes' rule on the same numbers
+    wood = program.probability("P(M=wood | E=0.45)")
+    assert not wood.density and float(wood) == pytest.approx(
+        0.3 * stats.norm.pdf(0.45, 0.5, 0.1) / float(marginal), rel=1e-12)

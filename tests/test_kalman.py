@@ -133,6 +133,40 @@ def test_the_json_gives_per_step_means_and_sds(tmp_path, capsys):
     assert len(out["mean"]["X"]) == 3 and len(out["sd"]["X"]) == 3
     assert out["method"] == "kalman-rts"
     assert out["mean"]["X"][-1] == pytest.approx(1.438938436932419, abs=1e-12)
+    assert out["density"] == "gaussian"  # one Gaussian per step, not a mixture
+    assert main(["query", str(tmp_path / "cart.yaml"), "P(X | Y)", "--over-time", "filter",
+                 "--evidence", "Y=1.0,2.1,2.9", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["density"] == "gaussian"
+
+
+def test_a_density_says_how_it_is_held():
+    """``kind`` (``density`` in --json): one Gaussian, a mixture over a discrete variable
+    summed out, or bins."""
+    mixed = bayesprog.loads("""\
+bayesprog: 1
+variables:
+  A: {states: [a0, a1]}
+  X: {continuous: [-.inf, .inf]}
+  Y: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(A), form: table, table: [0.3, 0.7]}
+  - {term: P(X | A), form: normal, mean: {a0: -1, a1: 1}, sigma: 1}
+  - {term: P(Y | X), form: normal, mean: X, sigma: 0.5}
+""")
+    assert mixed.density("P(X | Y)", {"Y": 0.2}).to_json()["density"] == "gaussian mixture"
+    assert mixed.density("P(X | Y, A)", {"Y": 0.2, "A": "a0"}).kind == "gaussian"
+    bounded = bayesprog.loads("""\
+bayesprog: 1
+variables:
+  X: {continuous: [-5, 5]}
+  Y: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(X), form: normal, mean: 0, sigma: 1}
+  - {term: P(Y | X), form: normal, mean: X, sigma: 0.5}
+""")
+    assert bounded.density("P(X | Y)", {"Y": 1.0}, method="grid").kind == "bins"
+    cart = bayesprog.loads(CART)
+    assert cart.ask("track", {"Y": [1.0, 2.0]}).kind == "gaussian"
 
 
 @pytest.mark.parametrize("change, said", [

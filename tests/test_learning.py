@@ -5,8 +5,10 @@ fitted file's round trip, continuing a fit, and the errors bad data get."""
 from __future__ import annotations
 
 import hashlib
+import itertools
 import logging
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -15,7 +17,7 @@ from scipy import optimize, stats
 
 import bayesprog
 from bayesprog.cli import main
-from bayesprog.learning import DataError
+from bayesprog.learning import DataError, render_fitted
 
 NORMAL = """\
 bayesprog: 1
@@ -302,17 +304,94 @@ def test_fitted_file_keeps_comments_and_layout_and_records_provenance(tmp_path):
     fitted = bayesprog.load(out)
     direct = bayesprog.loads(NORMAL).fit(data)
     record = fitted.learned[-1]
-    assert record.digits == 4  # 300 rows: a relative standard error near 1/sqrt(300) = 0.06
+    assert record.digits is None and "digits:" not in text  # written as fitted
     for term in ("P(M)", "P(E | M)"):
-        for name, value in direct.program.term(term).params.items():
-            written = fitted.term(term).params[name].array
-            # each value to 4 significant digits; a distribution's largest entry takes the rest
-            np.testing.assert_allclose(written, value.array, rtol=2 * 0.5e-3, atol=0)
-            assert not np.array_equal(written, value.array)  # rounded, as the record says
+        for name, value in direct.program.term(term).params.items():  # 15 digits
+            np.testing.assert_allclose(fitted.term(term).params[name].array, value.array,
+                                       rtol=1e-14, atol=0)
+    rounded = tmp_path / "rounded.yaml"
+    assert main(["learn", str(source), str(data), "-o", str(rounded), "--rounded"]) == 0
+    shortened = bayesprog.load(rounded)
+    assert shortened.learned[-1].digits == 4  # 300 rows: a relative standard error near 0.06
+    for name, value in direct.program.term("P(M)").params.items():
+        written = shortened.term("P(M)").params[name].array
+        # each value to 4 significant digits; a distribution's largest entry takes the rest
+        np.testing.assert_allclose(written, value.array, rtol=2 * 0.5e-3, atol=0)
+        assert not np.array_equal(written, value.array)  # rounded, as the record says
     assert record.sha256 == hashlib.sha256(data.read_bytes()).hexdigest()
     assert record.rows == record.rows_used == 300 and record.data == "probes.csv"
     assert record.log_likelihood == pytest.approx(direct.log_likelihood, rel=1e-12)
     assert record.terms == ["P(M)", "P(E | M)"]
+
+
+ASIA = (Path(__file__).parent / "programs" / "asia.yaml").read_text(encoding="utf-8")
+ASIA_ARCS = [("asia", "tub"), ("smoke", "lung"), ("smoke", "bronc"), ("tub", "either"),
+             ("lung", "either"), ("either", "xray"), ("bronc", "dysp"), ("either", "dysp")]
+
+
+def test_keyed_tables_naming_their_parents_are_learned_and_written_back_as_pgmpy_counts(
+        tmp_path, capsys):
+    from pgmpy.models import DiscreteBayesianNetwork
+    from pgmpy.parameter_estimator import DiscreteMLE
+
+    source = tmp_path / "asia.yaml"
+    source.write_text(ASIA)
+    data = bayesprog.loads(ASIA).sample(20_000, rng=5)
+    csv = tmp_path / "data.csv"
+    data.to_csv(csv, index=False)
+    out = tmp_path / "fitted.yaml"
+    assert main(["learn", str(source), str(csv), "-o", str(out)]) == 0
+    assert "values written as fitted" in capsys.readouterr().out
+    text = out.read_text()
+    # the keys name their variable again, in the author's order of the levels
+    assert "tub=yes: {lung=yes: [" in text and "tub=no: {lung=yes: [" in text
+    assert "either=yes: {bronc=yes: {dysp=yes: " in text
+    assert "# keys name their variable" in text
+    fitted = bayesprog.load(out)
+    network = DiscreteBayesianNetwork(ASIA_ARCS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logging.disable(logging.WARNING)
+        try:
+            estimator = DiscreteMLE().fit(network, data.astype(str))
+            cpds = estimator.parameters_
+        finally:
+            logging.disable(logging.NOTSET)
+    assert len(cpds) == 8
+    for cpd in cpds:
+        child, parents = cpd.variable, cpd.variables[1:]
+        term = f"P({child} | {', '.join(parents)})" if parents else f"P({child})"
+        ours = fitted.table(term)  # parent states by child states, read from the file
+        reference = cpd.get_values()  # [child, parents...] in pgmpy's state order
+        for r, states in enumerate(itertools.product(*(cpd.state_names[p] for p in parents))):
+            row = ours.loc[states if len(states) > 1 else states[0]] if parents else ours.iloc[0]
+            for c, state in enumerate(cpd.state_names[child]):
+                assert abs(row[state] - reference[c, r]) <= 1e-9, (term, states, state)
+    # Program.fit then Fit.save writes the same file; --rounded keeps the names too
+    bayesprog.load(source).fit(csv).save(tmp_path / "again.yaml")
+    assert (tmp_path / "again.yaml").read_text() == text
+    assert main(["learn", str(source), str(csv), "-o", str(tmp_path / "r.yaml"), "--rounded"]) == 0
+    assert "tub=yes: {lung=yes: [" in (tmp_path / "r.yaml").read_text()
+
+
+def test_a_parameter_written_once_for_every_parent_state_is_learned_into_keys_naming_them():
+    text = ASIA.replace("  dysp: {states: [yes, no]}", "  dysp: {states: [yes, no]}\n"
+                        "  cough: {continuous: [-.inf, .inf]}")
+    text += "  - {term: 'P(cough | bronc, either)', form: normal, mean: 0, sigma: 1}\n"
+    program = bayesprog.loads(text, "asia.yaml")
+    data = bayesprog.loads(ASIA).sample(3000, rng=2)
+    mean = {("yes", "yes"): 2.0, ("yes", "no"): 1.0, ("no", "yes"): 0.5, ("no", "no"): 0.0}
+    noise = np.random.default_rng(3).normal(0, 0.3, len(data))
+    data["cough"] = [mean[b, e] for b, e in zip(data["bronc"], data["either"], strict=True)] + noise
+    fit = program.fit(data)
+    written = render_fitted(text, fit.estimate.params, fit.program.variables, fit.record)
+    # bronc and either have the same states: plain keys (yes, no) would not load
+    assert "bronc=yes:" in written and "either=yes:" in written
+    again = bayesprog.loads(written)
+    for name in ("mean", "sigma"):
+        np.testing.assert_allclose(again.term("P(cough | bronc, either)").params[name].array,
+                                   fit.program.term("P(cough | bronc, either)").params[name].array,
+                                   rtol=1e-14)
 
 
 def test_learning_continues_from_a_fitted_file_with_more_data(tmp_path):
@@ -477,7 +556,8 @@ def test_complete_data_needs_no_starting_values_and_continuing_after_a_zero_work
     assert main(["learn", str(source), str(first), "-o", str(tmp_path / "f1.yaml")]) == 0
     more = tmp_path / "more.csv"
     more.write_text("A,B,C\na1,b0,c1\na0,b1,c0\n")  # cases the first fit gave probability 0
-    assert main(["learn", str(tmp_path / "f1.yaml"), str(more), "-o", str(tmp_path / "f2.yaml")]) == 0
+    assert main(["learn", str(tmp_path / "f1.yaml"), str(more), "-o", str(tmp_path / "f2.yaml"),
+                 "--rounded"]) == 0
     table = bayesprog.load(tmp_path / "f2.yaml").term("P(B | A)").params["table"].array
     # six rows support 3 significant digits; each row still sums to one exactly as written
     np.testing.assert_array_equal(table, [[0.667, 0.333, 0], [0.333, 0, 0.667]])

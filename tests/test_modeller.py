@@ -468,7 +468,7 @@ def test_learn_writes_the_digits_its_rows_support_and_says_so(capsys, tmp_path, 
     csv = tmp_path / "grades.csv"
     data.to_csv(csv, index=False)
     out = tmp_path / "fitted.yaml"
-    code, said, _ = run(capsys, "learn", source, csv, "-o", out)
+    code, said, _ = run(capsys, "learn", source, csv, "-o", out, "--rounded")
     assert code == 0 and f"the precision {rows} rows support ({digits} significant digits" in said
     fitted = bayesprog.load(out)
     assert fitted.learned[-1].digits == digits and f"digits: {digits}" in out.read_text()
@@ -508,7 +508,8 @@ def test_a_learned_mean_far_from_zero_keeps_the_decimals_its_standard_error_need
     csv = tmp_path / "far.csv"
     pd.DataFrame({"M": states, "T": values}).to_csv(csv, index=False)
     (tmp_path / "far.yaml").write_text(FAR)
-    assert main(["learn", str(tmp_path / "far.yaml"), str(csv), "-o", str(tmp_path / "l.yaml")]) == 0
+    assert main(["learn", str(tmp_path / "far.yaml"), str(csv), "-o", str(tmp_path / "l.yaml"),
+                 "--rounded"]) == 0
     written = bayesprog.load(tmp_path / "l.yaml")
     for state in ("a", "b"):
         x = values[states == state]
@@ -531,7 +532,8 @@ def test_a_continued_fit_writes_the_digits_of_all_its_rows(capsys, tmp_path):
     bayesprog.loads(STUDENT).sample(20_000, rng=1).to_csv(first, index=False)
     bayesprog.loads(STUDENT).sample(2, rng=2).to_csv(second, index=False)
     run(capsys, "learn", source, first, "-o", tmp_path / "f1.yaml")
-    code, said, _ = run(capsys, "learn", tmp_path / "f1.yaml", second, "-o", tmp_path / "f2.yaml")
+    code, said, _ = run(capsys, "learn", tmp_path / "f1.yaml", second, "-o", tmp_path / "f2.yaml",
+                        "--rounded")
     record = bayesprog.load(tmp_path / "f2.yaml").learned[-1]
     assert code == 0 and record.rows_used == 2 and record.rows_supporting == 20_002
     assert record.digits == 5 and "the precision 20002 rows support" in said

@@ -114,7 +114,7 @@ def test_a_copied_experiment_carries_every_file_it_names_and_runs_from_there(tmp
 
 def test_a_copy_does_not_overwrite_unless_forced(tmp_path, capsys):
     assert run(capsys, "examples", "copy", "student", tmp_path)[0] == 0
-    target = tmp_path / "examples" / "student.yaml"
+    target = tmp_path / "student.yaml"
     target.write_text("# my edits\n")
     code, _, err = run(capsys, "examples", "copy", "student", tmp_path)
     assert code == 2 and "exists" in err and "--force" in err
@@ -127,10 +127,22 @@ def test_a_copy_does_not_overwrite_unless_forced(tmp_path, capsys):
 
 def test_a_copied_program_is_the_bundled_one(tmp_path):
     written = bundled.copy("umbrella", tmp_path)
-    assert written == [tmp_path / "examples" / "umbrella.yaml"]
+    assert written == [tmp_path / "umbrella.yaml"]
     ours = bayesprog.load(written[0]).ask("P(Rain)")
     theirs = bayesprog.load(MODELS / "examples" / "umbrella.yaml").ask("P(Rain)")
     np.testing.assert_array_equal(ours.probabilities, theirs.probabilities)
+
+
+def test_a_model_of_one_file_lands_as_that_file_and_the_next_command_finds_it(tmp_path, capsys):
+    code, out, _ = run(capsys, "examples", "copy", "sprinkler", tmp_path / "my_sprinkler")
+    assert code == 0 and str(tmp_path / "my_sprinkler" / "sprinkler.yaml") in out
+    assert sorted(p.name for p in (tmp_path / "my_sprinkler").rglob("*")) == ["sprinkler.yaml"]
+    code, out, err = run(capsys, "query", tmp_path / "my_sprinkler" / "sprinkler.yaml",
+                         "why_wet")
+    assert code == 0 and "P(Rain | Grass=wet)" in out, err
+    # a data file is one file too
+    code, _, _ = run(capsys, "examples", "copy", "probes", tmp_path / "data_here")
+    assert code == 0 and (tmp_path / "data_here" / "probes.csv").is_file()
 
 
 # one version ---------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""The published JSON Schema: up to date, accepts every bundled program, rejects bad ones."""
+"""The published JSON Schema: up to date, accepts every bundled program, rejects bad ones; and
+the plain reader of the common shape reads what pydantic reads, as it reads it."""
 
 from __future__ import annotations
 
@@ -8,8 +9,14 @@ from pathlib import Path
 import jsonschema
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import BaseModel
 
+from bayesprog.language.document import Document, validate_located
 from bayesprog.language.json_schema import json_schema
+from bayesprog.language.loader import Located, load_yaml
+from bayesprog.language.plain import read_plain
 
 ROOT = Path(__file__).parents[1]
 PROGRAMS = sorted(p for p in (ROOT / "models").rglob("*.yaml")
@@ -42,3 +49,92 @@ def test_schema_rejects_bad_programs(change, word):
     with pytest.raises(jsonschema.ValidationError) as info:
         jsonschema.validate(doc, json_schema())
     assert word in str(info.value)
+
+
+# the plain reader: the common shape read without pydantic, as pydantic reads it -----------------
+
+EVERY_PROGRAM = PROGRAMS + sorted((ROOT / "tests" / "programs").glob("*.yaml"))
+
+
+def _located(text: str):
+    from bayesprog.program import _names_as_written
+
+    located, problems = load_yaml(text, "<test>")
+    assert not problems
+    _names_as_written(located)
+    return located
+
+
+def _as_data(spec) -> object:
+    """A document read either way as plain data, to compare the two."""
+    if isinstance(spec, (str, int, float, bool, type(None))):
+        return spec
+    if isinstance(spec, list):
+        return [_as_data(v) for v in spec]
+    if isinstance(spec, dict):
+        return {k: _as_data(v) for k, v in spec.items()}
+    if isinstance(spec, BaseModel):
+        out = {name: _as_data(getattr(spec, name)) for name in type(spec).model_fields}
+    else:
+        out = {name: _as_data(value) for name, value in vars(spec).items()}
+    if hasattr(spec, "parameters"):
+        out["parameters"] = _as_data(spec.parameters)
+    return out
+
+
+def _agree(data) -> bool:
+    """Whether the plain reader either leaves ``data`` to pydantic or reads it as pydantic does
+    (then pydantic finds no problem with it). True when the plain reader took it."""
+    import copy
+
+    plain = read_plain(copy.deepcopy(data))
+    if plain is None:
+        return False
+    validated, problems = validate_located(Located(copy.deepcopy(data), "<test>"), Document)
+    assert not problems, problems
+    assert _as_data(plain) == _as_data(validated)
+    return True
+
+
+@pytest.mark.parametrize("path", EVERY_PROGRAM, ids=lambda p: p.name)
+def test_the_plain_reader_reads_a_shipped_program_as_pydantic_does(path):
+    located = _located(path.read_text())
+    took = _agree(located.data)
+    # the common shape: every program without a grid, bins or a learned: record
+    text = path.read_text()
+    assert took or any(word in text for word in ("grid:", "discretise:", "learned:")), path
+
+
+LEAVES = st.sampled_from([None, 0, 1, 2, -1, 1.5, float("inf"), True, False, "", "x", "a0",
+                          "1", [], [1], ["a", "a"], ["a", "b"], [0, 1], {}, {"x": 1}]).map(
+    lambda leaf: __import__("copy").deepcopy(leaf))
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data())
+def test_whatever_the_plain_reader_takes_pydantic_takes_the_same(data):
+    """A shipped program with values replaced at random: the plain reader leaves it to
+    pydantic, or reads it as pydantic does."""
+    path = data.draw(st.sampled_from(EVERY_PROGRAM))
+    doc = _located(path.read_text()).data
+    for _ in range(data.draw(st.integers(1, 3))):
+        node, key = doc, None
+        while True:  # walk down to a random place: node[key]
+            keys = list(node) if isinstance(node, dict) else list(range(len(node)))
+            if not keys:
+                key = None
+                break
+            key = data.draw(st.sampled_from(keys))
+            child = node[key]
+            if not isinstance(child, (dict, list)) or not child or data.draw(st.booleans()):
+                break
+            node = child
+        if key is None:
+            continue
+        if isinstance(node, dict) and data.draw(st.booleans()):
+            node[data.draw(st.sampled_from(["description", "extra", "learn", "kind",
+                                            "indexed_by", "states", "range"]))] = \
+                data.draw(LEAVES)
+        else:
+            node[key] = data.draw(LEAVES)
+    _agree(doc)

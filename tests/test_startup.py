@@ -62,6 +62,28 @@ def test_a_discrete_question_on_the_command_line_loads_no_plotting_graph_or_tabl
     assert not loaded & unused, loaded & unused
 
 
+def test_a_script_that_loads_a_program_and_asks_once_builds_no_validator_and_no_plan():
+    """The first question of a script: the file of the common shape is read without pydantic
+    (its validators cost more than the question), the answer found by elimination with no
+    method ranked, so no other method's module, scipy or opt_einsum is imported; a file
+    with a learned: record, and a second question, load what they need."""
+    code = ("import bayesprog\n"
+            "p = bayesprog.load(bayesprog.bundled_path('student', 'program'))\n"
+            "print(p.ask('P(I | G=A)').probabilities.round(6).tolist())")
+    loaded = loaded_after(code)
+    assert not top_level(loaded) & {"pydantic", "scipy", "opt_einsum", "networkx", "pandas"}
+    methods = {m for m in loaded if m.startswith("bayesprog.inference.methods.")}
+    assert methods == {"bayesprog.inference.methods.base",
+                       "bayesprog.inference.methods.contraction"}, methods
+    assert "bayesprog.records" not in loaded and "bayesprog.language.document" not in loaded
+    # by hand: P(I=low, G=A) = 0.7 (0.6 x 0.3 + 0.4 x 0.05) = 0.14, P(G=A) = 0.14 + 0.222
+    assert _after(code).splitlines()[-1] == "[0.38674, 0.61326]"
+    # a learned: record is read by pydantic, and a second layout ranks the methods
+    later = loaded_after(code + "\np.ask('P(D | G=A)'); p.ask('P(D | G=B)')\n"
+                         "import bayesprog.language.document")
+    assert "bayesprog.inference.methods.table" in later
+
+
 def test_a_program_displays_in_a_notebook_without_importing_the_display_first():
     code = ("import bayesprog\n"
             "p = bayesprog.loads(" + repr(STUDENT) + ")\n"

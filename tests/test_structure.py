@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,7 +15,7 @@ import pytest
 
 import bayesprog
 from bayesprog.cli import main
-from bayesprog.discovery import code_data
+from bayesprog.discovery import StructureWarning, code_data
 from bayesprog.learning.structure import (
     Constraints,
     Scores,
@@ -208,7 +209,9 @@ def test_a_discovered_program_validates_answers_and_is_relearned(tmp_path, asia,
 
 def test_the_tables_are_the_posterior_mean_under_the_prior_written(asia):
     frame, _ = asia
-    found = bayesprog.discover(frame, method="hc", score="bdeu", equivalent_sample_size=4)
+    with warnings.catch_warnings():  # an arc into either, a function of tub and lung
+        warnings.simplefilter("ignore", StructureWarning)
+        found = bayesprog.discover(frame, method="hc", score="bdeu", equivalent_sample_size=4)
     program = found.program
     for term in program.terms:
         if term.parents:
@@ -493,3 +496,48 @@ def test_discovery_on_a_dict_of_columns_is_deterministic():
     assert timeless(first.text) == timeless(bayesprog.discover(data).text)
     assert "seconds:" in first.text
     assert sorted(itertools.chain.from_iterable(first.parents.values())) in (["A"], ["B"])
+
+
+# what the search cannot see: a deterministic variable ------------------------------------------
+
+def test_pc_says_when_arcs_contradict_a_deterministic_table(tmp_path, capsys):
+    """In asia, either = tub OR lung: given tub and lung it tells nothing more, so PC finds
+    xray and dysp independent given them and makes them parents of either. The arcs into a
+    variable that the data show to be a function of its other parents are said, and
+    forbidding them gives the true families."""
+    asia = bayesprog.load(Path(__file__).parent / "programs" / "asia.yaml")
+    frame = asia.sample(20_000, rng=3)
+    with pytest.warns(StructureWarning) as caught:
+        found = bayesprog.discover(frame, method="pc")
+    assert sorted(found.parents["either"]) == ["dysp", "lung", "tub", "xray"]
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith("either is a function of tub, lung in the data")
+    assert "the arcs xray -> either, dysp -> either contradict" in said[0]
+    assert "--forbid xray->either" in said[0]
+    assert found.record.structure.warnings == said  # and in the file's record
+    assert "warnings:" in found.text
+    # the command line says it on stderr and still writes the program
+    frame.to_csv(tmp_path / "asia.csv", index=False)
+    code, out, err = run(capsys, "discover", tmp_path / "asia.csv", "--method", "pc", "-o",
+                         tmp_path / "pc.yaml")
+    assert code == 0 and (tmp_path / "pc.yaml").is_file()
+    assert err.startswith("bayesprog: warning: either is a function of")
+    # forbidding the arcs it names gives either its own parents, and no warning
+    arcs = [f"{p}->either" for p in found.parents["either"] if p not in ("tub", "lung")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", StructureWarning)
+        fixed = bayesprog.discover(frame, method="pc", forbid=arcs)
+    assert sorted(fixed.parents["either"]) == ["lung", "tub"]
+    assert fixed.record.structure.warnings == []
+
+
+def test_a_function_of_chance_in_few_rows_is_not_said_to_be_deterministic():
+    from bayesprog.discovery import determined_by
+
+    rng = np.random.default_rng(4)
+    codes = rng.integers(0, 3, size=(12, 4))  # 12 rows, 9 configurations of two columns
+    assert determined_by(codes, 0, [1, 2]) is None
+    xor = rng.integers(0, 2, size=(400, 4))  # column 0 is column 1 xor column 2
+    xor[:, 0] = xor[:, 1] ^ xor[:, 2]
+    assert determined_by(xor, 0, [1, 2, 3]) == [1, 2]  # the smallest set, a proper subset
+    assert determined_by(xor, 0, [1, 3]) is None

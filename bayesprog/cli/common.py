@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -24,6 +25,21 @@ EXIT_USER_ERROR = 2
 
 class UserError(Exception):
     """A mistake in the command's arguments: printed as ``bayesprog: ...``, exit status 2."""
+
+
+def output_file(text: str, option: str = "-o") -> Path:
+    """The path of a file a command writes (``-o``): its folder must exist, so that a mistyped
+    folder is said, not made."""
+    path = Path(text)
+    folder = path.parent
+    if folder.exists() and not folder.is_dir():
+        raise UserError(f"{option} {text}: {folder} is a file, not a folder")
+    if not folder.is_dir():
+        raise UserError(f"{option} {text}: the folder {folder} does not exist (make it first, "
+                        "or write elsewhere)")
+    if path.is_dir():
+        raise UserError(f"{option} {text}: that is a folder; expected a file to write")
+    return path
 
 
 def load_program(name: str) -> Program:

@@ -8,11 +8,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from bayesprog.cli.common import UserError, column_renames, load_program
+from bayesprog.cli.common import UserError, column_renames, load_program, output_file
 
 
 def add_learn(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +39,10 @@ def add_learn(sub: argparse._SubParsersAction) -> None:
                    help="the variable takes the states found in its column (sorted), the terms "
                    "over it learned anew, e.g. a lab's own materials; repeatable (default: the "
                    "states declared)")
+    p.add_argument("--rounded", action="store_true",
+                   help="write the learned values to the precision their rows support "
+                   "(significant digits; a mean to a twentieth of its standard error) instead "
+                   "of as fitted")
     p.set_defaults(func=cmd_learn)
 
 
@@ -47,6 +52,7 @@ def cmd_learn(args: argparse.Namespace) -> int:
     from bayesprog.bundled import bundled_path
 
     program = load_program(args.file)
+    output_file(args.output)
     args.data = str(bundled_path(args.data, "data"))
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise UserError(f"-o {args.output}: that is the data file; expected a new program file")
@@ -56,16 +62,23 @@ def cmd_learn(args: argparse.Namespace) -> int:
     fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
                       columns=columns or None, states_from_data=args.states_from_data)
     try:
-        out = fit.save(args.output)
+        out = fit.save(args.output, rounded=args.rounded)
     except OSError as exc:
         raise UserError(f"cannot write {args.output}: {exc.strerror or exc}") from None
     record = fit.record
+    rows = record.rows_supporting or record.rows_used
     iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
+    if args.rounded:
+        from bayesprog.learning.write import supported_digits
+
+        written = (f"values written to the precision {rows} rows support "
+                   f"({supported_digits(rows)} significant digits, means to a twentieth of "
+                   "their standard error)")
+    else:
+        written = "values written as fitted"
     print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "
           f"rows of {record.data} ({record.method}{iterations}); log-likelihood "
-          f"{record.log_likelihood:.6g}; values written to the precision "
-          f"{record.rows_supporting} rows support ({record.digits} significant digits, means to "
-          "a twentieth of their standard error)")
+          f"{record.log_likelihood:.6g}; {written}")
     if not fit.converged:
         print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
               "(raise --max-iter)", file=sys.stderr)
@@ -125,10 +138,10 @@ def add_discover(sub: argparse._SubParsersAction) -> None:
 
 def cmd_discover(args: argparse.Namespace) -> int:
     from bayesprog.bundled import bundled_path
-    from bayesprog.discovery import discover
+    from bayesprog.discovery import StructureWarning, discover
 
     data = str(bundled_path(args.data, "data"))
-    out = Path(args.output)
+    out = output_file(args.output)
     if out.exists() and out.resolve() == Path(data).resolve():
         raise UserError(f"-o {args.output}: that is the data file; expected a new program file")
     if out.suffix not in (".yaml", ".yml"):
@@ -150,13 +163,17 @@ def cmd_discover(args: argparse.Namespace) -> int:
         if args.method == "pc" and value is not None:
             raise UserError(f"{option} applies to hill climbing (--method hc), not to pc")
     start = load_program(args.start) if args.start else None
-    found = discover(data, method=args.method, score=args.score or "bic",
-                     equivalent_sample_size=args.ess, test=args.test,
-                     significance=args.significance, max_conditioning=args.max_conditioning,
-                     forbid=args.forbid, require=args.require, tiers=args.tiers,
-                     max_parents=args.max_parents, start=start, restarts=args.restarts,
-                     tabu=args.tabu, seed=args.seed, discretise=args.discretise,
-                     columns=column_renames(args.column) or None, name=args.name or out.stem)
+    with warnings.catch_warnings():  # said once below, as the command's own words
+        warnings.simplefilter("ignore", StructureWarning)
+        found = discover(data, method=args.method, score=args.score or "bic",
+                         equivalent_sample_size=args.ess, test=args.test,
+                         significance=args.significance,
+                         max_conditioning=args.max_conditioning, forbid=args.forbid,
+                         require=args.require, tiers=args.tiers,
+                         max_parents=args.max_parents, start=start, restarts=args.restarts,
+                         tabu=args.tabu, seed=args.seed, discretise=args.discretise,
+                         columns=column_renames(args.column) or None,
+                         name=args.name or out.stem)
     try:
         found.save(out)
     except OSError as exc:
@@ -169,6 +186,8 @@ def cmd_discover(args: argparse.Namespace) -> int:
            + (f", {len(record.oriented_by_choice)} arcs oriented by choice"
               if record.oriented_by_choice else ""))
     print(f"wrote {out}: {len(found.parents)} variables, {arcs} arcs ({record.method}, {how})")
+    for message in record.warnings:
+        print(f"bayesprog: warning: {message}", file=sys.stderr)
     return 0
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from bayesprog.cli.common import ablated, load_program
+from bayesprog.cli.common import ablated, load_program, output_file
 
 
 def add_import(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +22,7 @@ def add_import(sub: argparse._SubParsersAction) -> None:
 def cmd_import(args: argparse.Namespace) -> int:
     from bayesprog.io import import_network
 
-    out = import_network(args.network, args.output)
+    out = import_network(args.network, output_file(args.output))
     load_program(str(out))  # what we write must load
     print(f"wrote {out}")
     return 0
@@ -42,5 +42,5 @@ def cmd_export(args: argparse.Namespace) -> int:
     from bayesprog.io import export_program
 
     program = ablated(load_program(args.file), args.ablate)
-    print(f"wrote {export_program(program, args.output)}")
+    print(f"wrote {export_program(program, output_file(args.output))}")
     return 0

@@ -11,7 +11,14 @@ import sys
 import textwrap
 from pathlib import Path
 
-from bayesprog.cli.common import EXIT_USER_ERROR, UserError, ablated, load_program, plugins
+from bayesprog.cli.common import (
+    EXIT_USER_ERROR,
+    UserError,
+    ablated,
+    load_program,
+    output_file,
+    plugins,
+)
 from bayesprog.errors import BayesprogError, SpecError
 
 
@@ -110,7 +117,7 @@ def cmd_graph(args: argparse.Namespace) -> int:
     from bayesprog.draw import write_graph
 
     program = load_program(args.file)
-    out = Path(args.output)
+    out = output_file(args.output)
     if out.suffix.lower() not in (".dot", ".png", ".pdf", ".svg"):
         raise UserError(f"-o {args.output}: expected a .dot, .png, .pdf or .svg file")
     question = program.question(args.question) if args.question else None
@@ -131,7 +138,8 @@ def add_examples(sub: argparse._SubParsersAction) -> None:
                            "into a folder")
     c.add_argument("name", metavar="NAME", help="a name that bayesprog examples lists")
     c.add_argument("folder", metavar="DIR", help="the folder to copy into (made if missing); "
-                   "the files keep their layout, so relative references still hold")
+                   "a model of one file lands as DIR/FILE, one that names other files keeps "
+                   "their layout, so relative references still hold")
     c.add_argument("--force", action="store_true",
                    help="overwrite files that exist (default: refuse)")
     c.set_defaults(func=cmd_examples_copy)
@@ -187,6 +195,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
     text = json.dumps(json_schema(), indent=2) + "\n"
     if args.output:
+        output_file(args.output)
         Path(args.output).write_text(text, encoding="utf-8")
     else:
         sys.stdout.write(text)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from bayesprog.cli.common import (
     evidence_value,
     load_program,
     named_values,
+    output_file,
     read_npy,
 )
 
@@ -56,8 +56,9 @@ def add_query(sub: argparse._SubParsersAction) -> None:
                    "not linear-Gaussian: grid); table, contraction, gaussian: exact; lbp: loopy "
                    "belief propagation; lw: likelihood weighting, with standard errors; gibbs: "
                    "Gibbs sampling, with standard errors from batch means; grid: unknown real "
-                   "variables on bins, with estimated errors; pf: a particle filter, for a "
-                   "filter question over real states (default: %(default)s)")
+                   "variables on bins, with estimated errors; pf: particles, for a filter or a "
+                   "smooth question over real states that are not linear-Gaussian "
+                   "(default: %(default)s)")
     p.add_argument("--samples", type=int, default=10_000,
                    help="draws per evidence set for --method lw, kept sweeps for gibbs, "
                    "particles per sequence for pf (default: %(default)s)")
@@ -217,7 +218,7 @@ def cmd_sample(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     if args.n < 1:
         raise UserError(f"-n: expected at least 1 draw, found {args.n}")
-    out = Path(args.output)
+    out = output_file(args.output)
     if out.suffix.lower() not in (".csv", ".parquet"):
         raise UserError(f"-o {args.output}: expected a .csv or .parquet file")
     if out.suffix.lower() == ".parquet":

@@ -266,6 +266,9 @@ class Form:
     #: has its log densities computed again at those cells only
     #: (:mod:`bayesprog.inference.recurring`)
     pointwise: ClassVar[bool] = False
+    #: :meth:`sample` is the quantile function at ``u[..., 0]`` (and :meth:`cdf` its inverse):
+    #: a draw restricted to a bounded support takes ``u`` between the CDF at its bounds
+    quantile_sample: ClassVar[bool] = False
 
     @property
     def display_name(self) -> str:

@@ -15,10 +15,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import scipy
 
+from bayesprog.extras import LazyModule
 from bayesprog.forms.base import Estimator, LearnOptions, Params, ParamValue, Stats, Term
 from bayesprog.variables import Discrete
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 __all__ = ["Estimator", "FitProblem", "LearnOptions", "Params", "Stats", "Term"]  # and below
 
@@ -245,16 +248,16 @@ class BetaEstimator(Estimator):
 
 def _beta_newton(a: np.ndarray, b: np.ndarray, g1: np.ndarray, g2: np.ndarray,
                  steps: int = 100) -> tuple[np.ndarray, np.ndarray]:
-    """Maximise ``(a-1) g1 + (b-1) g2 - scipy.special.betaln(a, b)`` elementwise (concave in (a, b))."""
+    """Maximise ``(a-1) g1 + (b-1) g2 - special.betaln(a, b)`` elementwise (concave in (a, b))."""
 
     def objective(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return (a - 1) * g1 + (b - 1) * g2 - scipy.special.betaln(a, b)
+        return (a - 1) * g1 + (b - 1) * g2 - special.betaln(a, b)
 
     for _ in range(steps):
-        dab = scipy.special.digamma(a + b)
-        ga, gb = g1 - scipy.special.digamma(a) + dab, g2 - scipy.special.digamma(b) + dab
-        t = scipy.special.polygamma(1, a + b)
-        haa, hbb = t - scipy.special.polygamma(1, a), t - scipy.special.polygamma(1, b)
+        dab = special.digamma(a + b)
+        ga, gb = g1 - special.digamma(a) + dab, g2 - special.digamma(b) + dab
+        t = special.polygamma(1, a + b)
+        haa, hbb = t - special.polygamma(1, a), t - special.polygamma(1, b)
         det = haa * hbb - t * t
         da = -(hbb * ga - t * gb) / det
         db = -(haa * gb - t * ga) / det

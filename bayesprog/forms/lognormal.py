@@ -21,8 +21,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import scipy
 
+from bayesprog.extras import LazyModule
 from bayesprog.forms.base import (
     Estimator,
     Form,
@@ -38,6 +38,9 @@ from bayesprog.forms.base import (
 )
 from bayesprog.forms.estimators import FitProblem, NormalEstimator
 from bayesprog.variables import Variable
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 _LOG_2PI = float(np.log(2 * np.pi))
 
@@ -71,6 +74,7 @@ class LogNormal(Form):
     pointwise = True
     title = "LogNormal"
     child_kinds = ("continuous",)
+    quantile_sample = True
     params = (
         Param("mu", real, doc="mean of log x, a literal or a table keyed by parent states"),
         Param("sigma", positive, doc="standard deviation of log x, > 0"),
@@ -90,9 +94,9 @@ class LogNormal(Form):
     def cdf(self, ctx: TermContext) -> np.ndarray:
         x, mu, sigma = ctx.child_value(), ctx.param("mu"), ctx.param("sigma")
         positive_x = x > 0
-        return np.where(positive_x, scipy.special.ndtr((np.log(np.where(positive_x, x, 1.0)) - mu) / sigma),
+        return np.where(positive_x, special.ndtr((np.log(np.where(positive_x, x, 1.0)) - mu) / sigma),
                         0.0)
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return np.exp(params["mu"] + params["sigma"] * scipy.special.ndtri(u[..., 0]))
+        return np.exp(params["mu"] + params["sigma"] * special.ndtri(u[..., 0]))

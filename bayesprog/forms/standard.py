@@ -6,8 +6,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import scipy
 
+from bayesprog.extras import LazyModule
 from bayesprog.forms.base import (
     Form,
     Param,
@@ -27,6 +27,9 @@ from bayesprog.forms.estimators import (
     TableEstimator,
 )
 from bayesprog.variables import Continuous, Discrete, Variable
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 _LOG_2PI = float(np.log(2 * np.pi))
 
@@ -126,6 +129,7 @@ class Normal(Form):
     )
     mean_param, scale_param = "mean", "sigma"
     location_scale = ("mean", "sigma")
+    quantile_sample = True
 
     def estimator(self, child: Variable) -> Estimator | None:
         return NormalEstimator()
@@ -136,11 +140,11 @@ class Normal(Form):
         return -0.5 * z * z - np.log(sigma) - 0.5 * _LOG_2PI
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
-        return scipy.special.ndtr((ctx.child_value() - ctx.param("mean")) / ctx.param("sigma"))
+        return special.ndtr((ctx.child_value() - ctx.param("mean")) / ctx.param("sigma"))
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return params["mean"] + params["sigma"] * scipy.special.ndtri(u[..., 0])
+        return params["mean"] + params["sigma"] * special.ndtri(u[..., 0])
 
 
 @register_form
@@ -149,6 +153,7 @@ class Beta(Form):
 
     name = "beta"
     pointwise = True
+    quantile_sample = True
     child_kinds = ("continuous",)
     params = (
         Param("a", positive, doc="first shape parameter (alpha), > 0"),
@@ -169,21 +174,21 @@ class Beta(Form):
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         x, a, b = ctx.child_value(), ctx.param("a"), ctx.param("b")
         with np.errstate(divide="ignore", invalid="ignore"):
-            out = np.broadcast_to(-scipy.special.betaln(a, b), np.broadcast_shapes(a.shape, b.shape, x.shape))
+            out = np.broadcast_to(-special.betaln(a, b), np.broadcast_shapes(a.shape, b.shape, x.shape))
             # a shape parameter of 1 contributes nothing: its log term is skipped (cue profiles
             # such as Beta(1, 2.5) and Beta(4, 1) halve their work)
-            out = _plus_xlog(out, a - 1, x, np.log, scipy.special.xlogy)
-            out = _plus_xlog(out, b - 1, -x, np.log1p, scipy.special.xlog1py)
+            out = _plus_xlog(out, a - 1, x, np.log, special.xlogy)
+            out = _plus_xlog(out, b - 1, -x, np.log1p, special.xlog1py)
         if not (np.min(x, initial=0.0) < 0 or np.max(x, initial=1.0) > 1):  # (two passes)
             return out
         return np.where((x < 0) | (x > 1), -np.inf, out)
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
-        return scipy.special.betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
+        return special.betainc(ctx.param("a"), ctx.param("b"), np.clip(ctx.child_value(), 0.0, 1.0))
 
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
-        return scipy.special.betaincinv(params["a"], params["b"], u[..., 0])
+        return special.betaincinv(params["a"], params["b"], u[..., 0])
 
 
 def _plus_xlog(out: np.ndarray, c: np.ndarray, v: np.ndarray, log: Any, xlog: Any) -> np.ndarray:
@@ -392,7 +397,7 @@ class GaussianMixture(Form):
         rest = np.where(in_floor, 0.0, (pick - floor) / np.where(floor < 1, 1 - floor, 1))
         component = np.minimum((np.cumsum(weights, -1) <= rest[..., None]).sum(-1), k - 1)
         mean = np.take_along_axis(means, component[..., None], -1)[..., 0]
-        value = mean + params["sigma"] * scipy.special.ndtri(u[..., 1])
+        value = mean + params["sigma"] * special.ndtri(u[..., 1])
         if np.any(in_floor):
             assert isinstance(child, Continuous)
             value = np.where(in_floor, child.low + u[..., 1] * child.width, value)

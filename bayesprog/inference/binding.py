@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import QuestionError, expect_mapping, short_repr
+from bayesprog.errors import QuestionError, did_you_mean, expect_mapping, short_repr
 from bayesprog.expressions import Question
 from bayesprog.forms import ParamValue
 from bayesprog.inference.protocol import ProgramLike
@@ -97,11 +97,13 @@ def bind(
     values: dict[str, Any] = dict(expr.values)
     for name, value in evidence.items():
         if name not in variables:
-            raise QuestionError(f"evidence for unknown variable {name!r} "
-                                f"(declared: {', '.join(variables)})")
+            raise QuestionError(f"evidence for unknown variable {name!r}"
+                                f"{did_you_mean(name, variables)} (declared: "
+                                f"{', '.join(variables)})")
         if name not in expr.right:
-            raise QuestionError(f"evidence for {name!r}, which is not known in {expr}: expected "
-                                f"evidence for {', '.join(expr.right) or 'no variable'}")
+            raise QuestionError(f"evidence for {name!r}, which is not known in {expr}"
+                                f"{did_you_mean(name, expr.right)} (expected evidence for "
+                                f"{', '.join(expr.right) or 'no variable'})")
         if name in expr.values:
             raise QuestionError(f"{name} is fixed to {expr.values[name]!r} by the question "
                                 "and given again as evidence")
@@ -130,7 +132,9 @@ def bind(
     for name, value in soft.items():
         soft_var = variables.get(name)
         if not isinstance(soft_var, Discrete):
-            raise QuestionError(f"soft evidence needs a declared discrete variable, found {name!r}")
+            raise QuestionError(f"soft evidence needs a declared discrete variable, found {name!r}"
+                                + did_you_mean(name, [n for n, v in variables.items()
+                                                      if isinstance(v, Discrete)]))
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -272,7 +276,8 @@ def _state_indices(var: Discrete, value: Any) -> np.ndarray:
             try:
                 codes[i] = var.index_of(str(item))
             except KeyError:
-                raise QuestionError(f"unknown state {str(item)!r} of {var.name} (expected one "
+                raise QuestionError(f"unknown state {str(item)!r} of {var.name}"
+                                    f"{did_you_mean(str(item), var.states)} (expected one "
                                     f"of {var.describe_states()})") from None
         return codes[inverse].reshape(arr.shape)
     raise QuestionError(f"evidence for {var.name}: expected state names or indices, "

@@ -16,8 +16,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-import scipy
 
+from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import ONE_STEP, Factor, equation
@@ -34,6 +34,9 @@ from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.recurring import Recurring
 from bayesprog.limits import limit
 from bayesprog.variables import discrete
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 #: Below this, a row's normaliser is recomputed in log space (underflow, or subnormal precision).
 TINY = 1e-280
@@ -148,7 +151,7 @@ def log_contract(factors: list[tuple[tuple[str, ...], np.ndarray]],
         take = [f for f in pool if var in f[0]]
         pool = [f for f in pool if var not in f[0]]
         axes, arr = _log_product(take)
-        pool.append((tuple(a for a in axes if a != var), scipy.special.logsumexp(arr, axis=axes.index(var))))
+        pool.append((tuple(a for a in axes if a != var), special.logsumexp(arr, axis=axes.index(var))))
     axes, arr = _log_product(pool, output)
     return arr
 
@@ -462,7 +465,7 @@ def _normalised(plan: QuestionPlan, operands: list[Factor], offset: np.ndarray |
     for row in np.flatnonzero(bad):
         logs = [(f.axes, f.log[row] if f.batched else f.log) for f in factors]
         lt = log_contract(logs, searched)
-        total = scipy.special.logsumexp(lt) if np.isfinite(lt).any() else -np.inf
+        total = special.logsumexp(lt) if np.isfinite(lt).any() else -np.inf
         log_z[row] = total
         probs[row] = np.exp(lt - total) if np.isfinite(total) else 0.0
     return probs, log_z

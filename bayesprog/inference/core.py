@@ -8,8 +8,12 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
-import opt_einsum
-from opt_einsum import parser
+
+from bayesprog.extras import LazyModule
+
+#: opt_einsum, imported by the first contraction path searched or compiled (a layout's first
+#: question, answered by elimination, needs none)
+opt_einsum = LazyModule("opt_einsum")
 
 
 @dataclass
@@ -292,7 +296,7 @@ class Contraction:
         """``info``: the path's :class:`Account`."""
         self.steps: list[tuple[tuple[int, ...], str, Any]] = []
         for inds, _, einsum_str, flops, kind, _, _ in info.steps:
-            einsum_str = parser.convert_to_valid_einsum_chars(einsum_str)
+            einsum_str = opt_einsum.parser.convert_to_valid_einsum_chars(einsum_str)
             inputs, result = einsum_str.split("->")
             if kind == "tensordot":
                 left, right = inputs.split(",")
@@ -354,6 +358,21 @@ def _stacked(inputs: str, result: str) -> tuple[tuple[int, ...], tuple[int, ...]
             None if order == tuple(range(len(order))) else order)
 
 
+_LETTERS = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+
+def symbol(i: int) -> str:
+    """The ``i``-th einsum symbol, as opt_einsum's ``get_symbol`` gives it (its 52 letters, then
+    characters from ``chr(192)`` on, surrogates skipped), without importing opt_einsum for it.
+
+    >>> symbol(2), symbol(200), symbol(60000) == chr(62048)
+    ('c', 'Ŕ', True)
+    """
+    if i < 52:
+        return _LETTERS[i]
+    return chr(i + 2048) if i >= 55296 else chr(i + 140)
+
+
 def equation(operands: list[tuple[str, ...]], output: tuple[str, ...],
              batched: list[bool] | None = None, batched_out: bool = False) -> str:
     """The einsum equation (opt_einsum's symbols) contracting factors over ``operands`` axes
@@ -361,8 +380,8 @@ def equation(operands: list[tuple[str, ...]], output: tuple[str, ...],
     (of the factors that are ``batched``) the first symbol. The same factors give the same
     equation, so that the cost model's path serves the contraction."""
     names = sorted({a for axes in operands for a in axes} | set(output))
-    sym = {n: opt_einsum.get_symbol(i + 1) for i, n in enumerate(names)}
-    batch = opt_einsum.get_symbol(0)
+    sym = {n: symbol(i + 1) for i, n in enumerate(names)}
+    batch = symbol(0)
     flags = batched or [False] * len(operands)
     terms = [(batch if b else "") + "".join(sym[a] for a in axes)
              for axes, b in zip(operands, flags, strict=True)]

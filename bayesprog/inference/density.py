@@ -22,10 +22,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy
 
 from bayesprog import rich
 from bayesprog.errors import QuestionError
+from bayesprog.extras import LazyModule
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 #: The quantiles a summary reports.
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
@@ -58,7 +61,12 @@ class Density:
 
     @property
     def kind(self) -> str:
-        return "gaussian mixture" if self.weights is not None else "bins"
+        """How the density is held: ``gaussian`` (one Gaussian per row: a linear-Gaussian
+        answer, Kalman and RTS, a particle filter's moments), ``gaussian mixture`` (one per
+        configuration of the discrete variables summed out) or ``bins``."""
+        if self.weights is None:
+            return "bins"
+        return "gaussian" if self.weights.shape[-1] == 1 else "gaussian mixture"
 
     def _repr_html_(self) -> str | None:
         return rich.html("density", self)
@@ -128,7 +136,7 @@ class Density:
                 z = (x[:, :, None] - m[:, None, :]) / s[:, None, :]
             z = np.where(s[:, None, :] > 0, z, np.where(x[:, :, None] >= m[:, None, :],
                                                          np.inf, -np.inf))
-            return (w[:, None, :] * scipy.special.ndtr(z)).sum(-1)
+            return (w[:, None, :] * special.ndtr(z)).sum(-1)
         edges, p = self._bins(variable)
         cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
         return np.stack([np.interp(x[r], edges, cum[r]) for r in range(p.shape[0])])

@@ -9,7 +9,11 @@ Every term is used as a factor over its discrete variables (:func:`term_factor`,
 own): a discrete child is drawn from the term's row at its drawn parents, normalised, and the
 draw is weighted by the row's total (one for a normalised term; a potential's mass else); a
 known variable is not drawn, and the draw is weighted by its term's factor at the drawn parents.
-Continuous variables that are not known are drawn by their form's :meth:`Form.sample`.
+Continuous variables that are not known are drawn by their form's :meth:`Form.sample`, inside
+their declared support: a bounded variable is drawn from its term truncated to the support
+(the density at its drawn parents, renormalised there), by the quantile function between the
+CDF at the bounds where the form has one (``quantile_sample``), by drawing again the values
+that fell outside otherwise.
 """
 
 from __future__ import annotations
@@ -19,10 +23,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy
 
 from bayesprog.errors import QuestionError
-from bayesprog.forms import FormulaParam, ParamValue
+from bayesprog.extras import LazyModule
+from bayesprog.forms import FormulaParam, ParamValue, TermContext
 from bayesprog.inference.answers import generator_of, seed_of
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import Factor, _bound_param, term_factor
@@ -31,6 +35,9 @@ from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size
 from bayesprog.model import Term
 from bayesprog.variables import Continuous, Discrete
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 
 @dataclass
@@ -136,7 +143,7 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
             check_size(float(rows) * n * child.card, f"drawing {name} ({child.card:,} states) "
                        f"{n:,} times")
             row = _at_draws(program, term, inputs_only, drawn, values, rows, n, keep=name)
-            total = scipy.special.logsumexp(row, axis=-1)
+            total = special.logsumexp(row, axis=-1)
             if not np.all(np.isfinite(total)):
                 raise QuestionError(f"term {term.label} gives no state of {name} a positive "
                                     "probability for some drawn parents: it cannot be sampled")
@@ -168,11 +175,56 @@ def draw(program: ProgramLike, terms: list[Term], bound: Bound, n: int,
                     term, key, param, bound)
                 arr = value.aligned(term.axes, event)
             params[key] = _gather_param(arr, value.batched, term.axes, values, rows, n, event)
-        values[name] = term.form.sample(params, child, _uniforms(gens, n, 2))
+        values[name] = _draw_within(program, term, child, params, gens, n)
     for name, pv in bound.soft.items():  # soft evidence given with the question
         with np.errstate(divide="ignore"):
             log_w = log_w + _gather(np.log(pv.array), pv.batched, (name,), values, rows, n)
     return Draws(values, log_w)
+
+
+#: how many times the values of a form without a quantile function that fell outside a bounded
+#: support are drawn again (each time the fraction left is the mass outside, so that a term with
+#: a tenth of its mass inside leaves one draw in 10^4 of a million outside at the end)
+REDRAWS = 200
+
+
+def _draw_within(program: ProgramLike, term: Term, child: Continuous,
+                 params: dict[str, np.ndarray], gens: list[np.random.Generator],
+                 n: int) -> np.ndarray:
+    """``n`` values of ``child`` per row from its term at each draw's ``params``, inside the
+    child's support (see the module)."""
+    form, low, high = term.form, child.low, child.high
+    u = _uniforms(gens, n, 2)
+    if not (np.isfinite(low) or np.isfinite(high)):
+        return form.sample(params, child, u)
+    where = f"[{low:g}, {high:g}]"
+    if form.quantile_sample:
+        values = {k: ParamValue((), v, True) for k, v in params.items()}
+
+        def cdf(x: float) -> np.ndarray:
+            at = ParamValue((), np.full(u.shape[:-1], x), True)
+            ctx = TermContext(child, (), (), (), values, at, program.variables)
+            return np.broadcast_to(np.asarray(form.cdf(ctx), float), u.shape[:-1])
+
+        below = cdf(low) if np.isfinite(low) else np.zeros(u.shape[:-1])
+        inside = (cdf(high) if np.isfinite(high) else 1.0) - below
+        if not np.all(inside > 0):
+            raise QuestionError(f"term {term.label} puts no probability inside the support "
+                                f"{where} of {child.name} at some of its drawn parents: it "
+                                "cannot be drawn there (check the term's parameters or the "
+                                "support declared)")
+        u = u.copy()
+        u[..., 0] = below + u[..., 0] * inside
+        return np.clip(form.sample(params, child, u), low, high)  # (rounding at a bound)
+    drawn = form.sample(params, child, u)
+    for _ in range(REDRAWS):
+        outside = (drawn < low) | (drawn > high)
+        if not outside.any():
+            return drawn
+        drawn = np.where(outside, form.sample(params, child, _uniforms(gens, n, 2)), drawn)
+    raise QuestionError(f"term {term.label} puts little or no probability inside the support "
+                        f"{where} of {child.name}: {REDRAWS} draws in a row fell outside it "
+                        "(check the term's parameters or the support declared)")
 
 
 def _at_draws(program: ProgramLike, term: Term, given: Bound, drawn: tuple[str, ...],

@@ -12,11 +12,11 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog.errors import Diagnostic, short_repr
+from bayesprog.errors import Diagnostic, did_you_mean, short_repr
 from bayesprog.expressions import Expression, ExpressionError, parse_expression
 from bayesprog.forms import (
     Form,
@@ -29,12 +29,15 @@ from bayesprog.forms import (
 )
 from bayesprog.forms.base import nonnegative, real
 from bayesprog.formula import Formula, FormulaError, parse_formula
-from bayesprog.language.document import Document, InputSpec, LearnSpec
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
 from bayesprog.limits import limit
 from bayesprog.model import InputDecl, LearnOptions, Term
 from bayesprog.variables import Continuous, Discrete, Variable, binned_variable, grid_variable
+
+if TYPE_CHECKING:  # (pydantic's models are built only for a file the plain reader leaves)
+    from bayesprog.language.document import Document, InputSpec, LearnSpec
+    from bayesprog.language.plain import PlainDocument, PlainInput, PlainLearn
 
 #: The most discrete variables a term may have: its table has one axis per variable and one
 #: for a batch of evidence, and numpy's einsum takes arrays of at most 32 axes.
@@ -79,10 +82,11 @@ def build_variable(name: str, spec: Any) -> Variable:
 
 
 class _Checker:
-    def __init__(self, located: Located, doc: Document, base_dir: Path,
+    def __init__(self, located: Located, doc: Document | PlainDocument, base_dir: Path,
                  load_program: Callable[..., Any] | None = None):
         self.located = located
-        self.doc = doc
+        #: pydantic's Document or the plain reader's: the same attributes, unrelated types
+        self.doc: Any = doc
         self.base_dir = base_dir
         #: loads another program file (for ``program`` terms), with the names of the variables
         #: it shares with the term; given by the program layer
@@ -112,7 +116,7 @@ class _Checker:
         for name, spec in self.doc.inputs.items():
             self.inputs[name] = self.input_decl(name, spec)
 
-    def input_decl(self, name: str, spec: InputSpec) -> InputDecl:
+    def input_decl(self, name: str, spec: InputSpec | PlainInput) -> InputDecl:
         axes: list[str] = []
         event: list[int | str] = []
         for i, dim in enumerate(spec.shape):
@@ -188,7 +192,8 @@ class _Checker:
         self.check_cycles(terms)
         return terms
 
-    def learn_options(self, term: Term, spec: bool | LearnSpec, path: YPath) -> LearnOptions | None:
+    def learn_options(self, term: Term, spec: bool | LearnSpec | PlainLearn,
+                      path: YPath) -> LearnOptions | None:
         """The term's ``learn:`` entry, checked against its form."""
         if spec is False:
             return None
@@ -277,8 +282,9 @@ class _Checker:
             ok = False
         for name in expr.left + expr.right:
             if name not in self.variables:
-                self.error(tpath, f"term {expr}: undeclared variable {name!r} "
-                           f"(declared: {', '.join(self.variables)})")
+                self.error(tpath, f"term {expr}: undeclared variable {name!r}"
+                           f"{did_you_mean(name, self.variables)} (declared: "
+                           f"{', '.join(self.variables)})")
                 ok = False
         form = get_form(form_name)
         if form is None:
@@ -595,10 +601,15 @@ class _Checker:
                 self.error(path, f"question {name!r}: {exc}")
                 continue
             problem = question_problem(expr, self.variables)
+            kind = "probability" if expr.event and spec.kind == "posterior" else spec.kind
+            if not problem and expr.event and kind != "probability":
+                problem = (f"{expr} asks the probability of an event, not a {kind} question "
+                           "(leave out kind:, or ask P(searched | known) without values on "
+                           "the left)")
             if problem:
                 self.error(path, f"question {name!r}: {problem}")
                 continue
-            out[name] = (expr, spec.kind, spec.description)
+            out[name] = (expr, kind, spec.description)
         return out
 
     def check_time(self, terms: list[Term], questions: dict[str, tuple[Expression, str, str]]
@@ -727,7 +738,7 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
     """Why ``expr`` cannot be asked of these variables (None if it can)."""
     for name in expr.left + expr.right:
         if name not in variables:
-            return (f"undeclared variable {name!r} in {expr} "
+            return (f"undeclared variable {name!r} in {expr}{did_you_mean(name, variables)} "
                     f"(declared: {', '.join(variables)})")
     for name in expr.left:
         var = variables[name]
@@ -740,8 +751,8 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
             try:
                 var.index_of(text)
             except KeyError:
-                return (f"unknown state {text!r} of {name} (expected one of "
-                        f"{var.describe_states()})")
+                return (f"unknown state {text!r} of {name}{did_you_mean(text, var.states)} "
+                        f"(expected one of {var.describe_states()})")
         elif var.index is None:
             try:
                 value = float(text)
@@ -812,7 +823,8 @@ def _named_keys(raw: dict, child: Variable, keyable: list, path: YPath,
     unknown = [s for s in rows if s not in var.states]
     if unknown:
         raise _LiteralError(path + (rows[unknown[0]][0],),
-                            f"{what}: unknown state {unknown[0]!r} of {name} (expected one of "
+                            f"{what}: unknown state {unknown[0]!r} of {name}"
+                            f"{did_you_mean(unknown[0], var.states)} (expected one of "
                             f"{var.describe_states()})")
     return var, rows
 
@@ -887,7 +899,7 @@ def _offender(array: np.ndarray, param: Param, event_ndim: int) -> str:
     return str(array.tolist())
 
 
-def check_document(located: Located, doc: Document, base_dir: Path,
+def check_document(located: Located, doc: Document | PlainDocument, base_dir: Path,
                    load_program: Callable[..., Any] | None = None) -> Checked:
     """Check a validated document whole; ``load_program`` loads the files that ``program`` terms
     name (sub-programs), which this layer cannot do itself."""

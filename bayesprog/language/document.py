@@ -26,8 +26,8 @@ from pydantic import (
 from bayesprog.errors import Diagnostic, SpecError, short_repr
 from bayesprog.files import KINDS
 from bayesprog.language.loader import Located, load_yaml
-from bayesprog.limits import limit
-from bayesprog.model import FitRecord
+from bayesprog.language.plain import check_states, name_of_number
+from bayesprog.records import FitRecord
 
 FORMAT_VERSION = 1
 M = TypeVar("M", bound=BaseModel)
@@ -36,13 +36,6 @@ M = TypeVar("M", bound=BaseModel)
 #: Axes of a grid variable (numpy arrays have at most 32 dimensions, and a question may add
 #: a batch axis).
 MAX_AXES = 16
-
-
-def _check_states(count: int, what: str) -> None:
-    cap = limit("states")
-    if count > cap:
-        raise ValueError(f"{what} has {count:,} states, more than the limit of {cap:,} (raise "
-                         "it with the environment variable BAYESPROG_MAX_STATES)")
 
 
 class _Strict(BaseModel):
@@ -60,7 +53,7 @@ class GridSpec(_Strict):
             raise ValueError(f"grid shape must have sizes >= 1, got {self.shape}")
         if len(self.shape) > MAX_AXES:
             raise ValueError(f"expected at most {MAX_AXES} axes, found {len(self.shape)}")
-        _check_states(math.prod(self.shape), f"a grid of {' x '.join(map(str, self.shape))}")
+        check_states(math.prod(self.shape), f"a grid of {' x '.join(map(str, self.shape))}")
         if self.origin is not None and len(self.origin) != len(self.shape):
             raise ValueError(
                 f"origin must have {len(self.shape)} coordinates (one per axis), "
@@ -105,13 +98,6 @@ class DiscretiseSpec(_Strict):
 MAX_BINS = 100_000
 
 
-def _name_of_number(value: Any) -> Any:
-    """A number where a name stands, as its name (``1`` -> ``"1"``, ``0.5`` -> ``"0.5"``)."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        return repr(value)
-    return value
-
-
 class VariableSpec(_Strict):
     """Exactly one of ``states``, ``range``, ``grid`` or ``continuous``."""
 
@@ -139,7 +125,7 @@ class VariableSpec(_Strict):
     def _numbers_are_names(cls, value: Any) -> Any:
         # a state is a name: an unquoted number (states: [1, 2, 3]) names it as written
         if isinstance(value, list):
-            return [_name_of_number(v) for v in value]
+            return [name_of_number(v) for v in value]
         return value
 
     @model_validator(mode="after")
@@ -161,7 +147,7 @@ class VariableSpec(_Strict):
         if self.range is not None and self.range[0] > self.range[1]:
             raise ValueError(f"expected range [low, high] with low <= high, got {self.range}")
         if self.range is not None:
-            _check_states(self.range[1] - self.range[0] + 1, f"the range {self.range}")
+            check_states(self.range[1] - self.range[0] + 1, f"the range {self.range}")
         if self.continuous is not None and not self.continuous[0] < self.continuous[1]:
             raise ValueError(f"expected support [low, high] with low < high, got {self.continuous}")
         if self.discretise is not None:
@@ -226,9 +212,10 @@ class SoftEvidenceSpec(_WithParameters):
 
 class QuestionSpec(_Strict):
     ask: str = Field(description="P(searched | known)")
-    kind: Literal["posterior", "map", "filter", "smooth", "sequence"] = Field(
+    kind: Literal["posterior", "map", "filter", "smooth", "sequence", "probability"] = Field(
         "posterior", description="posterior, map, or over a sequence of steps (a program with "
-        "time:): filter, smooth, sequence (the most likely sequence)")
+        "time:): filter, smooth, sequence (the most likely sequence); probability: of an "
+        "event, P(A=a, B=b | C=c) (the kind of a question with values on its left)")
     description: str = ""
 
 

@@ -100,6 +100,9 @@ def yaml_problem(exc: yaml.MarkedYAMLError, text: str) -> str:
         where = f" (the {{...}} or [...] opened at line {exc.context_mark.line + 1})" \
             if "flow" in (exc.context or "") else \
             f" (in what began at line {exc.context_mark.line + 1})"
+    indented = _misindented(text, exc)
+    if indented:
+        return indented
     found = re.match(r"expected (.+), but (?:found|got) (.+)$", problem)
     if found:
         expected, got = found.groups()
@@ -120,6 +123,66 @@ def yaml_problem(exc: yaml.MarkedYAMLError, text: str) -> str:
     if "could not find expected ':'" in problem:
         return f"malformed YAML: expected 'key: value', found a line without ':'{where}"
     return f"malformed YAML: {problem}{where}"
+
+
+#: a line that holds a key: its leading spaces and list dashes, then the key and its colon
+_KEY_LINE = re.compile(r"^(?P<lead>[ ]*(?:-[ ]+)*)(?P<key>[^\s#:{}\[\],&*!|>'\"%@`][^:#]*?)"
+                       r"[ ]*:(?:[ ]|$)")
+
+
+def _key_at(line: str) -> tuple[int, str] | None:
+    """(the column of the key, the key) of a line that starts with ``key:``, else None."""
+    match = _KEY_LINE.match(line)
+    return (len(match["lead"]), match["key"].strip()) if match else None
+
+
+def _misindented(text: str, exc: yaml.MarkedYAMLError) -> str | None:
+    """A key that is not lined up with the keys beside it, said as such: indented less than
+    the key above it (which PyYAML takes for a key indented more than the block it closes), or
+    more (a second ':' in what PyYAML reads as the line above's value going on)."""
+    mark = exc.problem_mark
+    problem = exc.problem or ""
+    if mark is None:
+        return None
+    lines = text.splitlines()
+    if mark.line >= len(lines):
+        return None
+    here = _key_at(lines[mark.line])
+    if here is None:
+        return None
+    column, key = here
+    above: tuple[int, tuple[int, str] | None] | None = None
+    for line_number in range(mark.line - 1, -1, -1):
+        stripped = lines[line_number].strip()
+        if stripped and not stripped.startswith("#"):
+            above = (line_number, _key_at(lines[line_number]))
+            break
+    if above is None or above[1] is None:
+        return None
+    number, (their_column, their_key) = above[0], above[1]
+    where = f"{their_key!r} on line {number + 1} (column {their_column + 1})"
+    if "block mapping start" in problem and column < their_column:
+        chain: list[tuple[int, str, int]] = []  # the keys whose blocks hold the line above
+        for n in range(number, -1, -1):
+            found = _key_at(lines[n])
+            if found and (not chain or found[0] < chain[-1][0]):
+                chain.append((found[0], found[1], n))
+        places = " or ".join(f"{c + 1} ({k!r}, line {n + 1})" for c, k, n in chain)
+        return (f"malformed YAML: expected the key {key!r} lined up with the keys beside it, "
+                f"found it indented less than {where}: indent it to the column of the key it "
+                f"goes beside: {places}")
+    if "block mapping start" in problem and column > their_column:
+        return (f"malformed YAML: expected the key {key!r} lined up with the keys beside it, "
+                f"found it indented more than {where}: only the keys of a mapping opened by "
+                f"'{their_key}:' with nothing after the ':' go further in; indent it to column "
+                f"{their_column + 1}")
+    if "mapping values are not allowed" in problem and mark.column == column + len(key) \
+            and column > their_column and lines[number].rstrip()[-1:] != ":":
+        return (f"malformed YAML: expected the key {key!r} lined up with the keys beside it, "
+                f"found it indented more than {where}, which already has a value (read as "
+                f"that value going on over a second line): indent {key!r} to column "
+                f"{their_column + 1}")
+    return None
 
 
 def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, list[Diagnostic]]:

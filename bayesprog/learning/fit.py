@@ -34,8 +34,8 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
 from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.learning.data import Data, DataError, load_data
-from bayesprog.learning.write import supported_digits
-from bayesprog.model import FitRecord, LearnOptions, Term
+from bayesprog.model import LearnOptions, Term
+from bayesprog.records import FitRecord
 from bayesprog.variables import Continuous, Discrete, Variable
 
 #: Most entries of one chunk's joint table over the missing variables (rows x joint states).
@@ -146,7 +146,7 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         data=Path(data.source).name if data.source[0] != "<" else data.source,
         sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
         log_likelihood=float(ll), method=method, iterations=iterations,
-        digits=supported_digits(supporting), rows_supporting=supporting,
+        rows_supporting=supporting,
         columns=dict(columns or {}), terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
                     for i in todo})

@@ -20,12 +20,17 @@ from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
 from bayesprog.expressions import canonical, parse_expression
 from bayesprog.forms import ParamValue
-from bayesprog.model import FitRecord
+from bayesprog.records import FitRecord
 from bayesprog.variables import Discrete, Variable
 
-#: the most significant digits a value is written with (a tuned number; learned parameters
-#: are written with the digits their data supports, see :func:`supported_digits`)
+#: the most significant digits a value is written with where it is rounded (a tuned number;
+#: learned parameters are written as fitted, or rounded to the digits their data supports, see
+#: :func:`supported_digits`)
 DIGITS = 8
+#: the significant digits of a value written as fitted: as many as a double always reads back
+#: from (DBL_DIG), so that the file is the fit to a relative 1e-15 and a fit's own rounding
+#: (0.5000000000000001) is written 0.5
+FULL = 15
 #: a learned mapping is written on one line ({a: 1, b: 2}) when it is this short, else one entry
 #: per line
 FLOW_WIDTH = 80
@@ -104,46 +109,87 @@ def _is_flow(node: Any) -> bool:
     return bool(getattr(node, "fa", None) is not None and node.fa.flow_style())
 
 
-def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
-          child: Variable | None = None) -> Any:
-    """The YAML node of a parameter, keyed by the states of its axes; a mapping keeps the flow or
-    block style of the node it replaces, and a row written keyed by the child's states stays so."""
+def _written_states(node: Any) -> dict[str, Any]:
+    """The keys of a mapping as written, by the state each names (``tub=yes`` names ``yes``)."""
+    if not isinstance(node, Mapping):
+        return {}
+    return {str(k).partition("=")[2].strip() if "=" in str(k) else str(k): k for k in node}
 
-    def build(axes: tuple[str, ...], array: np.ndarray, old: Any, depth: int) -> Any:
+
+def _names_its_keys(node: Any) -> bool:
+    return isinstance(node, Mapping) and any("=" in str(k) for k in node)
+
+
+def _level(old: Any, written: Mapping[str, Any], axes: tuple[str, ...],
+           variables: Mapping[str, Variable]) -> str | None:
+    """The variable of ``axes`` the old mapping was keyed by, where its keys say so."""
+    names = {str(k).partition("=")[0].strip() for k in written.values() if "=" in str(k)}
+    if len(names) == 1:
+        name = names.pop()
+        return name if name in axes else None
+    keyed = [a for a in axes if isinstance(var := variables[a], Discrete)
+             and set(written) == set(var.states)]
+    return keyed[0] if len(keyed) == 1 else None
+
+
+def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
+          child: Variable | None = None, term: Collection[str] = ()) -> Any:
+    """The YAML node of a parameter, keyed by the states of its axes; a mapping keeps the flow or
+    block style of the node it replaces, and a row written keyed by the child's states stays so.
+    A key names its variable (``tub=yes``) where the old key did, or where another variable of
+    the ``term`` has the same states, as the loader asks."""
+
+    def ambiguous(var: Discrete) -> bool:
+        return any(isinstance(other := variables.get(name), Discrete) and other.name != var.name
+                   and set(other.states) == set(var.states) for name in term)
+
+    def build(axes: tuple[str, ...], array: np.ndarray, old: Any) -> Any:
         if isinstance(old, list):  # written as nested lists: stays so
             return _leaf(array)
+        written = _written_states(old)
         if not axes:
             if (isinstance(child, Discrete) and array.ndim == 1 and isinstance(old, Mapping)
-                    and {str(k) for k in old} == set(child.states)):
-                row = CommentedMap((_key(child, s), float(v))
+                    and set(written) == set(child.states)):
+                named = _names_its_keys(old)
+                row = CommentedMap((_key(child, s, named), float(v))
                                    for s, v in zip(child.states, array, strict=True))
                 row.fa.set_flow_style()
                 return row
             return _leaf(array)
+        first = _level(old, written, axes, variables)
+        if first:  # the author's order of the levels is kept
+            array = np.moveaxis(array, axes.index(first), 0)
+            axes = (first, *(a for a in axes if a != first))
         var = variables[axes[0]]
         assert isinstance(var, Discrete)
+        named = _names_its_keys(old) or ambiguous(var)
         out = CommentedMap()
         for i, state in enumerate(var.states):
-            previous = ({str(k): v for k, v in old.items()}.get(state)
-                        if isinstance(old, Mapping) else None)
-            out[_key(var, state)] = build(axes[1:], array[i], previous, depth + 1)
+            previous = old[written[state]] if state in written else None
+            out[_key(var, state, named)] = build(axes[1:], array[i], previous)
         short = len(str(dict(out))) <= FLOW_WIDTH
         if short and (_is_flow(old) or (len(axes) == 1 and not isinstance(old, Mapping))):
             out.fa.set_flow_style()
         return out
 
-    return build(value.axes, np.asarray(value.array, float), old, 0)
+    return build(value.axes, np.asarray(value.array, float), old)
 
 
 _PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
 #: words that a YAML 1.2 reader takes for booleans or null: written quoted (``yes``, ``on``
 #: are words, written as they are)
 _AMBIGUOUS = {"true", "false", "null", "~"}
+#: a key naming its variable that a YAML reader takes as written, unquoted
+_PLAIN_NAMED = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*=[A-Za-z0-9_.-]+$")
 
 
-def _key(var: Discrete, state: str) -> Any:
+def _key(var: Discrete, state: str, named: bool = False) -> Any:
     """A state as a mapping key: a range's values as numbers, names quoted where a YAML reader
-    would take them for something else."""
+    would take them for something else; ``named``, the key names its variable
+    (``tub=yes``)."""
+    if named:
+        key = f"{var.name}={state}"
+        return key if _PLAIN_NAMED.match(key) else DoubleQuotedScalarString(key)
     if var.kind == "range":
         return int(state)
     if _PLAIN.match(state) and state.lower() not in _AMBIGUOUS:
@@ -169,6 +215,8 @@ def _keep(old: Any, new: Any) -> Any:
 def _record(record: FitRecord) -> CommentedMap:
     out = CommentedMap()
     for key, value in record.model_dump().items():
+        if key == "digits" and value is None:  # written as fitted
+            continue
         if key == "structure":
             if value is not None:
                 out[key] = CommentedMap((k, _flow(v)) for k, v in value.items()
@@ -193,12 +241,15 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
                   locations: Mapping[str, tuple[str, str]] | None = None,
                   states: Mapping[str, list[str]] | None = None) -> str:
     """``text`` (a program file) with the learned ``params`` (by term label) written in place of
-    the old values, to the record's ``digits`` (``simplex``: the parameters of each term whose
-    last axis is a distribution, kept summing to one; ``locations``: each term's location and
-    scale parameters, the location written to its standard error), and ``record`` appended to
-    its ``learned:`` list; ``states``: variables that take new states (from the data),
-    declared so."""
-    digits = record.digits or DIGITS
+    the old values, and ``record`` appended to its ``learned:`` list; ``states``: variables
+    that take new states (from the data), declared so.
+
+    The values are written as fitted, to ``FULL`` significant digits, unless the record has
+    ``digits``: then to that many (``locations``: each term's location and scale parameters,
+    the location written to a twentieth of its standard error instead); ``simplex``: the
+    parameters of each term whose last axis is a distribution, kept summing to one as
+    written."""
+    digits = record.digits
     simplex, locations = simplex or {}, locations or {}
     rows = record.rows_supporting or record.rows_used
     yaml = _yaml()
@@ -213,17 +264,20 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
         label = canonical(item.get("term"))
         if label is None or label not in params:
             continue
-        child = variables.get(parse_expression(label).left[0])
+        expression = parse_expression(label)
+        child = variables.get(expression.left[0])
+        term = (*expression.left, *expression.right)
         fitted = params[label]
         location, scale = locations.get(label, (None, None))
         for name, value in fitted.items():
             spread = fitted.get(scale) if name == location and scale else None
-            if spread is not None and spread.axes in ((), value.axes):
+            if digits is not None and spread is not None and spread.axes in ((), value.axes):
                 value = ParamValue(value.axes, rounded_location(value.array, spread.array, rows))
             else:
-                value = ParamValue(value.axes, rounded(value.array, digits,
+                value = ParamValue(value.axes, rounded(value.array, digits or FULL,
                                                        name in simplex.get(label, ())))
-            item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child))
+            item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child,
+                                                     term))
         done.add(label)
     missing = set(params) - done
     if missing:

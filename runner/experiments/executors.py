@@ -84,12 +84,27 @@ def process_pool(workers: int, preload: tuple[str, ...] = (), start: bool = Fals
     return pool
 
 
+#: seconds a stopped worker has to end as a Python program does before it is killed
+STOP_GRACE = 1.0
+
+
 def stop_pool(pool: Any) -> None:
-    """Stop ``pool`` now: its queued work cancelled, its processes terminated."""
+    """Stop ``pool`` now: its queued work cancelled, its processes terminated (SIGTERM: they
+    end as Python programs do), and killed if they are still there after :data:`STOP_GRACE`
+    seconds: a worker whose SIGTERM lands in a job only ends that job (the pool's worker loop
+    catches what the job raises and takes the next one already queued), and the interpreter's
+    exit would wait for it."""
+    import time
+
     processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
+    deadline = time.monotonic() + STOP_GRACE
+    for process in processes:
+        process.join(max(deadline - time.monotonic(), 0.0))
+        if process.is_alive():
+            process.kill()
 
 
 def worker_init(preload: tuple[str, ...] = ()) -> None:

@@ -93,7 +93,8 @@ def hold(folder: Path, what: str, make: bool = True) -> Iterator[None]:
         yield
         return
     if folder.exists() and not folder.is_dir():
-        raise StoreError(f"--out {folder}: is a file, expected a folder")
+        raise StoreError(f"--out {folder}: cannot write results there: it is a file, expected "
+                         "a folder")
     key = folder.resolve()
     if key in _HELD:
         _HELD[key][1] += 1

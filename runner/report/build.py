@@ -7,6 +7,7 @@ import contextlib
 import html
 import json
 import os
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ from runner.experiments.experiment import (
     stored_experiment,
 )
 from runner.experiments.metrics import area_under, border_band, paired_test, visits  # noqa: F401
-from runner.experiments.store import ResultStore, atomic_write, sweep_partial
+from runner.experiments.store import ResultStore, atomic_write, hold, sweep_partial
 from runner.report import figures
 from runner.report.verdicts import (  # noqa: F401  (the report's statistics, read from here too)
     ALPHA,
@@ -266,7 +267,9 @@ class DecisionFigure:
         background = canvas.copy_from_bbox(self.fig.bbox)
         width, height = canvas.get_width_height()
         # written beside, then renamed over ``out``: the animation is whole or not there
-        partial = out.with_name(f".{out.stem}.tmp{out.suffix}")
+        # (a name of its own: another process's report may be writing beside it)
+        partial = out.with_name(f".{out.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
+                                f"{out.suffix}")
         writer = imageio_ffmpeg.write_frames(
             str(partial), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgba",
             pix_fmt_out="yuv420p", macro_block_size=2, ffmpeg_log_level="fatal",
@@ -465,7 +468,14 @@ def build_report(out: Path, animation: bool = True, compare: Path | None = None,
     """Write ``out/report/`` (figures, table, report.md, report.html) from stored results;
     ``compare``: another experiment's output folder whose findings are set beside these;
     ``pool``: a process pool (:func:`~runner.experiments.executors.process_pool`) started
-    beforehand, on which Fig. 11 is drawn (else one is started here, where there is a second core)."""
+    beforehand, on which Fig. 11 is drawn (else one is started here, where there is a second core).
+    The folder is held while the report is written: a run, a report or a search of it started
+    meanwhile is refused (:func:`~runner.experiments.store.hold`)."""
+    with hold(out, "report", make=False):
+        return _build_report(out, animation, compare, pool)
+
+
+def _build_report(out: Path, animation: bool, compare: Path | None, pool: Any) -> Path:
     store = ResultStore(out)
     manifest = store.manifest()
     experiment = stored_experiment(out)
@@ -616,6 +626,49 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
+#: What the report's words mean, for a reader who has not read the paper (Martins, Ferreira,
+#: Castelo-Branco and Dias, "Integration of touch attention mechanisms to improve the robotic
+#: haptic exploration of surfaces"): its equations are cited by their numbers there
+GLOSSARY = [
+    "## What the words mean", "",
+    "A simulated hand probes one cell of a grid at a time, looking for the border between two "
+    "materials, and decides where to probe next from what it has felt so far. The "
+    "configurations compare that decision with and without each of the cues it weighs. "
+    "'eq. N' cites the equations of the paper the experiment reproduces (Martins, Ferreira, "
+    "Castelo-Branco and Dias, *Integration of touch attention mechanisms to improve the robotic "
+    "haptic exploration of surfaces*).", "",
+    "- **Task (T1, T2, ...).** Find and follow the border between two given materials (a haptic "
+    "discontinuity); each task has its ground-truth border, drawn in black in Fig. 9.",
+    "- **pi_tar** (π_tar). The Bayesian program that chooses the next cell to probe, O: the "
+    "most probable cell given the task and the cues S, U, I and R (eq. 13). **full** is pi_tar "
+    "as written; **without_S** (likewise R, I, U) is pi_tar with that cue's term replaced by a "
+    "uniform, so that the cue no longer counts: what the ablation study removes.",
+    "- **S, haptic saliency** (eq. 12). How sharply the material map felt so far changes around "
+    "a cell (an edge detector on the probed cells, from 0 to 1): high on a border between the "
+    "task's two materials. It draws the hand to the border (exploitation).",
+    "- **U, uncertainty** (eq. 11). How unsure the hand still is of a cell's material: the "
+    "entropy of its material posterior, scaled to [0, 1] (1 for a cell never probed, near 0 "
+    "for one whose material is known). It draws the hand to what it has not explored "
+    "(curiosity).",
+    "- **I, inhibition of return** (eq. 10). A level set by the distance to the cell just "
+    "probed, which holds a cell back the more, the higher it is: 1 there, so that the hand does "
+    "not probe it again at once, lowest beside it and rising with distance, so that the hand "
+    "keeps moving on without jumping far.",
+    "- **R, shape cues** (eq. 14-15). Known shapes (templates such as a rectangle and a "
+    "triangle) registered onto the path probed so far, each weighted by how well the path "
+    "matches it (the program pi_obj): a cell on a registered outline is favoured, so that the "
+    "hand goes on along the shape it is following.",
+    "- **Gamma** (Γ, eq. 16). How far the probes left the task's border: for each cell of the "
+    "ground-truth border, the distance to the nearest probed cell, summed over the border "
+    "(metres); divided by the number of border cells, the mean distance of a border cell to "
+    "the nearest probe (mm, 'per border cell'). **Lower is better**: 0 when every border "
+    "cell has been probed. Gamma(k) is its value after k probes (Fig. 10); the **area under "
+    "Gamma(k)** sums it over a run's steps (metre x steps), **lower is better** too: the border "
+    "found sooner and followed more closely. A cue helps when removing it raises the area.",
+    "",
+]
+
+
 def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str, str]],
               borders: dict[str, int], step: int, task: str, digest: str, run: int = 0,
               extra: Sequence[str] = (), animation: str | None = None, shown: str = "full",
@@ -626,6 +679,7 @@ def _markdown(spec: ExperimentSpec, rows: list[dict], found: list[tuple[str, str
              f"{spec.runs} runs x {spec.iterations} iterations, seed {spec.seed}, configuration "
              f"hash `{digest}`. Border cells per task: "
              + ", ".join(f"{t} {n}" for t, n in borders.items()) + ".", "",
+             *GLOSSARY,
              "## Gamma(k) (paper Fig. 10)", "", "![Gamma](fig10_gamma.png)", "",
              "*Fig. 10. Gamma (eq. 16) sums, over the task's border cells, the distance in metres "
              "to the nearest probed cell; lower is better. Mean over the runs, shaded +- SEM; "

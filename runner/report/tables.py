@@ -101,5 +101,8 @@ def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:
     else:
         raise BayesprogError(f"-o {path}: expected a .parquet or .csv file, found "
                              f"{path.suffix or 'no suffix'}")
-    atomic_write(path, data)
+    try:
+        atomic_write(path, data, parents=False)  # a folder the user names, never made
+    except OSError as exc:
+        raise BayesprogError(f"cannot write {path}: {exc.strerror or exc}") from None
     return path, len(table)

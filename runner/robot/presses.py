@@ -69,11 +69,15 @@ def write(table: dict[str, list], out: Path, traces: dict[str, np.ndarray] | Non
 
     import pandas as pd
 
-    atomic_write(out, pd.DataFrame(table).to_csv(index=False).encode())
-    if traces_out is not None:
-        if not traces:
-            raise BayesprogError("--traces: only physics probes have traces (add --physics, or "
-                                 "a scenario whose sensor is physics:)")
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, **traces)  # type: ignore[arg-type]
-        atomic_write(traces_out, buffer.getvalue())
+    if traces_out is not None and not traces:
+        raise BayesprogError("--traces: only physics probes have traces (add --physics, or "
+                             "a scenario whose sensor is physics:)")
+    try:  # folders the user names, never made
+        atomic_write(out, pd.DataFrame(table).to_csv(index=False).encode(), parents=False)
+        if traces_out is not None:
+            buffer = io.BytesIO()
+            np.savez_compressed(buffer, **traces)  # type: ignore[arg-type]
+            atomic_write(traces_out, buffer.getvalue(), parents=False)
+    except OSError as exc:
+        raise BayesprogError(f"cannot write {exc.filename or out}: {exc.strerror or exc}") \
+            from None

@@ -278,7 +278,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             materials = bayesprog.load(args.perception).variables["M"].states  # type: ignore[union-attr]
         model = load_sensor_model(args.model, materials)
         frame = pd.DataFrame(model.record(args.per_material, args.seed))
-        atomic_write(Path(args.output), frame.to_csv(index=False).encode())
+        atomic_write(Path(args.output), frame.to_csv(index=False).encode(), parents=False)
     except SpecError as exc:
         for d in exc.diagnostics:
             print(d, file=sys.stderr)

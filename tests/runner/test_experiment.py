@@ -207,6 +207,7 @@ def test_statistics_against_scipy():
 
 def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
     """A real SIGINT to `bayesprog run --workers 2`: exit 130 promptly, chunks kept, resume."""
+    import shutil
     import signal
     import subprocess
     import sys
@@ -218,13 +219,21 @@ def test_ctrl_c_with_worker_processes_stops_at_once_and_resumes(tmp_path):
     script = Path(sys.executable).with_name("bayesprog")
     command = [str(script), "run", str(path), "--out", str(out), "--workers", "2", "-q",
                "--no-report"]
-    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while not list(out.glob("chunks/*/*/*.npz")) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    process.send_signal(signal.SIGINT)
-    sent = time.monotonic()
-    _, err = process.communicate(timeout=60)
+    for _attempt in range(3):
+        process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not list(out.glob("chunks/*/*/*.npz")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        running = process.poll() is None
+        before = len(list(out.glob("chunks/*/*/*.npz")))
+        process.send_signal(signal.SIGINT)
+        sent = time.monotonic()
+        _, err = process.communicate(timeout=60)
+        if running and before < 32:
+            break  # the signal reached a run with chunks left: it must stop it
+        # a loaded machine kept this test from the run until it had ended: nothing to stop
+        shutil.rmtree(out)
+    assert running and before < 32, "the run always ended before the test could interrupt it"
     assert time.monotonic() - sent < 10
     assert process.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err

@@ -1,21 +1,13 @@
-"""Inference methods, one module each; importing this package registers them."""
+"""Inference methods, one module each, registered with the cost model when the registry is
+first read (:data:`~bayesprog.inference.methods.base.BUILTIN`): the package's own methods load
+with the first question that needs them, not with the package."""
 
-from bayesprog.inference.methods import contraction as _contraction  # noqa: F401  (registers)
-from bayesprog.inference.methods import gaussian as _gaussian  # noqa: F401  (registers)
-from bayesprog.inference.methods import gibbs as _gibbs  # noqa: F401  (registers)
-from bayesprog.inference.methods import grid as _grid  # noqa: F401  (registers)
-from bayesprog.inference.methods import lbp as _lbp  # noqa: F401  (registers)
-from bayesprog.inference.methods import lw as _lw  # noqa: F401  (registers)
-from bayesprog.inference.methods import table as _table  # noqa: F401  (registers)
 from bayesprog.inference.methods.base import (
     Cost,
     Method,
-    mark_builtin,
     register_method,
     registered_methods,
     registry_version,
 )
-
-mark_builtin()
 
 __all__ = ["Cost", "Method", "register_method", "registered_methods", "registry_version"]

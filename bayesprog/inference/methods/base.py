@@ -129,11 +129,36 @@ def answer(plan: QuestionPlan, probabilities: np.ndarray, log_evidence: np.ndarr
 _METHODS: dict[str, Method] = {}
 _VERSION = [0]
 
+#: The package's own methods, one module each of :mod:`bayesprog.inference.methods`, in the
+#: order they register (the cost model's order among equal costs). They are imported when the
+#: registry is first read, not with the package: a layout's first question, answered by the
+#: contraction with nothing planned, loads the contraction's module alone.
+BUILTIN = ("contraction", "gaussian", "gibbs", "grid", "lbp", "lw", "table")
+_PACKAGE = "bayesprog.inference.methods"
+_LOADED: set[str] = set()
+
+
+def _load(*names: str) -> None:
+    """Import the package's own method modules ``names`` (each registers its method)."""
+    from importlib import import_module
+
+    for name in names:
+        if name not in _LOADED:
+            _LOADED.add(name)
+            import_module(f"{_PACKAGE}.{name}")
+
+
+def _builtin(cls: type) -> bool:
+    return cls.__module__.startswith(_PACKAGE + ".") and \
+        cls.__module__.rpartition(".")[2] in BUILTIN
+
 
 def register_method(cls: type[Method]) -> type[Method]:
     """Class decorator: make a method available to the cost model under ``cls.name``."""
     if not cls.name:
         raise ValueError(f"{cls.__name__} needs a name")
+    if not _builtin(cls):
+        _load(*BUILTIN)  # the package's own come first, as they always have
     _METHODS[cls.name] = cls()
     _VERSION[0] += 1
     return cls
@@ -141,30 +166,27 @@ def register_method(cls: type[Method]) -> type[Method]:
 
 def registry_version() -> int:
     """A number that changes whenever a method is registered (rankings kept before are stale)."""
+    _load(*BUILTIN)
     return _VERSION[0]
 
 
 def registered_methods() -> dict[str, Method]:
     """The registered methods by name, in registration order."""
+    _load(*BUILTIN)
     return dict(_METHODS)
-
-
-#: the package's own methods, marked once their modules have registered them
-_BUILTIN: set[type[Method]] = set()
-
-
-def mark_builtin() -> None:
-    """Mark the methods registered so far as the package's own (called once, when
-    :mod:`bayesprog.inference.methods` has imported its modules)."""
-    _BUILTIN.update(type(m) for m in _METHODS.values())
 
 
 def own_methods_only() -> bool:
     """Whether every registered method is one of this package's (no method registered from
     outside it, which the cost model must weigh from a layout's first question)."""
-    return all(type(m) in _BUILTIN for m in _METHODS.values())
+    return all(_builtin(type(m)) for m in _METHODS.values())
 
 
 def first_answerers() -> list[Method]:
     """The registered methods that answer a layout's first question with nothing planned."""
+    _load(*(name for name in BUILTIN if name in FIRST))
     return [m for m in _METHODS.values() if m.answers_first]
+
+
+#: the package's own methods that answer a layout's first question (``answers_first``)
+FIRST = ("contraction",)

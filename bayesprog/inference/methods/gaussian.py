@@ -51,7 +51,8 @@ class GaussianMethod(Method):
         configurations = float(np.prod([plan.card(a) for a in _mixing(plan, block)]))
         n = len(block)
         names = {t.child.name for t in block}
-        output = tuple(_mixing(plan, block)) if plan.searched[0] in names else plan.searched
+        output = (tuple(_mixing(plan, block)) if plan.searched and plan.searched[0] in names
+                  else plan.searched)
         operations, largest = plan.contraction_cost(output)
         size = float(plan.bound.size)
         return Cost(operations=size * (operations + configurations * n**3),
@@ -225,7 +226,7 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
     loglik = np.broadcast_to(loglik, (rows, k))
     factors.append(Factor(tuple(mixing), loglik.reshape([rows] + cards), True))
     searched = plan.searched
-    if searched[0] not in names:  # a discrete question: the Gaussians are one more factor
+    if not searched or searched[0] not in names:  # discrete (or none): the Gaussians a factor
         probs, log_z = contract_factors(plan, factors, searched)
         return answer(plan, probs, log_z, method="gaussian")  # type: ignore[return-value]
     probs, log_z = contract_factors(plan, factors, tuple(mixing))

@@ -67,7 +67,7 @@ class GridMethod(Method):
         n = _bins(plan)
         coarse = contract_question(_derived_plan(plan, n))
         fine = contract_question(_derived_plan(plan, 2 * n))
-        if plan.searched[0] not in plan.latent:
+        if not plan.searched or plan.searched[0] not in plan.latent:
             fine.method = "grid"
             fine.stderr = np.abs(fine.probabilities - coarse.probabilities)
             return fine

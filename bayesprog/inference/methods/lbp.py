@@ -11,14 +11,18 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import scipy
-from opt_einsum import contract, get_symbol
 
 from bayesprog.errors import QuestionError
+from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
+from bayesprog.inference.core import symbol
 from bayesprog.inference.factors import question_factors, rescaled
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
+opt_einsum = LazyModule("opt_einsum")
 
 #: Sweeps over all messages at most, and the change of a message that counts as converged.
 MAX_ITERATIONS, TOLERANCE = 200, 1e-10
@@ -126,7 +130,7 @@ def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list
         arity = len(cards)
         stacked = np.stack([tables[i][1] for i in members])  # [F, rows, c1..ca]
         where = np.array([[index[a] for a in tables[i][0]] for i in members])  # [F, a]
-        letters = [get_symbol(2 + k) for k in range(arity)]
+        letters = [symbol(2 + k) for k in range(arity)]
         head = "fr" + "".join(letters)
         equations = [",".join([head] + ["fr" + letters[q] for q in range(arity) if q != p])
                      + "->fr" + letters[p] for p in range(arity)]
@@ -147,7 +151,7 @@ def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list
             incoming = [np.exp(m) for m in to_factor[g]]
             for p, c in enumerate(cards):
                 others = [incoming[q] for q in range(len(cards)) if q != p]
-                m = contract(equations[p], stacked, *others) if others else stacked
+                m = opt_einsum.contract(equations[p], stacked, *others) if others else stacked
                 total = m.sum(axis=-1, keepdims=True)
                 with np.errstate(invalid="ignore", divide="ignore"):
                     m = np.where(total > 0, m / total, 1.0 / c)
@@ -158,13 +162,13 @@ def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list
         for g, (_, cards, _, where, _) in enumerate(plans):
             for p, c in enumerate(cards):
                 log = received[where[:, p], :, :c] - np.log(to_var[g][p])
-                to_factor[g][p] = log - scipy.special.logsumexp(log, axis=-1, keepdims=True)
+                to_factor[g][p] = log - special.logsumexp(log, axis=-1, keepdims=True)
         if residual < tolerance:
             break
 
     def var_belief(v: str) -> np.ndarray:
         log = received[index[v], :, : card[v]]
-        return np.exp(log - scipy.special.logsumexp(log, axis=-1, keepdims=True))
+        return np.exp(log - special.logsumexp(log, axis=-1, keepdims=True))
 
     position = {i: (g, k) for g, (members, *_) in enumerate(plans)
                 for k, i in enumerate(members)}
@@ -172,10 +176,10 @@ def _propagate(tables: list[tuple[tuple[str, ...], np.ndarray]], variables: list
     def factor_belief(i: int, keep: tuple[str, ...]) -> np.ndarray:
         axes, table = tables[i]
         g, k = position[i]
-        letters = [get_symbol(2 + q) for q in range(len(axes))]
+        letters = [symbol(2 + q) for q in range(len(axes))]
         eq = ",".join(["r" + "".join(letters)] + ["r" + letter for letter in letters]) + \
             "->r" + "".join(letters[axes.index(a)] for a in keep)
-        return contract(eq, table, *(np.exp(to_factor[g][p][k]) for p in range(len(axes))))
+        return opt_einsum.contract(eq, table, *(np.exp(to_factor[g][p][k]) for p in range(len(axes))))
 
     return ({"var": {v: var_belief(v) for v in variables}, "factor": factor_belief},
             residual, done)

@@ -8,12 +8,15 @@ so it also answers a discrete question where the exact methods do not apply."""
 from __future__ import annotations
 
 import numpy as np
-import scipy
 
+from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.sampling import draw, generators
+
+#: scipy.special, imported by the first computation that reads it
+special = LazyModule("scipy.special")
 
 #: Draws per evidence row when the question does not say.
 DEFAULT_SAMPLES = 10_000
@@ -66,5 +69,5 @@ class LikelihoodWeighting(Method):
         variance = sq * (1 - 2 * probs) + w2 * probs**2
         stderr = np.sqrt(np.maximum(variance, 0.0))
         with np.errstate(divide="ignore"):
-            log_z = scipy.special.logsumexp(draws.log_weights, axis=1) - np.log(n)
+            log_z = special.logsumexp(draws.log_weights, axis=1) - np.log(n)
         return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=draws.ess)
