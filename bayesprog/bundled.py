@@ -30,7 +30,7 @@ FOLDERS = {"experiment": ("experiments",), "scenario": ("scenarios",),
 
 #: the order of the kinds when a short name is given without one (an experiment carries its
 #: scenario and programs with it)
-ORDER = ("experiment", "program", "scenario", "sensor model", "data")
+ORDER = ("experiment", "program", "scenario", "sensor model", "physics materials", "data")
 
 #: the suffixes of the files that are models or their data
 SUFFIXES = (".yaml", ".yml", ".csv", ".parquet")
@@ -98,7 +98,8 @@ def _describe(path: Path) -> str:
 
 @cache
 def listing() -> tuple[Bundled, ...]:
-    """Every bundled file, experiments first, then programs, scenarios, sensor models, data."""
+    """Every bundled file, experiments first, then programs, scenarios, sensor models, physics
+    materials, data."""
     found = []
     for path in sorted(bundled_root().rglob("*")):
         if not path.is_file() or path.suffix not in SUFFIXES:

@@ -42,11 +42,12 @@ def atomic_write(path: Path, data: bytes, *, parents: bool = True) -> None:
 
 #: the top-level key that names each kind of file of the project
 KINDS = {"bayesprog": "program", "experiment": "experiment", "scenario": "scenario",
-         "sensor": "sensor model"}
+         "sensor": "sensor model", "physics": "physics materials"}
 
 
 def file_kind(path: str | os.PathLike[str]) -> str | None:
-    """"program", "experiment", "scenario" or "sensor model" by the file's first-level key, or
+    """"program", "experiment", "scenario", "sensor model" or "physics materials" by the file's
+    first-level key, or
     None (unreadable, not text, or none of these). Only the file's head is read, and not
     parsed: a hint must cost nothing, whatever the file's size."""
     try:

@@ -462,8 +462,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
 def validate(path: str, kind: str) -> list | None:
     """``bayesprog validate`` of this runner's files: a scenario (its programs, sensor model,
     materials, tasks and objects), an experiment (its scenario, tasks and sizes; its search
-    when it has a ``tune:`` section) or a sensor model; its warnings, or None for another
-    kind. Problems raise, each at its place."""
+    when it has a ``tune:`` section), a sensor model or a file of materials' physical
+    properties; its warnings, or None for another kind. Problems raise, each at its place."""
     if kind == "scenario":
         from runner.world.scenario import load_scenario
 
@@ -481,6 +481,12 @@ def validate(path: str, kind: str) -> list | None:
         from runner.world.sensor import load_sensor_model
 
         load_sensor_model(path)
+        return []
+    if kind == "physics materials":
+        from bayesprog import load_document
+        from runner.world.physics import MaterialsFile
+
+        load_document(Path(path), MaterialsFile)
         return []
     return None
 

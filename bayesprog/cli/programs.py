@@ -164,7 +164,8 @@ def cmd_examples(args: argparse.Namespace) -> int:
     for name, entry in zip(names, entries, strict=True):
         if entry.kind != kind:
             kind = entry.kind
-            print(f"\n{kind}s:" if kind != "data" else "\ndata:")
+            print("\ndata:" if kind == "data" else f"\n{kind}:" if kind.endswith("s")
+                  else f"\n{kind}s:")
         description = textwrap.shorten(entry.description, 96 - width, placeholder="...")
         print(f"  {name:<{width}}  {description}")
     return 0

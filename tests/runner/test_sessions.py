@@ -21,19 +21,43 @@ PAPER = ROOT / "models" / "scenarios" / "paper.yaml"
 BAYESPROG = str(Path(sys.executable).with_name("bayesprog"))
 
 
-def stdio(lines: list[dict | str]) -> list[dict]:
-    """The replies of ``explore paper.yaml --stdio --task T2`` to ``lines``."""
-    text = "".join((line if isinstance(line, str) else json.dumps(line)) + "\n"
+def _text(lines: list[dict | str]) -> str:
+    return "".join((line if isinstance(line, str) else json.dumps(line)) + "\n"
                    for line in lines)
-    done = subprocess.run([BAYESPROG, "explore", str(PAPER), "--stdio", "--task", "T2"],
-                          input=text, capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert done.returncode == 0, done.stderr
-    return [json.loads(line) for line in done.stdout.splitlines()]
+
+
+_SCENARIO: list = []
+
+
+def stdio(lines: list[dict | str]) -> list[dict]:
+    """The replies to ``lines`` of the stdio interface, in this process (what ``explore
+    paper.yaml --stdio --task T2`` serves; one test runs the command itself)."""
+    import io
+
+    from runner.robot.stdio import serve
+
+    if not _SCENARIO:
+        _SCENARIO.append(load_scenario(PAPER))
+    out = io.StringIO()
+    serve(Explorer(_SCENARIO[0], "T2"), io.StringIO(_text(lines)), out)
+    return [json.loads(line) for line in out.getvalue().splitlines()]
 
 
 @pytest.fixture(scope="module")
 def paper():
     return load_scenario(PAPER)
+
+
+def test_the_command_serves_the_same_lines():
+    lines = [{"reset": {"task": "T2", "seed": 1, "session": "arm"}},
+             {"cell": [5, 7], "texture": 1.3, "compliance": 0.08, "session": "arm", "k": 0},
+             {"cell": [6, 7], "texture": 0.5, "compliace": 0.1, "session": "arm"},
+             {"cell": [6, 7], "texture": 0.5, "compliance": 0.1}]
+    done = subprocess.run([BAYESPROG, "explore", str(PAPER), "--stdio", "--task", "T2"],
+                          input=_text(lines), capture_output=True, text=True, cwd=ROOT,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert [json.loads(line) for line in done.stdout.splitlines()] == stdio(lines)
 
 
 def probe(cell, texture=0.52, compliance=0.08, **extra) -> dict:

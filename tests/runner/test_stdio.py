@@ -54,7 +54,10 @@ WALK = [probe((10, 12), "silicone"), probe((11, 12), "silicone"), probe((11, 13)
 
 def assert_step_replies(replies: list[dict], first_k: int = 0) -> None:
     for j, reply in enumerate(replies):
-        assert set(reply) == {"k", "next", "position", "probed", "chosen", "shape"}, reply
+        assert set(reply) - {"warning"} == {"k", "next", "position", "probed", "chosen",
+                                            "shape"}, reply
+        # a walk that does not go where the replies say is flagged, and for nothing else here
+        assert "not the cell asked for" in reply.get("warning", "not the cell asked for")
         assert reply["k"] == first_k + j
         ix, iy = reply["next"]
         assert isinstance(ix, int) and isinstance(iy, int)
@@ -88,6 +91,7 @@ def test_following_the_suggestions_like_a_robot():
     assert serve(explorer(), robot(), out) == 12
     replies = [json.loads(line) for line in out.getvalue().splitlines()]
     assert_step_replies(replies)
+    assert not any("warning" in r for r in replies)  # every probe where it was asked for
     # each reply is the cell probed next
     assert [tuple(r["next"]) for r in replies[:-1]] == probed[1:]
 
@@ -134,7 +138,7 @@ def test_reset_restarts_the_exploration():
     after = [probe((10, 13), "wood"), probe((11, 13), "silicone"), probe((12, 12), "wood"),
              probe((12, 14), "silicone")]
     replies = session(before + [json.dumps({"reset": {"seed": 3}})] + after)
-    assert replies[3] == {"reset": True, "task": "T2", "seed": 3}
+    assert replies[3] == {"reset": True, "task": "T2", "seed": 3, "workspace": {"cell_m": 0.01, "size": [30, 60], "frame": "workspace"}}
     assert_step_replies(replies[:3])
     assert_step_replies(replies[4:])  # k counts from 0 again
     # after the reset the session is a fresh one with seed 3: nothing of the first walk remains
@@ -206,7 +210,8 @@ def test_reset_with_a_negative_seed_is_refused_or_works():
     if "error" in replies[0]:
         assert "line 1" in replies[0]["error"]
     else:
-        assert replies[0] == {"reset": True, "task": "T2", "seed": -1}
+        assert replies[0] == {"reset": True, "task": "T2", "seed": -1,
+                              "workspace": {"cell_m": 0.01, "size": [30, 60], "frame": "workspace"}}
     assert_step_replies(replies[1:])
 
 
@@ -220,7 +225,7 @@ def test_reset_sets_the_task_the_seed_and_the_start_cell():
     replies = session(['{"reset": {"task": "T1", "seed": 4, "start": [3, 40]}}', probe((3, 40)),
                        '{"reset": {"task": "T9"}}', '{"reset": {"start": [30, 0]}}'])
     assert replies[0] == {"reset": True, "task": "T1", "seed": 4, "next": [3, 40],
-                          "position": [0.035, 0.405]}
+                          "position": [0.035, 0.405], "workspace": {"cell_m": 0.01, "size": [30, 60], "frame": "workspace"}}
     # decided for T1 (plush), as an explorer of T1 with that seed decides
     alone = Explorer(scenario(), "T1")
     alone.reset(start=[3, 40], seed=4)
@@ -291,7 +296,7 @@ def test_maps_after_a_reset_and_malformed_maps_requests_get_errors():
              json.dumps({"cell": [10, 12], "texture": 0.1, "compliance": 0.3, "maps": 1}),
              json.dumps({"reset": {}, "maps": True}), WALK[1]]
     replies = session(lines)
-    assert replies[1] == {"reset": True, "task": "T2", "seed": 2}
+    assert replies[1] == {"reset": True, "task": "T2", "seed": 2, "workspace": {"cell_m": 0.01, "size": [30, 60], "frame": "workspace"}}
     assert "no decision yet" in replies[2]["error"]
     assert "'maps' true or false" in replies[3]["error"]
     assert "alone" in replies[4]["error"]
