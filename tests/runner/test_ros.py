@@ -777,7 +777,8 @@ def test_the_physics_robot_drives_the_explorer_and_publishes_its_fingertip():
                      "--task", "T2")
     client = Client(namespace)
     poses: list = []
-    client.node.create_subscription(TransformStamped, f"{namespace}/fingertip", poses.append, 10)
+    client.node.create_subscription(TransformStamped, f"{namespace}/fingertip", poses.append,
+                                    LATCHED)  # the last ten, even those sent before we matched
     try:
         client.spin(client.connected, timeout=60)
         robot = start("robot", str(scenario_file), "--physics", "--ros", "--json", "--task",
@@ -806,8 +807,10 @@ def test_when_the_explorer_dies_the_robot_prints_what_it_did_and_exits_1(paper):
     client = Client(namespace)
     try:
         client.spin(client.connected, timeout=60)
+        # (the timeout also bounds how long the robot looks for the explorer at its start:
+        # discovery on a loaded machine takes seconds)
         robot = start("robot", str(PAPER), "--ros", "--json", "--task", "T2", "--steps", "500",
-                      "--timeout", "3", "--namespace", namespace)
+                      "--timeout", "8", "--namespace", namespace)
         client.spin(lambda: len(client.got["reply"]) >= 6, timeout=60)
         explorer.kill()
         out, err = robot.communicate(timeout=60)

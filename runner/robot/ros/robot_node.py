@@ -23,7 +23,7 @@ from std_msgs.msg import String
 
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
-from runner.robot.ros.explorer_node import PROBES, STREAM
+from runner.robot.ros.explorer_node import LATCHED, PROBES, STREAM
 from runner.world.physics import ProbeSpec
 from runner.world.scenario import Scenario
 
@@ -64,7 +64,8 @@ class RobotNode(Node):
                                   options.physics)
         # the fingertip's pose, where a TF broadcaster would put it: frame ``fingertip`` in
         # the workspace frame (tf2's messages are not among the extra's wheels)
-        self.fingertip = (self.create_publisher(TransformStamped, "fingertip", STREAM)
+        # transient-local, as the explorer's path: a late viewer gets the last ten poses
+        self.fingertip = (self.create_publisher(TransformStamped, "fingertip", LATCHED)
                           if options.physics is not None else None)
         self.start = start_cell(scenario.shape, seed, run)
         self.gamma = BorderDistance(scenario.centres, scenario.border(options.task), 1)
