@@ -21,6 +21,10 @@ from runner.experiments.loop import make_sensor
 from runner.world.physics import Probe, ProbeSpec, press_cells
 from runner.world.scenario import Scenario
 
+#: the raw figures of a physics press, and their columns (with their units)
+RAW_COLUMNS = {"force": "force_n", "depth": "depth_m", "friction_ratio": "friction_ratio",
+               "tangential_sd": "tangential_sd_n"}
+
 #: the most presses per material a command may ask for
 MAX_PRESSES = 10_000
 
@@ -49,10 +53,8 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         table["ix"] += [int(i) for i in index[0]]
         table["iy"] += [int(i) for i in index[1]]
         for probe in probes:
-            for key, unit in zip(Probe.RAW, ("force_n", "depth_m", "friction_ratio",
-                                               "tangential_sd_n"), strict=True):
-                name = key if key == "friction_ratio" else unit
-                table.setdefault(name, []).append(float(f"{getattr(probe, key):.6g}"))
+            for key, column in RAW_COLUMNS.items():
+                table.setdefault(column, []).append(float(f"{getattr(probe, key):.6g}"))
             for key, values in probe.traces.items() if keep_traces else ():
                 traces.setdefault(key, []).append(values)
         done += presses

@@ -43,6 +43,7 @@ MuJoCo is the ``physics`` extra: it is imported when a scene is built, never bef
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -161,7 +162,13 @@ class ProbeSpec(_Strict):
 
 
 def default_materials() -> dict[str, MaterialPhysics]:
-    """The bundled defaults (``models/physics/materials.yaml``), each with its reasons."""
+    """The bundled defaults (``models/physics/materials.yaml``), each with its reasons (read
+    once per process: every scenario's check and its properties use them)."""
+    return dict(_bundled_materials())
+
+
+@functools.cache
+def _bundled_materials() -> dict[str, MaterialPhysics]:
     from bayesprog import bundled_root, load_document
 
     _, spec = load_document(bundled_root() / "physics" / "materials.yaml", MaterialsFile)
@@ -197,8 +204,6 @@ class Probe:
     at: tuple[float, float]
     #: per time step: normal force (N), tangential force (N), the fingertip's height (m)
     traces: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
-
-    RAW = ("force", "depth", "friction_ratio", "tangential_sd")
 
 
 def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, press_steps: int,
