@@ -151,6 +151,8 @@ class Session:
         self.holder: str | int | None = None
         #: the cell the last reply asked to probe next (None before any)
         self.expected: list[int] | None = None
+        #: the range pi_per declares for each cue (the scenario's, whatever the task)
+        self.ranges = {v: declared_range(explorer.perception, v) for v in ("E", "C")}
         #: the explorers of the tasks a reset has named (built once each)
         self._by_task = {explorer.task: explorer}
         self.seed = seed
@@ -252,20 +254,11 @@ class Session:
         variable's support, or the range its description gives (``(0 smooth .. 1 rough)``)."""
         out = []
         for variable, value, what in (("E", texture, "texture"), ("C", compliance, "compliance")):
-            low, high = self.ranges.get(variable, (-math.inf, math.inf))
+            low, high = self.ranges[variable]
             if not low <= value <= high:
                 out.append(f"{what} {value:g} is outside [{low:g}, {high:g}], the range the "
                            f"perception program declares for it ({variable})")
         return out
-
-    @property
-    def ranges(self) -> dict[str, tuple[float, float]]:
-        """Per cue variable of the perception program, the range it declares."""
-        program = self.explorer.perception
-        if getattr(self, "_ranges_of", None) is not program:
-            self._ranges = {v: declared_range(program, v) for v in ("E", "C")}
-            self._ranges_of = program
-        return self._ranges
 
     # one line --------------------------------------------------------------------------------
     def answer(self, line: str) -> dict | None:
