@@ -6,6 +6,7 @@ Ctrl-C to it (:mod:`runner.experiments.child`)."""
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -116,27 +117,36 @@ def worker_init(preload: tuple[str, ...] = ()) -> None:
     collector's reach (module objects live as long as the process), and so is everything alive
     when the process ends: the interpreter's last collections do not visit a heap of
     imported modules (a quarter of a second after a figure) while the parent waits for it."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # stopped while it starts (its parent refused the command, or was stopped), it leaves at
+    # once: it has taken no work, and SystemExit raised in the pool's initializer would be
+    # printed with a traceback
+    signal.signal(signal.SIGTERM, _leave_now)
     import atexit
     import gc
     import importlib
-    import signal
     import threading
 
     import numba
     from tqdm import tqdm
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _exit_quietly)
     numba.set_num_threads(1)
     tqdm.set_lock(threading.RLock())
     for module in preload:
         importlib.import_module(module)
+    signal.signal(signal.SIGTERM, _exit_quietly)
     gc.freeze()
     atexit.register(gc.freeze)
 
 
 def _exit_quietly(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
+
+
+def _leave_now(signum: int, frame: Any) -> None:
+    os._exit(128 + signum)
 
 
 def run_dask(address: str, job: Callable[[Unit], dict], todo: list[Unit], store: ResultStore,
