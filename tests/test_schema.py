@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import pytest
 import yaml
 from hypothesis import given, settings
@@ -69,6 +70,8 @@ def _as_data(spec) -> object:
     """A document read either way as plain data, to compare the two."""
     if isinstance(spec, (str, int, float, bool, type(None))):
         return spec
+    if isinstance(spec, np.ndarray):  # a table the loader read as an array
+        return spec.tolist()
     if isinstance(spec, list):
         return [_as_data(v) for v in spec]
     if isinstance(spec, dict):

@@ -548,6 +548,9 @@ class _Checker:
             raise _LiteralError(path, f"{what}: expected shape {want + array.shape[lead:]} "
                                 f"(one level per state of {', '.join(axes)}), found "
                                 f"{array.shape}")
+        if spec.expected is not None and array.shape[lead:] == spec.expected \
+                and spec.param.constraint.ok(array):
+            return axes, array  # every row at once; else the first wrong row is found below
         for idx in np.ndindex(*array.shape[:lead]):
             row, where = array[idx], path + tuple(int(i) for i in idx)
             if spec.expected is not None and row.shape != spec.expected:
@@ -849,6 +852,11 @@ def _nested(raw: Any, path: YPath, what: str, leaf: int | None, spec: _LiteralSp
                             f"by states or {{input: NAME}}, found {raw!r}")
     if isinstance(raw, (int, float)):
         return np.asarray(float(raw))
+    if isinstance(raw, np.ndarray):  # a table of numbers the loader read as an array
+        if leaf is not None and raw.shape[-1] != leaf:
+            raise _LiteralError(path + (0,) * (raw.ndim - 1), f"{what}: expected "
+                                f"{_count(spec)}, found {raw.shape[-1]}")
+        return raw
     if isinstance(raw, dict):
         raise _LiteralError(path, f"{what}: expected a number or a list here (tables keyed by "
                             "states go outside nested lists), found a mapping")

@@ -11,11 +11,14 @@ the name is the text as written: ``1.50``, ``true``, ``null``.
 
 from __future__ import annotations
 
+import json
 import math
 import re
+import secrets
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import yaml
 
 from bayesprog.errors import Diagnostic
@@ -41,13 +44,20 @@ class Located:
     texts: dict[Path, str] = field(default_factory=dict)
     #: the paths of values written in quotes on one line (their text starts a column later)
     quoted: set[Path] = field(default_factory=set)
+    #: tables of numbers read as arrays (see :func:`_number_blocks`): their text, by path
+    blocks: dict[Path, str] = field(default_factory=dict)
 
     def where(self, path: Path) -> tuple[int, int]:
         """Line and column of ``path``, or of its closest located ancestor."""
         path = tuple(path)
+        inside: list[Any] = []
         while path not in self.positions and path:
+            inside.insert(0, path[-1])
             path = path[:-1]
-        return self.positions.get(path, (1, 1))
+        line, column = self.positions.get(path, (1, 1))
+        if inside and path in self.blocks:  # a row or a number of a table read as an array
+            return _position_in_block(self.blocks[path], line, column, inside)
+        return line, column
 
     def diagnostic(self, path: Path, message: str, at_key: bool = False) -> Diagnostic:
         """A diagnostic at ``path``'s value (or at its key, with ``at_key``)."""
@@ -189,6 +199,12 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     """Parse ``text`` strictly (``kind``: what the file should hold, for the messages). Returns
     the located data and the problems found (maybe several)."""
     problems: list[Diagnostic] = []
+    # large tables of numbers are read as arrays, not as a YAML node per number
+    text, blocks, numbers = _number_blocks(text)
+    if numbers > MAX_TABLE_NUMBERS:
+        return Located(None, file), [Diagnostic(
+            file, 1, 1, f"the file's tables hold {numbers:,} numbers, more than the "
+            f"{MAX_TABLE_NUMBERS:,} a file may hold: give large arrays as inputs (.npy files)")]
     # a linear count before anything is built: no file holds more values than it has commas
     # and lines, and one past the limit is refused without parsing it
     estimate = text.count(",") + text.count("\n")
@@ -278,6 +294,10 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
 
     def build_scalar(node: yaml.Node, path: Path) -> Any:
         assert isinstance(node, yaml.ScalarNode)
+        if blocks and not node.style and node.value in blocks:
+            array, written = blocks.pop(node.value)  # each placeholder stands once
+            located.blocks[path] = written
+            return array
         if node.style:  # quoted or block scalar: always a string (plain: None, or "" from libyaml)
             if node.style in ("'", '"') and node.start_mark.line == node.end_mark.line:
                 located.quoted.add(path)
@@ -299,9 +319,87 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     return located, problems
 
 
-#: the most values a file may expand to (aliases included): the largest bnlearn network's
-#: tables (diabetes, 461,069 parameters) fit; reading that many takes about 3 s and 400 MB
+#: the most values a file may expand to (aliases included), tables of numbers read as arrays
+#: aside (:data:`MAX_TABLE_NUMBERS`); reading that many as YAML takes about 3 s and 400 MB
 MAX_VALUES = 500_000
+#: the most numbers the tables of a file may hold (8 bytes each once read; the largest bnlearn
+#: networks, diabetes and mildew, hold about half a million)
+MAX_TABLE_NUMBERS = 20_000_000
+#: a table shorter than this (in characters) is read as YAML, like everything else
+BLOCK_MIN_CHARS = 10
+#: ``table:`` followed by a nested list made only of numbers, brackets, commas and spaces
+_BLOCK_START = re.compile(r"(?:^|[\s{,])table[ \t]*:[ \t]*(?=\[)")
+_BLOCK_BODY = re.compile(r"[\[\]0-9.,eE+\- \t\r\n]*")
+
+
+def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
+    """The text with each large table of numbers (``table: [[0.1, 0.9], ...]``) replaced by a
+    placeholder on its first line (the lines and the columns after it kept), the arrays by
+    placeholder (with their text, to place a row later), and how many numbers they hold.
+
+    A table is taken only when it is a regular nested list of plain decimal numbers (what JSON
+    reads); anything else (a ragged row, a word, ``.5``) is left to the YAML reader and its
+    diagnostics."""
+    if len(text) < BLOCK_MIN_CHARS or "table" not in text:
+        return text, {}, 0
+    token = "__table_" + secrets.token_hex(4)
+    while token in text:
+        token = "__table_" + secrets.token_hex(4)
+    pieces: list[str] = []
+    blocks: dict[str, tuple[Any, str]] = {}
+    numbers, done, at = 0, 0, 0
+    while True:
+        found = _BLOCK_START.search(text, at)
+        if found is None:
+            break
+        start = found.end()
+        body = _BLOCK_BODY.match(text, start)
+        end = _closing(text, start, body.end() if body else start)
+        at = max(end, start + 1)
+        if end - start < BLOCK_MIN_CHARS:
+            continue
+        written = text[start:end]
+        try:
+            array = np.asarray(json.loads(written), dtype=float)
+        except (ValueError, TypeError):  # not JSON's numbers, or ragged
+            continue
+        if array.dtype != np.float64 or array.ndim < 1 or not np.all(np.isfinite(array)):
+            continue
+        name = f"{token}_{len(blocks)}"
+        blocks[name] = (array, written)
+        numbers += array.size
+        lines = written.count("\n")
+        # what follows the table keeps its line and column
+        pad = end - (text.rfind("\n", 0, end) + 1) if lines else end - start - len(name)
+        pieces += [text[done:start], name, "\n" * lines, " " * pad]
+        done = end
+    if not blocks:
+        return text, {}, 0
+    pieces.append(text[done:])
+    return "".join(pieces), blocks, numbers
+
+
+def _closing(text: str, start: int, stop: int) -> int:
+    """Where the bracket opened at ``start`` closes (one past it), looking no further than
+    ``stop``; ``start`` when it does not close there."""
+    depth = 0
+    for match in re.finditer(r"[\[\]]", text[start:stop]):
+        depth += 1 if match.group() == "[" else -1
+        if depth == 0:
+            return start + match.end()
+    return start
+
+
+def _position_in_block(written: str, line: int, column: int, inside: list[Any]) -> tuple[int, int]:
+    """Line and column of the row or number at indices ``inside`` of a table written as
+    ``written`` from (``line``, ``column``)."""
+    at = _offset_in_block(written, [int(i) for i in inside])
+    newlines = written.count("\n", 0, at)
+    if newlines == 0:
+        return line, column + at
+    return line + newlines, at - written.rfind("\n", 0, at)
+
+
 _FAST_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _SCALAR = re.compile(r"[^\s,\[\]{}:#-][^,\[\]{}\n]*")
 
@@ -311,6 +409,29 @@ def _count_values(text: str) -> int:
     linear, and never fewer than PyYAML would build for plain flow lists."""
     return sum(sum(1 for _ in _SCALAR.finditer(line.split(" #", 1)[0]))
                for line in text.splitlines() if not line.lstrip().startswith("#"))
+
+
+def _offset_in_block(written: str, target: list[int]) -> int:
+    """Where the item at indices ``target`` of the nested list ``written`` starts (0 when it
+    has none)."""
+    stack: list[int] = []  # the index of the item being read at each open bracket
+    expecting = False
+    for at, char in enumerate(written):
+        if char.isspace():
+            continue
+        if expecting:
+            expecting = False
+            if stack == target:
+                return at
+        if char == "[":
+            stack.append(0)
+            expecting = True
+        elif char == "]":
+            stack.pop()
+        elif char == ",":
+            stack[-1] += 1
+            expecting = True
+    return 0
 
 
 class _Refused(Exception):
