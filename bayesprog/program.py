@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog import inference, rich
+from bayesprog import cache, inference, rich
 from bayesprog.errors import (
     ArgumentError,
     Diagnostic,
@@ -840,6 +840,9 @@ def loads(text: str | bytes, file: str = "<string>", base_dir: Path | None = Non
         raise SpecError(problems)
 
     def load_named(file: Path, shared: tuple[str, ...] = ()) -> Program:
+        named = _NAMED.get()
+        if named is not None:
+            named.append(file)
         # a program named by a term: the variables it shares with the term (its child and
         # parents) are replaced there as they are here, so they keep the same states
         given = {name: variables[name] for name in shared if variables and name in variables}
@@ -910,8 +913,24 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None,
         raise ProgramCycleError([*chain[chain.index(key):], key])
     token = _LOADING.set((*chain, key))
     try:
-        text = path.read_text(encoding="utf-8")
-        return loads(text, str(path), path.parent, variables, terms)
+        data = path.read_bytes()
+        # a file loaded before, byte for byte, is read back checked (see bayesprog.cache)
+        kept = cache.key(path, data) if variables is None and terms is None else None
+        if kept is not None:
+            program = cache.get(kept)
+            if isinstance(program, Program):
+                program.path = path
+                return program
+        text = data.decode("utf-8")
+        named: list[Path] = []
+        named_token = _NAMED.set(named)
+        try:
+            program = loads(text, str(path), path.parent, variables, terms)
+        finally:
+            _NAMED.reset(named_token)
+        if kept is not None and not named:  # a file that names others may change with them
+            cache.put(kept, program)
+        return program
     finally:
         _LOADING.reset(token)
 
@@ -936,5 +955,7 @@ def _replace_terms(located: Located, terms: Mapping[str, Mapping[str, Any]]
     return problems
 
 
+#: the files a program being loaded names (see :func:`load`: such a program is not cached)
+_NAMED: ContextVar[list[Path] | None] = ContextVar("bayesprog_named", default=None)
 #: The program files being loaded, outermost first (see :func:`load`).
 _LOADING: ContextVar[tuple[Path, ...]] = ContextVar("bayesprog_loading", default=())

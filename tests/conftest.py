@@ -18,6 +18,13 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+# checked programs are kept in a folder of the test run's own, not in the user's cache (the
+# processes the tests start inherit it)
+if "BAYESPROG_CACHE" not in os.environ:
+    import tempfile  # noqa: E402
+
+    os.environ["BAYESPROG_CACHE"] = tempfile.mkdtemp(prefix="bayesprog-test-cache-")
+
 
 @pytest.fixture
 def screenshot(tmp_path):
