@@ -340,7 +340,7 @@ def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
     A table is taken only when it is a regular nested list of plain decimal numbers (what JSON
     reads); anything else (a ragged row, a word, ``.5``) is left to the YAML reader and its
     diagnostics."""
-    if len(text) < BLOCK_MIN_CHARS or "table" not in text:
+    if len(text) < BLOCK_MIN_CHARS:
         return text, {}, 0
     token = "__table_" + secrets.token_hex(4)
     while token in text:
