@@ -1,6 +1,6 @@
 """The commands that convert between programs and the network files other libraries read and
-write: ``import`` (BIF, XMLBIF or UAI into a program file) and ``export`` (a discrete program
-as one of them).
+write: ``import`` (BIF, XMLBIF, UAI or a linear-Gaussian JSON network into a program file) and
+``export`` (a discrete program as BIF, XMLBIF or UAI, a linear-Gaussian one as JSON).
 """
 
 from __future__ import annotations
@@ -11,9 +11,11 @@ from bayesprog.cli.common import ablated, load_program, output_file
 
 
 def add_import(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("import", help="convert a BIF, XMLBIF or UAI network into a program file")
-    p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai",
-                   help="a network file (optionally .gz)")
+    p = sub.add_parser("import", help="convert a BIF, XMLBIF, UAI or linear-Gaussian JSON "
+                                      "network into a program file")
+    p.add_argument("network", metavar="FILE.bif|.xmlbif|.uai|.json",
+                   help="a network file (optionally .gz); .json: a linear-Gaussian network as "
+                        "pgmpy ships bnlearn's")
     p.add_argument("-o", "--output", required=True, metavar="OUT.yaml",
                    help="the program file to write")
     p.set_defaults(func=cmd_import)
@@ -29,9 +31,11 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def add_export(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="write a discrete program as BIF, XMLBIF or UAI")
-    p.add_argument("file", metavar="FILE", help="a discrete program with literal tables")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bif|.xmlbif|.uai",
+    p = sub.add_parser("export", help="write a discrete program as BIF, XMLBIF or UAI, a "
+                                      "linear-Gaussian one as JSON")
+    p.add_argument("file", metavar="FILE", help="a discrete program with literal tables, or a "
+                                                "linear-Gaussian program")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bif|.xmlbif|.uai|.json",
                    help="the network file; its format from the extension")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help="write the program with this term uniform; repeatable (default: none)")

@@ -1,4 +1,5 @@
-"""Exchange with other tools: BIF, XMLBIF and UAI networks, read and written through pgmpy.
+"""Exchange with other tools: BIF, XMLBIF and UAI networks, read and written through pgmpy,
+and linear-Gaussian networks as JSON (:mod:`bayesprog.io.gaussian`).
 
 ``import_network`` turns a network file into a program document (states and CPT layout kept:
 one ``table`` term per variable, parents in the file's order; rows that sum to 1 within 1e-6,
@@ -19,7 +20,7 @@ import yaml
 
 from bayesprog.errors import BayesprogError
 
-FORMATS = {".bif": "bif", ".xmlbif": "xmlbif", ".xml": "xmlbif", ".uai": "uai"}
+FORMATS = {".bif": "bif", ".xmlbif": "xmlbif", ".xml": "xmlbif", ".uai": "uai", ".json": "json"}
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 
 
@@ -33,8 +34,8 @@ def network_format(path: Path) -> str:
         suffixes = suffixes[:-1]
     fmt = FORMATS.get(suffixes[-1] if suffixes else "")
     if fmt is None:
-        raise NetworkError(f"{path}: unsupported network format: expected .bif, .xmlbif or .uai "
-                           "(optionally gzipped)")
+        raise NetworkError(f"{path}: unsupported network format: expected .bif, .xmlbif, .uai "
+                           "or .json (a linear-Gaussian network), optionally gzipped")
     return fmt
 
 
@@ -42,6 +43,9 @@ def read_network(path: str | Path) -> Any:
     """A pgmpy ``DiscreteBayesianNetwork`` (or, for UAI Markov files, an error) from ``path``."""
     path = Path(path)
     fmt = network_format(path)
+    if fmt == "json":
+        raise NetworkError(f"{path}: a linear-Gaussian network: read it with "
+                           "bayesprog.io.gaussian.read_gaussian")
     try:
         raw = gzip.open(path, "rt", encoding="utf-8").read() if path.suffix == ".gz" \
             else path.read_text(encoding="utf-8")
@@ -142,13 +146,54 @@ def dump_document(doc: dict[str, Any]) -> str:
     """YAML text of a document: block style for structure, flow style for the number rows;
     names written as they are (``yes``, ``on``: YAML 1.2 words), quoted only where a YAML 1.2
     reader would take them for something else (``true``, ``null``, ``1.0``)."""
-    return yaml.dump(doc, Dumper=_Dumper12, sort_keys=False, default_flow_style=None,
+    from bayesprog.language.flow import flow_table
+
+    # tables go as flow lists, a row per line: readable, and read back as one array each
+    tables: dict[str, Any] = {}
+    entries = []
+    for entry in doc.get("decomposition") or []:
+        table = entry.get("table") if isinstance(entry, dict) else None
+        if isinstance(table, list) and table and _numbers(table):
+            name = f"__flow_table_{len(tables)}__"
+            tables[name] = table
+            entry = _Block({**entry, "table": name})
+        entries.append(entry)
+    if tables:
+        doc = {**doc, "decomposition": entries}
+    text = yaml.dump(doc, Dumper=_Dumper12, sort_keys=False, default_flow_style=None,
                      width=100, allow_unicode=True)
+    if not tables:
+        return text
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        name = line.rpartition(" ")[2]
+        if name in tables:
+            column = len(line) - len(name)
+            lines[i] = line[:column] + flow_table(tables[name], column)
+    return "\n".join(lines)
+
+
+class _Block(dict):
+    """A mapping written in block style (one key per line)."""
+
+
+_Dumper12.add_representer(_Block, lambda dumper, data: dumper.represent_mapping(
+    "tag:yaml.org,2002:map", data.items(), flow_style=False))
+
+
+def _numbers(table: list) -> bool:
+    """Whether ``table`` is made of numbers only, in nested lists."""
+    return all(_numbers(x) if isinstance(x, list) else
+               isinstance(x, (int, float)) and not isinstance(x, bool) for x in table)
 
 
 def import_network(path: str | Path, out: str | Path) -> Path:
     """Convert the network at ``path`` into a program file ``out``; returns ``out``."""
     path, out = Path(path), Path(out)
+    if network_format(path) == "json":
+        from bayesprog.io.gaussian import import_gaussian
+
+        return import_gaussian(path, out)
     model = read_network(path)
     if not list(model.nodes()):
         raise NetworkError(f"{path}: no variables found: expected a {network_format(path).upper()} "
@@ -159,11 +204,16 @@ def import_network(path: str | Path, out: str | Path) -> Path:
 
 
 def export_program(program: Any, out: str | Path) -> Path:
-    """Write a discrete program with literal tables as BIF, XMLBIF or UAI (by ``out``'s suffix)."""
+    """Write a discrete program with literal tables as BIF, XMLBIF or UAI, or a linear-Gaussian
+    program as JSON (by ``out``'s suffix)."""
     from bayesprog.compile import to_bayesian_network
 
     out = Path(out)
     fmt = network_format(out)
+    if fmt == "json":
+        from bayesprog.io.gaussian import export_gaussian
+
+        return export_gaussian(program, out)
     model = to_bayesian_network(program)
     from pgmpy.readwrite import BIFWriter, UAIWriter, XMLBIFWriter
 

@@ -13,14 +13,25 @@ the unknown discrete variables those terms depend on, the real variables are joi
 Conditioning on the known real values gives each configuration's likelihood, which joins the
 discrete factors as one more factor, and the searched variables' conditional Gaussian; the
 answer is the mixture over configurations (one component when there are none).
+
+What depends only on the question's layout (its searched and known variables, not their
+values) is worked out once and kept with the layout: the terms solved together, and, when every
+one of them has one affine mean of numbers and a literal sigma (a linear-Gaussian network: no
+discrete parent nor runtime input), the conditioning as one affine map of the known values
+(:class:`LinearLayout`). A question asked again with other values, or a batch of them, is then
+one matrix product.
 """
 
 from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
 
 import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, available_forms, get_form
+from bayesprog.formula import CONSTANTS, FUNCTIONS, Formula
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.contraction import contract_factors
 from bayesprog.inference.core import Factor
@@ -29,7 +40,10 @@ from bayesprog.inference.factors import _bound_param, question_factors, slice_fa
 from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.methods.base import Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
+from bayesprog.inference.protocol import ProgramLike
+from bayesprog.limits import check_size
 from bayesprog.model import Term
+from bayesprog.variables import Discrete
 
 _LOG_2PI = float(np.log(2 * np.pi))
 
@@ -67,7 +81,15 @@ class GaussianMethod(Method):
 
 def _block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
     """The terms of the real variables solved together, in a topological order, or why the
-    program is not conditional linear-Gaussian."""
+    program is not conditional linear-Gaussian (found once per layout: it reads the names of
+    the known variables, not their values)."""
+    found = plan.layout.prepared.get("gaussian block")
+    if found is None:
+        found = plan.layout.prepared["gaussian block"] = _find_block(plan)
+    return found
+
+
+def _find_block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
     latent = set(plan.latent)
     chosen = [t for t in plan.terms if not t.child.is_discrete and (
         t.child.name in latent or any(p.name in latent for p in t.parents))]
@@ -94,7 +116,7 @@ def _block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
             if key != t.form.mean_param and real:
                 return [], f"{t.label}: its {key} depends on {', '.join(real)}"
             for formula in param.formulas.flat:
-                if not formula.affine_in(names):
+                if _affine(plan.program, formula) is None and not formula.affine_in(names):
                     return [], (f"{t.label}: {key} \"{formula}\" is not affine in "
                                 f"{', '.join(n for n in formula.names if n in names)}")
     order: list[Term] = []
@@ -123,6 +145,17 @@ def _mixing(plan: QuestionPlan, block: list[Term]) -> list[str]:
 def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
     program, bound = plan.program, plan.bound
     names = [t.child.name for t in block]
+    linear = LinearLayout.of(plan, block)
+    if linear is not None:
+        loglik, means, covs = linear.condition(bound)
+        if not linear.whole:
+            return _joined(plan, names, [], [], loglik, means, covs)
+        rows = bound.size
+        log_z = np.broadcast_to(loglik[:, 0], (rows,))
+        return Density(str(plan.question.expression), plan.searched, bound.batch_shape,
+                       np.array(log_z), ablated=program.ablated, method="gaussian",
+                       weights=np.ones((rows, 1)), means=np.ascontiguousarray(means),
+                       covariances=np.broadcast_to(covs, (rows, *covs.shape[1:])).copy())
     n = len(names)
     mixing = _mixing(plan, block)
     cards = [plan.card(a) for a in mixing]
@@ -221,7 +254,21 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
                                                                    s_lo, gain)
     else:
         cond_mean, cond_cov = mean[..., unknown], cov[..., unknown, :][..., :, unknown]
-    rest = [t for t in plan.terms if t.child.name not in set(names)]
+    pick = [unknown.index(names.index(v)) for v in plan.searched if v in names]
+    return _joined(plan, names, mixing, cards, loglik, cond_mean[..., pick],
+                   cond_cov[..., pick, :][..., :, pick])
+
+
+def _joined(plan: QuestionPlan, names: list[str], mixing: list[str], cards: list[int],
+            loglik: np.ndarray, means: np.ndarray, covs: np.ndarray) -> Density:
+    """The answer: the likelihood of each configuration ``loglik`` ``[r, k]`` joined to the
+    other terms' factors; ``means`` ``[r, k, p]`` and ``covs`` ``[r, k, p, p]``: the searched
+    real variables' conditional Gaussian in each configuration."""
+    program, bound = plan.program, plan.bound
+    rows = bound.size
+    k = int(np.prod(cards)) if cards else 1
+    solved = set(names)
+    rest = [t for t in plan.terms if t.child.name not in solved]
     factors = question_factors(program, rest, bound)
     loglik = np.broadcast_to(loglik, (rows, k))
     factors.append(Factor(tuple(mixing), loglik.reshape([rows] + cards), True))
@@ -231,10 +278,249 @@ def gaussian_answer(plan: QuestionPlan, block: list[Term]) -> Density:
         return answer(plan, probs, log_z, method="gaussian")  # type: ignore[return-value]
     probs, log_z = contract_factors(plan, factors, tuple(mixing))
     weights = probs.reshape(rows, k)
-    pick = [unknown.index(names.index(v)) for v in searched]
-    means = np.broadcast_to(cond_mean, (rows, k, len(unknown)))[..., pick]
-    covs = np.broadcast_to(cond_cov, (rows, k, len(unknown), len(unknown)))[..., pick, :][
-        ..., :, pick]
+    p = means.shape[-1]
+    means = np.broadcast_to(means, (rows, k, p))
+    covs = np.broadcast_to(covs, (rows, k, p, p))
     return Density(str(plan.question.expression), searched, bound.batch_shape, log_z,
                    ablated=program.ablated, method="gaussian", weights=weights,
                    means=np.ascontiguousarray(means), covariances=np.ascontiguousarray(covs))
+
+
+@dataclass
+class LinearLayout:
+    """A linear-Gaussian block's algebra for one layout: every term of the block a normal (or
+    dirac) term whose mean is a number or one affine formula of numbers and whose sigma is a
+    number, so that its joint Gaussian depends on the known real values ``u`` outside the
+    block only through its mean:
+
+        x = M (b + C u + e)  =>  mean(u) = M b + M C u,  cov = M diag(s) M^T
+
+    Conditioning on the known block variables ``o`` gives the searched ones ``p`` the mean
+    ``mean_p + G^T (x_o - mean_o)``, ``G = cov_oo^-1 cov_op``, a covariance that no value
+    changes, and the likelihood of ``x_o`` from its residuals whitened by the inverse ``W`` of
+    ``cov_oo``'s Cholesky factor. When the question's other terms are of the same kind (known
+    real children of known parents) and it searches real variables only, their standardised
+    residuals join (``whole``: the answer then needs no contraction). All of these are affine
+    in the known values ``v``: one matrix, found here once, gives them all at each question,
+
+        [W (x_o - mean_o), (x_rest - mean_rest) / sigma_rest, cond. mean_p] = v A + c,
+
+    the log-likelihood being ``norm - |first columns|^2 / 2``.
+    """
+
+    given: list[str]  #: the known real variables whose values are read, ``v``
+    weights: np.ndarray  #: [g, q + p] A
+    offset: np.ndarray  #: [q + p] c
+    standardised: int  #: q: the columns of standardised residuals
+    norm: float  #: their log-likelihood's constant
+    cond_cov: np.ndarray  #: [p, p]
+    whole: bool  #: whether the other terms' log densities are in
+
+    @classmethod
+    def of(cls, plan: QuestionPlan, block: list[Term]) -> LinearLayout | None:
+        """The layout's, made at its first question; None when a term is not of that kind."""
+        prepared = plan.layout.prepared
+        if "gaussian linear" not in prepared:
+            prepared["gaussian linear"] = cls._make(plan, block)
+        return prepared["gaussian linear"]
+
+    @classmethod
+    def _make(cls, plan: QuestionPlan, block: list[Term]) -> LinearLayout | None:
+        bound, variables = plan.bound, plan.program.variables
+        if bound.ablated:
+            return None
+        names = [t.child.name for t in block]
+        at = {name: i for i, name in enumerate(names)}
+        n = len(names)
+        check_size(3.0 * n * n, f"the joint Gaussian of {n} real variables")
+
+        def outside(name: str) -> bool:  # a known real value
+            return name in bound.continuous and not isinstance(variables.get(name), Discrete)
+
+        given = {name: None for name in names if name in bound.continuous}
+        weights, intercepts, noise = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+        slopes: list[dict[str, float]] = []
+        for i, t in enumerate(block):
+            found = _linear_term(plan.program, t)
+            if found is None or not all(v in at or outside(v) for v in found[1]):
+                return None
+            intercepts[i], coefficients, noise[i] = found
+            slopes.append({v: c for v, c in coefficients.items() if v not in at})
+            given.update(dict.fromkeys(slopes[-1]))
+            for v, c in coefficients.items():
+                if v in at:
+                    weights[i, at[v]] += c
+        rest = [t for t in plan.terms if t.child.name not in at]
+        folded = [_linear_term(plan.program, t) for t in rest]
+        whole = (not bound.soft and bool(plan.searched) and all(v in at for v in plan.searched)
+                 and all(f is not None and f[2] > 0 and outside(t.child.name)
+                         and all(outside(v) for v in f[1]) and not t.soft
+                         and getattr(t.child, "index", None) is None
+                         for t, f in zip(rest, folded, strict=True)))
+        if whole:
+            for t, f in zip(rest, folded, strict=True):
+                given.update(dict.fromkeys([t.child.name, *f[1]]))  # type: ignore[index]
+        column = {v: j for j, v in enumerate(given)}
+        slope = np.zeros((n, len(column)))
+        for i, row in enumerate(slopes):
+            for v, c in row.items():
+                slope[i, column[v]] += c
+        solve = np.linalg.inv(np.eye(n) - weights)
+        base, slope = solve @ intercepts, solve @ slope  # the block's mean: base + slope v
+        cov = (solve * noise) @ solve.T
+        known = [i for i, v in enumerate(names) if v in bound.continuous]
+        pick = [at[v] for v in plan.searched if v in at]
+        cov_oo, cov_op = cov[np.ix_(known, known)], cov[np.ix_(known, pick)]
+        try:
+            chol = np.linalg.cholesky(cov_oo)
+        except np.linalg.LinAlgError:
+            raise QuestionError(f"{plan.question.expression}: the known values "
+                                f"{', '.join(names[i] for i in known)} are tied exactly "
+                                "(a singular covariance)") from None
+        whiten = np.linalg.inv(chol)  # (o is a few known variables)
+        gain = whiten.T @ (whiten @ cov_op)
+        # x_o - mean_o = v R + r
+        pick_known = np.zeros((len(column), len(known)))
+        pick_known[[column[names[i]] for i in known], range(len(known))] = 1.0
+        resid_weights, resid_offset = pick_known - slope[known].T, -base[known]
+        blocks = [(resid_weights @ whiten.T, resid_offset @ whiten.T)]
+        norm = -float(np.log(np.diagonal(chol)).sum()) - 0.5 * len(known) * _LOG_2PI
+        if whole:
+            matrix, offset, scale = (np.zeros((len(column), len(rest))), np.zeros(len(rest)),
+                                     np.zeros(len(rest)))
+            for k, (t, f) in enumerate(zip(rest, folded, strict=True)):
+                offset[k], coefficients, variance = f  # type: ignore[misc]
+                matrix[column[t.child.name], k] += 1.0
+                for v, c in coefficients.items():
+                    matrix[column[v], k] -= c
+                scale[k] = 1.0 / np.sqrt(variance)
+            blocks.append((matrix * scale, -offset * scale))
+            norm += float(np.log(scale).sum()) - 0.5 * len(rest) * _LOG_2PI
+        blocks.append((slope[pick].T + resid_weights @ gain, base[pick] + resid_offset @ gain))
+        return cls(list(given), np.hstack([w for w, _ in blocks]),
+                   np.concatenate([c for _, c in blocks]), sum(c.size for _, c in blocks[:-1]),
+                   norm, cov[np.ix_(pick, pick)] - cov_op.T @ gain, whole)
+
+    def condition(self, bound: Bound) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For the bound values: the log-likelihood of the known values ``[r or 1, 1]`` (those
+        of the block, and of the other terms when ``whole``), the searched variables'
+        conditional means ``[r, 1, p]`` and their covariance ``[1, 1, p, p]``."""
+        values = _values(bound, self.given)
+        out = values @ self.weights + self.offset
+        z = out[:, : self.standardised]
+        loglik = self.norm - 0.5 * np.einsum("ij,ij->i", z, z)[:, np.newaxis]
+        cond_mean = np.broadcast_to(out[:, self.standardised :],
+                                    (bound.size, out.shape[1] - self.standardised))
+        return loglik, cond_mean[:, np.newaxis, :], self.cond_cov[np.newaxis, np.newaxis]
+
+
+def _linear_term(program: ProgramLike, t: Term) -> tuple[float, dict[str, float], float] | None:
+    """``(intercept, {name: coefficient}, variance)`` of a term whose mean is a number or one
+    affine formula of numbers and whose scale is a number (variance 0 without one: a dirac),
+    else None."""
+    mean_key, scale_key = t.form.mean_param, t.form.scale_param
+    if mean_key is None or set(t.params) - {mean_key, scale_key}:
+        return None
+    mean = t.params[mean_key]
+    if isinstance(mean, FormulaParam) and not mean.axes:
+        affine = _affine(program, mean.formulas.flat[0])
+        if affine is None:
+            return None
+        intercept, coefficients = affine
+    elif isinstance(mean, ParamValue) and not mean.axes and not mean.batched:
+        intercept, coefficients = float(mean.array), {}
+    else:
+        return None
+    if scale_key is None:
+        return intercept, coefficients, 0.0
+    sigma = t.params[scale_key]
+    if not (isinstance(sigma, ParamValue) and not sigma.axes and not sigma.batched):
+        return None  # (the loader makes a formula of numbers a number)
+    s = float(sigma.array)
+    if not s > 0:
+        raise QuestionError(f"term {t.label}: {scale_key} must be > 0, got {s:g}")
+    return intercept, coefficients, s * s
+
+
+def _values(bound: Bound, names: list[str]) -> np.ndarray:
+    """The known real values of ``names``, ``[rows or 1, len(names)]``."""
+    found = [bound.continuous[v] for v in names]
+    if not found:
+        return np.zeros((1, 0))
+    if not any(pv.batched for pv in found):
+        return np.array([[float(pv.array) for pv in found]])
+    return np.stack([np.broadcast_to(np.asarray(pv.array, float), (bound.size,))
+                     for pv in found], axis=-1)
+
+
+def _affine(program: ProgramLike, formula: Formula) -> tuple[float, dict[str, float]] | None:
+    """:func:`affine_of`, kept by the program for each of its formulas (a layout's first
+    question reads each twice: to choose the method and to solve)."""
+    kept = program.inference_cache.derived
+    key = ("gaussian affine", id(formula))
+    if key not in kept:
+        kept[key] = affine_of(formula)
+    return kept[key]
+
+
+def affine_of(formula: Formula) -> tuple[float, dict[str, float]] | None:
+    """``formula.affine()`` in one walk of its tree: ``(intercept, {name: coefficient})`` when
+    it is affine in all its names, else None. (:meth:`Formula.affine` walks every sub-tree
+    again at each node, 1.7 ms for a mean of eight parents; a network of a hundred terms paid
+    that at each new layout.)
+
+    >>> from bayesprog.formula import parse_formula
+    >>> affine_of(parse_formula("0.5 + 1.2*A - B/4 + sqrt(4)*C"))
+    (0.5, {'A': 1.2, 'B': -0.25, 'C': 2.0})
+    >>> affine_of(parse_formula("A*B")) is None, affine_of(parse_formula("exp(A)")) is None
+    (True, True)
+    """
+    found = _affine_walk(formula.tree)
+    if found is None:
+        return None
+    intercept, coefficients = found
+    if not np.all(np.isfinite([intercept, *coefficients.values()])):
+        return None
+    return intercept, {n: coefficients.get(n, 0.0) for n in formula.names}
+
+
+def _affine_walk(node: ast.AST) -> tuple[float, dict[str, float]] | None:
+    if isinstance(node, ast.Constant):
+        return float(node.value), {}  # type: ignore[arg-type]  # numbers only, checked by parsing
+    if isinstance(node, ast.Name):
+        return (CONSTANTS[node.id], {}) if node.id in CONSTANTS else (0.0, {node.id: 1.0})
+    if isinstance(node, ast.UnaryOp):
+        inner = _affine_walk(node.operand)
+        if inner is None:
+            return None
+        sign = -1.0 if isinstance(node.op, ast.USub) else 1.0
+        return sign * inner[0], {k: sign * v for k, v in inner[1].items()}
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):  # of numbers: folded
+        numbers = []
+        for arg in node.args:
+            found = _affine_walk(arg)
+            if found is None or found[1]:
+                return None
+            numbers.append(found[0])
+        with np.errstate(all="ignore"):
+            return float(FUNCTIONS[node.func.id][1](*numbers)), {}
+    if not isinstance(node, ast.BinOp):
+        return None
+    left, right = _affine_walk(node.left), _affine_walk(node.right)
+    if left is None or right is None:
+        return None
+    if isinstance(node.op, (ast.Add, ast.Sub)):
+        sign = 1.0 if isinstance(node.op, ast.Add) else -1.0
+        coefficients = dict(left[1])
+        for k, v in right[1].items():
+            coefficients[k] = coefficients.get(k, 0.0) + sign * v
+        return left[0] + sign * right[0], coefficients
+    if isinstance(node.op, ast.Mult) and not (left[1] and right[1]):
+        scale, (b, terms) = (left[0], right) if not left[1] else (right[0], left)
+        return scale * b, {k: scale * v for k, v in terms.items()}
+    if isinstance(node.op, ast.Div) and not right[1] and right[0] != 0:
+        return left[0] / right[0], {k: v / right[0] for k, v in left[1].items()}
+    if isinstance(node.op, ast.Pow) and not left[1] and not right[1]:
+        with np.errstate(all="ignore"):
+            return float(np.power(left[0], right[0])), {}
+    return None

@@ -1,0 +1,178 @@
+"""Tables of numbers read as arrays: the same program and the same diagnostics (file, line,
+column, message) as when every number is read as a YAML node; large networks within the
+limits; tables written a row per line and read back to the bit."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import bayesprog
+from bayesprog.errors import SpecError
+from bayesprog.io import dump_document
+from bayesprog.language import loader
+from bayesprog.language.flow import flow_table
+
+TWO_PARENTS = """\
+bayesprog: 1
+variables:
+  A: {states: [a0, a1, a2]}
+  B: {states: [b0, b1]}
+  C: {states: [c0, c1, c2, c3]}
+decomposition:
+  - {term: P(A), form: table, table: [0.2, 0.3, 0.5]}
+  - {term: P(B), form: uniform}
+  - term: P(C | A, B)
+    form: table
+    table: TABLE
+"""
+
+
+def _table(seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).dirichlet(np.ones(4), size=(3, 2))
+
+
+def _problems(text: str, as_yaml: bool, monkeypatch) -> list[str]:
+    with monkeypatch.context() as patch:
+        if as_yaml:
+            patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+        try:
+            bayesprog.loads(text, "net.yaml")
+        except SpecError as exc:
+            return [str(d) for d in exc.diagnostics]
+    return []
+
+
+@pytest.mark.parametrize("layout", ["one line", "a row per line"])
+@pytest.mark.parametrize("change", [
+    ("a row that does not sum to 1", lambda t: t.__setitem__((2, 1, 3), 0.9)),
+    ("a negative number", lambda t: (t.__setitem__((1, 0, 0), -0.1),
+                                     t.__setitem__((1, 0, 1), t[1, 0, 1] + 0.1))),
+    ("a number too large", lambda t: t.__setitem__((0, 1, 2), 1e300)),
+])
+def test_a_wrong_row_is_placed_as_when_every_number_is_read_as_yaml(layout, change,
+                                                                    monkeypatch):
+    table = _table()
+    change[1](table)
+    written = json.dumps(table.tolist()) if layout == "one line" else \
+        flow_table(table, column=len("    table: "))
+    text = TWO_PARENTS.replace("TABLE", written)
+    as_arrays, as_yaml = _problems(text, False, monkeypatch), _problems(text, True, monkeypatch)
+    assert as_arrays and as_arrays == as_yaml, (as_arrays, as_yaml)
+
+
+@pytest.mark.parametrize("written", [
+    "[[[0.5, 0.5, 0, 0], [0.25, 0.25, 0.25, 0.25]], [[1, 0, 0, 0], [0, 1, 0, 0]], "
+    "[[0.1, 0.2, 0.3, 0.4], [0.5, 0.5]]]",  # a short row
+    "[[[0.5, 0.5, 0, 0], [0.25, 0.25, 0.25, 0.25]], [[1, 0, 0, 0], [0, 1, 0, 0]], "
+    "[[0.1, 0.2, 0.3, 0.4], [0.5, 0.5, 0, 0, 0]]]",  # a long row
+    "[[[0.5, 0.5, 0], [0.25, 0.25, 0.5]], [[1, 0, 0], [0, 1, 0]], [[0.1, 0.2, 0.7], "
+    "[0.5, 0.5, 0]]]",  # every row too short: read as an array
+    "[[[0.5, 0.5, 0, 0], [0.25, 0.25, 0.25, 0.25]], [[1, 0, 0, 0], [0, 1, 0, 0]], "
+    "[[0.1, 0.2, 0.3, 0.4], [0.5, 0.5, zero, 0]]]",  # a word
+    "[[[0.5, 0.5, 0, 0], [0.25, 0.25, 0.25, 0.25]], [[1, 0, 0, 0], [0, 1, 0, 0]], "
+    "[[0.1, 0.2, 0.3, 0.4], [.5, .5, 0, 0]]]",  # numbers JSON does not read
+    "[[[0.5, 0.5, 0, 0], [0.25, 0.25, 0.25, 0.25]], [[1, 0, 0, 0], [0, 1, 0, 0]]]",  # 2 of 3
+])
+def test_a_malformed_table_is_reported_as_when_read_as_yaml(written, monkeypatch):
+    text = TWO_PARENTS.replace("TABLE", written)
+    as_arrays, as_yaml = _problems(text, False, monkeypatch), _problems(text, True, monkeypatch)
+    assert as_arrays == as_yaml, (as_arrays, as_yaml)
+    assert as_arrays or "[.5" in written
+
+
+def test_a_good_table_gives_the_same_program_both_ways(monkeypatch):
+    text = TWO_PARENTS.replace("TABLE", flow_table(_table(3), column=11))
+    fast = bayesprog.loads(text)
+    with monkeypatch.context() as patch:
+        patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+        slow = bayesprog.loads(text)
+    for question in ["P(C)", "P(A | C=c2)", "P(B | C=c0)"]:
+        assert np.array_equal(fast.posterior(question).probabilities,
+                              slow.posterior(question).probabilities)
+
+
+def test_what_follows_a_table_keeps_its_line_and_column():
+    table = flow_table(_table(1), column=len("  - {term: 'P(C | A, B)', form: table, table: "))
+    text = TWO_PARENTS.replace(
+        "  - term: P(C | A, B)\n    form: table\n    table: TABLE\n",
+        f"  - {{term: 'P(C | A, B)', form: table, table: {table}, bad: 1}}\n")
+    with pytest.raises(SpecError) as caught:
+        bayesprog.loads(text, "net.yaml")
+    last = text.splitlines()[-1]
+    line, column = len(text.splitlines()), last.index("bad") + 1
+    assert any(f"net.yaml:{line}:{column}:" in str(d) for d in caught.value.diagnostics), \
+        caught.value.diagnostics
+
+
+@pytest.mark.parametrize("shape", [(5,), (3, 4), (2, 3, 7), (2, 2, 2, 40)])
+def test_a_written_table_reads_back_to_the_bit(shape):
+    rng = np.random.default_rng(len(shape))
+    table = rng.dirichlet(np.ones(shape[-1]) * 0.3, size=shape[:-1])
+    table[..., 0] = 0.0  # zeros, and numbers written with exponents
+    table /= table.sum(axis=-1, keepdims=True)
+    table[(0,) * (len(shape) - 1)] = np.r_[1e-300, 1 - 1e-300, np.zeros(shape[-1] - 2)] \
+        if shape[-1] > 2 else table[(0,) * (len(shape) - 1)]
+    doc = {"bayesprog": 1, "variables": {
+        f"V{i}": {"states": [f"s{j}" for j in range(n)]} for i, n in enumerate(shape)},
+        "decomposition": [{"term": f"P(V{i})", "form": "uniform"}
+                          for i in range(len(shape) - 1)]}
+    child, parents = f"V{len(shape) - 1}", [f"V{i}" for i in range(len(shape) - 1)]
+    term = f"P({child} | {', '.join(parents)})" if parents else f"P({child})"
+    doc["decomposition"].append({"term": term, "form": "table", "table": table.tolist()})
+    text = dump_document(doc)
+    written = text[text.index("  table: "):]
+    assert max(len(line) for line in written.splitlines()) <= 100
+    located, problems = loader.load_yaml(text, "t.yaml")
+    assert not problems
+    read = np.asarray(located.data["decomposition"][-1]["table"])
+    assert read.shape == table.shape and np.array_equal(read, table)
+    program = bayesprog.loads(text)
+    assert program.ask(f"P({child})") is not None
+
+
+_MEASURE = """
+import json, resource, sys, time
+import bayesprog
+status = 0
+try:
+    bayesprog.load(sys.argv[1])
+except Exception as exc:
+    status, err = 2, str(exc)
+else:
+    err = ""
+print(json.dumps([status, err, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss]))
+"""
+
+
+def test_a_network_of_a_million_numbers_loads_within_the_memory_it_needs(tmp_path):
+    # a child of 50 states under three parents of 20, 25 and 40 states: 1,000,000 numbers, more
+    # than the 500,000 values a file may hold as YAML nodes
+    rng = np.random.default_rng(2)
+    shape = (20, 25, 40, 50)
+    doc = {"bayesprog": 1, "variables": {
+        f"V{i}": {"states": [f"s{j}" for j in range(n)]} for i, n in enumerate(shape)},
+        "decomposition": [{"term": f"P(V{i})", "form": "uniform"} for i in range(3)]
+        + [{"term": "P(V3 | V0, V1, V2)", "form": "table",
+            "table": rng.dirichlet(np.ones(50), size=shape[:-1]).tolist()}]}
+    path = tmp_path / "large.yaml"
+    path.write_text(dump_document(doc))
+    result = subprocess.run([sys.executable, "-c", _MEASURE, str(path)], capture_output=True,
+                            text=True, timeout=300, env=dict(os.environ))
+    status, err, peak_kb = json.loads(result.stdout)
+    assert status == 0, err
+    assert peak_kb / 1024 < 600
+
+
+def test_an_alias_bomb_beside_a_large_table_is_still_refused(tmp_path):
+    bomb = "bomb: &a0 [1, 2, 3, 4, 5, 6, 7, 8, 9]\n" + "".join(
+        f"b{i}: &a{i + 1} [" + ", ".join([f"*a{i}"] * 9) + "]\n" for i in range(8))
+    text = TWO_PARENTS.replace("TABLE", flow_table(_table(), column=11)) + bomb
+    with pytest.raises(SpecError) as caught:
+        bayesprog.loads(text, "bomb.yaml")
+    assert f"more than {loader.MAX_VALUES:,} values" in str(caught.value)
