@@ -15,6 +15,7 @@ import numpy as np
 
 from bayesprog import rich
 from bayesprog.draw import graph_figure
+from bayesprog.errors import QuestionError
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.program import Program
 from bayesprog.show import render
@@ -192,8 +193,12 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
         program = program.ablate([ablate] if isinstance(ablate, str) else list(ablate))
     evidence = dict(evidence or {})
     given = ", ".join(evidence)
-    marginals = {}
     panels = {}
+    try:  # every posterior from one junction tree
+        found = program.marginals(evidence, inputs=inputs)
+    except QuestionError:  # a real variable not observed: a question per variable
+        found = None
+    marginals = {}
     for name, var in program.variables.items():
         if name in evidence:
             value = evidence[name]
@@ -205,8 +210,8 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
                 text = f"{name}: array of shape {np.shape(value)}"
             panels[name] = _value_panel(text)
         elif var.is_discrete:
-            post = program.ask(f"P({name}" + (f" | {given})" if given else ")"), evidence,
-                               inputs=inputs)
+            post = found[name] if found is not None else program.ask(
+                f"P({name}" + (f" | {given})" if given else ")"), evidence, inputs=inputs)
             assert isinstance(post, Posterior)
             marginals[name] = post
             panels[name] = _bar_panel(post)

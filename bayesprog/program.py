@@ -404,6 +404,35 @@ class Program:
             raise QuestionError(_other_answer(result, "posterior"))
         return result
 
+    def marginals(self, evidence: Mapping[str, Any] | None = None,
+                  variables: str | list[str] | tuple[str, ...] | None = None, *,
+                  inputs: Mapping[str, Any] | None = None,
+                  soft: Mapping[str, Any] | None = None,
+                  ablate: Mapping[str, Any] | None = None) -> dict[str, Posterior]:
+        """The posterior of every discrete variable not observed (or of ``variables``) given
+        ``evidence``, in one pass: a junction tree calibrated once, read for all of them
+        (batched evidence as in :meth:`ask`; each answer carries the evidence's probability).
+        Every unobserved variable the answers depend on must be discrete.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {Rain: {states: [rain, dry]}, Sprinkler: {states: [on, off]},
+        ...             Grass: {states: [wet, dry]}}
+        ... decomposition:
+        ...   - {term: P(Rain), form: table, table: [0.2, 0.8]}
+        ...   - {term: P(Sprinkler), form: table, table: [0.4, 0.6]}
+        ...   - {term: 'P(Grass | Rain, Sprinkler)', form: table,
+        ...      table: [[[0.99, 0.01], [0.8, 0.2]], [[0.9, 0.1], [0.0, 1.0]]]}
+        ... ''')
+        >>> found = p.marginals({"Grass": "wet"})
+        >>> {name: answer.probabilities.round(4).tolist() for name, answer in found.items()}
+        {'Rain': [0.3782, 0.6218], 'Sprinkler': [0.7927, 0.2073]}
+        """
+        from bayesprog.inference.junction import all_marginals
+
+        return all_marginals(self, evidence, variables, inputs, soft, ablate)
+
     def density(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
                 **kw: Any) -> Density:
         """The posterior density of real searched variables (:meth:`ask` of kind

@@ -29,7 +29,11 @@ def add_query(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("query", help='ask a question, e.g. "P(A B | C=c1, D=0.3)"')
     p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
                    "one (bayesprog examples)")
-    p.add_argument("question", help="a named question of the file, or P(searched | known)")
+    p.add_argument("question", nargs="?", help="a named question of the file, or P(searched "
+                   "| known) (left out with --marginals)")
+    p.add_argument("--marginals", action="store_true",
+                   help="the posterior of every discrete variable not given as evidence, in "
+                   "one pass (a junction tree), instead of a question (default: a question)")
     p.add_argument("--map", action="store_true",
                    help="the joint argmax instead of the posterior (default: the posterior)")
     p.add_argument("--over-time", choices=["filter", "smooth", "sequence"],
@@ -83,6 +87,11 @@ def cmd_query(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     if args.limit < 1:
         raise UserError(f"--limit: expected at least 1 row, found {args.limit}")
+    if args.marginals:
+        return _marginals(args)
+    if args.question is None:
+        raise UserError("query: expected a question (a named question of the file, or "
+                        "P(searched | known)), or --marginals for every variable's posterior")
     program = ablated(load_program(args.file), args.ablate)
     inputs = {k: read_npy(v, "--input") for k, v in named_values(args.input, "--input").items()}
     evidence = {k: evidence_value(v) for k, v in named_values(args.evidence, "--evidence").items()}
@@ -191,6 +200,44 @@ def _plot_density(result: Any, path: str) -> None:
         raise UserError(f"--plot {path}: cannot write it: {exc}") from None
     finally:
         plt.close(fig)
+
+
+def _marginals(args: argparse.Namespace) -> int:
+    """``query FILE --marginals``: every unobserved discrete variable's posterior."""
+    if args.question is not None:
+        raise UserError(f"--marginals: expected no question (every variable's posterior is "
+                        f"asked), found {args.question!r}")
+    for flag, used in (("--map", args.map), ("--over-time", args.over_time),
+                       ("--plot", args.plot), ("--method", args.method != "auto")):
+        if used:
+            raise UserError(f"--marginals and {flag}: expected one of them (--marginals "
+                            "answers exactly, in one pass, the posterior of each variable)")
+    program = ablated(load_program(args.file), args.ablate)
+    inputs = {k: read_npy(v, "--input") for k, v in named_values(args.input, "--input").items()}
+    evidence = {k: evidence_value(v) for k, v in named_values(args.evidence, "--evidence").items()}
+    _no_steps(program, evidence)
+    soft = {}
+    for name, text in named_values(args.soft, "--soft").items():
+        try:
+            soft[name] = np.asarray(read_npy(text, "--soft"), dtype=float) \
+                if text.endswith(".npy") else np.array([float(x) for x in text.split(",")])
+        except ValueError:
+            raise UserError(f"--soft {name}={text}: expected numbers separated by commas, or "
+                            "FILE.npy") from None
+    found = program.marginals(evidence, inputs=inputs, soft=soft)
+    if args.json:
+        first = next(iter(found.values()), None)
+        log_evidence = None if first is None else np.asarray(first.log_evidence).tolist()
+        print(json.dumps({"evidence": sorted(evidence), "log_evidence": log_evidence,
+                          "marginals": {name: answer.to_json()
+                                        for name, answer in found.items()}}))
+        return 0
+    from bayesprog.show import format_result
+
+    if not found:
+        print("every variable is given as evidence: no posterior to show")
+    print("\n\n".join(format_result(answer, limit=args.limit) for answer in found.values()))
+    return 0
 
 
 def add_sample(sub: argparse._SubParsersAction) -> None:
