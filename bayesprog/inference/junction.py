@@ -18,7 +18,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -68,6 +68,9 @@ class JunctionTree:
     home: dict[str, tuple[int, tuple[int, ...]]]
     #: the most entries a clique's table holds (per row of evidence)
     largest: int
+    #: clique -> its factors' arrays at the last call, their product and its log scale
+    initial: dict[int, tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]] = field(
+        default_factory=dict)
 
     @property
     def entries(self) -> int:
@@ -227,29 +230,43 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int
     evidence (``[size]``) from the log-factors the tree was built for (in the same order)."""
     check_size(float(size) * tree.entries, f"the junction tree's tables for {size:,} rows")
     log_scale = np.zeros(size)
-    tables: list[np.ndarray | None] = [None] * len(tree.cliques)
-    for factor, (k, perm, shape) in zip(factors, tree.placed, strict=True):
-        log = factor.log if factor.batched else factor.log[np.newaxis]
-        axes = tuple(range(1, log.ndim))
-        with np.errstate(invalid="ignore"):
-            top = np.max(log, axis=axes, keepdims=True) if axes else log
-        top = np.where(np.isfinite(top), top, 0.0)
-        values = np.exp(log - top)
-        log_scale = log_scale + top.reshape(top.shape[0])
-        values = values.transpose((0,) + tuple(1 + j for j in perm)).reshape(
-            (values.shape[0],) + shape)
-        table = tables[k]
-        tables[k] = values if table is None else table * values
+    # each clique's table before any message: its factors' product, kept while its factors
+    # are the same arrays as at the last call (the terms that no evidence value changes)
+    by_clique: list[list[int]] = [[] for _ in tree.cliques]
+    for i, (k, _, _) in enumerate(tree.placed):
+        by_clique[k].append(i)
+    tables: list[np.ndarray] = []
     for k, clique in enumerate(tree.cliques):
         full = (size,) + tuple(tree.cards[a] for a in clique)
-        table = tables[k]
-        if table is None:
-            tables[k] = np.ones(full)
-        elif table.shape != full:
-            tables[k] = np.broadcast_to(table, full).copy()
-        elif not table.flags.writeable or not table.flags.owndata:
-            tables[k] = table.copy()
+        own = tuple(factors[i].log for i in by_clique[k])
+        kept = tree.initial.get(k)
+        if kept is not None and kept[1].shape == full and len(kept[0]) == len(own) \
+                and all(a is b for a, b in zip(kept[0], own, strict=True)):
+            log_scale += kept[2]
+            tables.append(kept[1].copy())
+            continue
+        table: np.ndarray | None = None
+        offset = np.zeros(size)
+        for i in by_clique[k]:
+            factor, (_, perm, shape) = factors[i], tree.placed[i]
+            log = factor.log if factor.batched else factor.log[np.newaxis]
+            axes = tuple(range(1, log.ndim))
+            with np.errstate(invalid="ignore"):
+                top = np.max(log, axis=axes, keepdims=True) if axes else log
+            top = np.where(np.isfinite(top), top, 0.0)
+            values = np.exp(log - top)
+            offset = offset + top.reshape(top.shape[0])
+            values = values.transpose((0,) + tuple(1 + j for j in perm)).reshape(
+                (values.shape[0],) + shape)
+            table = values if table is None else table * values
+        table = np.ones(full) if table is None else np.broadcast_to(table, full).copy()
+        log_scale += offset
+        if all(not factors[i].batched for i in by_clique[k]):
+            tree.initial[k] = (own, table, offset)
+            table = table.copy()
+        tables.append(table)
     sent: list[np.ndarray | None] = [None] * len(tree.cliques)
+    scales: list[np.ndarray | None] = [None] * len(tree.cliques)
     with np.errstate(divide="ignore", invalid="ignore"):
         # collect: a clique after its children
         for k in tree.post:
@@ -264,6 +281,7 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int
             message /= np.where(total > 0, total, 1.0).reshape((size,) + (1,) * (message.ndim - 1))
             log_scale += np.log(total)
             sent[k] = message
+            scales[k] = total
             parent_table = tables[p]
             assert parent_table is not None
             parent_table *= message.reshape((size,) + shape)
@@ -280,22 +298,40 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int
             if p < 0:
                 continue
             _, _, others = tree.up[k]
-            parent_table, table, old = tables[p], tables[k], sent[k]
-            assert parent_table is not None and table is not None and old is not None
+            parent_table, table, old, scale = tables[p], tables[k], sent[k], scales[k]
+            assert old is not None and scale is not None
             new = parent_table.sum(axis=others) if others else parent_table
-            ratio = np.where(old > 0, new.reshape(old.shape) / np.where(old > 0, old, 1.0), 0.0)
+            # the clique's table summed to the scale of its message up: its belief sums to 1
+            scale = np.where(scale > 0, scale, 1.0).reshape((size,) + (1,) * (old.ndim - 1))
+            ratio = np.where(old > 0, new.reshape(old.shape) / (np.where(old > 0, old, 1.0)
+                                                                * scale), 0.0)
             table *= ratio.reshape((size,) + tree.down[k])
-            total = table.reshape(size, -1).sum(axis=1)
-            table /= np.where(total > 0, total, 1.0).reshape((size,) + (1,) * (table.ndim - 1))
-    marginals = {}
-    for name, (k, summed) in tree.home.items():
-        table = tables[k]
-        assert table is not None
-        marginal = table.sum(axis=summed) if summed else table.copy()
-        total = marginal.sum(axis=1, keepdims=True)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            marginals[name] = marginal / total
+    marginals: dict[str, np.ndarray] = {}
+    homed: dict[int, list[str]] = {}
+    for name, (k, _) in tree.home.items():
+        homed.setdefault(k, []).append(name)
+    for k, read in homed.items():
+        clique = tree.cliques[k]
+        where = [clique.index(name) for name in read]
+        others = tuple(1 + j for j in range(len(clique)) if j not in where)
+        found = tables[k].sum(axis=others) if others else tables[k]
+        order = sorted(range(len(read)), key=where.__getitem__)
+        _read_each(found, [read[i] for i in order], marginals)
     return marginals, log_scale
+
+
+def _read_each(table: np.ndarray, names: list[str], into: dict[str, np.ndarray]) -> None:
+    """Each axis's marginal of ``table`` (``[rows] + one axis per name``), normalised: the
+    axes halved in turn, so that a clique of many read variables is summed over about twice
+    its size, not once per variable."""
+    if len(names) == 1:
+        total = table.sum(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            into[names[0]] = table / total
+        return
+    half = len(names) // 2
+    _read_each(table.sum(axis=tuple(range(1 + half, 1 + len(names)))), names[:half], into)
+    _read_each(table.sum(axis=tuple(range(1, 1 + half))), names[half:], into)
 
 
 def all_marginals(program: ProgramLike, evidence: Mapping[str, Any] | None,
