@@ -176,3 +176,15 @@ def test_an_alias_bomb_beside_a_large_table_is_still_refused(tmp_path):
     with pytest.raises(SpecError) as caught:
         bayesprog.loads(text, "bomb.yaml")
     assert f"more than {loader.MAX_VALUES:,} values" in str(caught.value)
+
+
+def test_tables_past_the_limit_are_refused_before_they_are_read(monkeypatch):
+    monkeypatch.setattr(loader, "MAX_TABLE_NUMBERS", 20)
+    read = []
+    monkeypatch.setattr(loader.json, "loads", lambda text: read.append(text) or [])
+    text = TWO_PARENTS.replace("TABLE", flow_table(_table(), column=11))
+    with pytest.raises(SpecError) as caught:
+        bayesprog.loads(text, "big.yaml")
+    assert "big.yaml:1:1: the file's tables hold at least 24 numbers, more than the 20" \
+        in str(caught.value)
+    assert not [t for t in read if t.count(",") > 2]  # P(A)'s three numbers only

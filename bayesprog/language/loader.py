@@ -203,7 +203,7 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     text, blocks, numbers = _number_blocks(text)
     if numbers > MAX_TABLE_NUMBERS:
         return Located(None, file), [Diagnostic(
-            file, 1, 1, f"the file's tables hold {numbers:,} numbers, more than the "
+            file, 1, 1, f"the file's tables hold at least {numbers:,} numbers, more than the "
             f"{MAX_TABLE_NUMBERS:,} a file may hold: give large arrays as inputs (.npy files)")]
     # a linear count before anything is built: no file holds more values than it has commas
     # and lines, and one past the limit is refused without parsing it
@@ -359,6 +359,8 @@ def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
         if end - start < BLOCK_MIN_CHARS:
             continue
         written = text[start:end]
+        if numbers + written.count(",") + 1 > MAX_TABLE_NUMBERS:  # refused before it is read
+            return text, {}, numbers + written.count(",") + 1
         try:
             array = np.asarray(json.loads(written), dtype=float)
         except (ValueError, TypeError):  # not JSON's numbers, or ragged
