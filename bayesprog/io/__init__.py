@@ -287,9 +287,11 @@ _Dumper12.add_representer(_Block, lambda dumper, data: dumper.represent_mapping(
 
 
 def _numbers(table: list) -> bool:
-    """Whether ``table`` is made of numbers only, in nested lists."""
-    return all(_numbers(x) if isinstance(x, list) else
-               isinstance(x, (int, float)) and not isinstance(x, bool) for x in table)
+    """Whether ``table`` is made of numbers only (no booleans), in regular nested lists."""
+    try:
+        return np.asarray(table).dtype.kind in "iuf"
+    except ValueError:  # ragged
+        return False
 
 
 def import_network(path: str | Path, out: str | Path) -> Path:

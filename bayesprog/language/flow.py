@@ -31,7 +31,7 @@ def flow_table(values: Any, column: int, width: int = WIDTH) -> str:
 
 def _flow(rows: list, ndim: int, column: int, width: int) -> str:
     if ndim == 1:
-        return _row([repr(float(x)) for x in rows], column, width)
+        return _row(list(map(repr, rows)), column, width)
     inner = ",\n".join(
         (" " * (column + 1) if i else "") + _flow(row, ndim - 1, column + 1, width)
         for i, row in enumerate(rows))
@@ -39,6 +39,9 @@ def _flow(rows: list, ndim: int, column: int, width: int) -> str:
 
 
 def _row(numbers: list[str], column: int, width: int) -> str:
+    one = "[" + ", ".join(numbers) + "]"
+    if column + len(one) <= width:  # most rows: one line
+        return one
     lines: list[str] = []
     line = "["
     for i, text in enumerate(numbers):
