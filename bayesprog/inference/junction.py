@@ -101,12 +101,18 @@ def _elimination(scopes: list[tuple[str, ...]], names: list[str], cards: dict[st
         weight = cards[a] * math.prod(cards[b] for b in around)
         if heuristic == "weight":
             return (weight,)
-        listed = list(around)
-        pairs = [(x, y) for i, x in enumerate(listed) for y in listed[i + 1:]
-                 if y not in adjacent[x]]
-        if heuristic == "fill":
-            return (len(pairs), weight)
-        return (sum(cards[x] * cards[y] for x, y in pairs), weight)
+        # the pairs of neighbours not joined yet: all pairs less those joined (each joined
+        # pair seen from both ends), by set intersections rather than pair by pair
+        sizes = {cards[x] for x in around}
+        if heuristic == "fill" or len(sizes) == 1:  # (weighed alike: the count, weighed)
+            joined = sum(len(adjacent[x] & around) for x in around) // 2
+            fill = len(around) * (len(around) - 1) // 2 - joined
+            return (fill if heuristic == "fill" else fill * sizes.pop() ** 2, weight)
+        total = sum(cards[x] for x in around)
+        every = (total * total - sum(cards[x] * cards[x] for x in around)) // 2
+        joined = sum(cards[x] * sum(cards[y] for y in adjacent[x] & around)
+                     for x in around) // 2
+        return (every - joined, weight)
 
     heap = [(score(a), rank[a], a) for a in names]
     heapq.heapify(heap)
