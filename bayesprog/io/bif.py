@@ -58,6 +58,9 @@ from bayesprog.limits import check_size
 
 __all__ = ["BifError", "Network", "Table", "check_sizes_as_pgmpy_reads", "read_bif"]
 
+#: BIF's word for a CPT given whole ("table 0.1, 0.9;"), beside rows keyed by parent states
+_TABLE_WORD = "table"
+
 
 class BifError(BayesprogError, ValueError):
     """A BIF text this reader does not read, at ``line``:``column`` (1-based)."""
@@ -360,12 +363,12 @@ class _Reader:
                     at = statement.start(group) + _first_not_number(statement[group])
                     return self.fail(at, f"{kind}: expected a number, found {self.found(at)}")
                 found = len(statement[group].replace(",", " ").split())
-                if kind != "table" and found != count:
+                if kind != _TABLE_WORD and found != count:
                     return self.fail(at, f"{kind}: expected {count} numbers (one per state), "
                                          f"found {found}")
                 kinds.append(kind)
             pos = statement.end()
-        if "table" in kinds and len(kinds) > 1:
+        if _TABLE_WORD in kinds and len(kinds) > 1:
             return self.fail(start, "expected one table statement or rows, found "
                                     f"{' and '.join(sorted(set(kinds)))}")
         return self.fail(start, "expected (STATE, ...) numbers; rows, or table numbers;")
