@@ -7,6 +7,8 @@ from __future__ import annotations
 import hashlib
 import itertools
 import logging
+import math
+import re
 import warnings
 from pathlib import Path
 
@@ -686,3 +688,200 @@ def test_a_variable_takes_the_states_of_its_data_and_is_learned_anew(tmp_path, c
     assert main(["learn", str(source), str(csv), "-o", str(tmp_path / "x.yaml"), "--column",
                  "material=M", "--states-from-data", "M", "--freeze", "P(M)"]) == 2
     assert "P(M) keeps its values" in capsys.readouterr().err
+
+
+# --- bnlearn networks: pgmpy's tables, the plain CSV reader and the in-place writer ----------
+
+EXAMPLES = Path(__import__("pgmpy").__file__).parent / "utils" / "example_models"
+
+
+def _imported(tmp_path: Path, name: str, pseudo_counts: float | None) -> Path:
+    """``bayesprog import`` of pgmpy's bnlearn network, its tables given pseudo-counts."""
+    path = tmp_path / f"{name}.yaml"
+    assert main(["import", str(EXAMPLES / f"{name}.bif.gz"), "-o", str(path)]) == 0
+    if pseudo_counts is not None:
+        text = path.read_text()
+        learned = re.sub(r"(?m)^(\s*)form: table$",
+                         rf"\1form: table\n\1learn: {{pseudo_counts: {pseudo_counts}}}", text)
+        assert learned.count("pseudo_counts") == text.count("form: table")
+        path.write_text(learned)
+    return path
+
+
+def _sampled(name: str, rows: int, seed: int = 1) -> pd.DataFrame:
+    from pgmpy.sampling import BayesianModelSampling
+    from pgmpy.utils import get_example_model
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = get_example_model(name)
+        return BayesianModelSampling(model).forward_sample(size=rows, seed=seed,
+                                                           show_progress=False).astype(str)
+
+
+@pytest.mark.parametrize("name, rows, pseudo_counts", [
+    ("asia", 10_000, None), ("asia", 10_000, 1.0), ("alarm", 10_000, None),
+    ("alarm", 10_000, 0.5)])
+def test_bnlearn_tables_equal_pgmpy_with_and_without_pseudo_counts(tmp_path, name, rows,
+                                                                   pseudo_counts):
+    """Maximum likelihood against pgmpy's DiscreteMLE, and the posterior mean under uniform
+    Dirichlet pseudo-counts against its DiscreteBayesianEstimator, to 1e-12. Without
+    pseudo-counts a table with a parent configuration no row shows is undefined (ours says
+    so): those terms are frozen, the others compared."""
+    from pgmpy.models import DiscreteBayesianNetwork
+    from pgmpy.parameter_estimator import DiscreteBayesianEstimator, DiscreteMLE
+
+    program = bayesprog.load(_imported(tmp_path, name, pseudo_counts))
+    frame = _sampled(name, rows)
+    csv = tmp_path / f"{name}.csv"
+    frame.to_csv(csv, index=False)
+    states = {n: list(v.states) for n, v in program.variables.items()}
+    freeze = []
+    if pseudo_counts is None:
+        for term in program.terms:
+            parents = [p.name for p in term.parents]
+            seen = len(frame.groupby(parents).size()) if parents else 1
+            if seen < math.prod(len(states[p]) for p in parents):
+                freeze.append(str(term.expression))
+        assert len(freeze) < len(program.terms) // 2
+    fit = program.fit(csv, freeze=freeze)
+    again = program.fit(frame, freeze=freeze)  # a data frame: the same counts
+    network = DiscreteBayesianNetwork([(p.name, t.child.name) for t in program.terms
+                                       for p in t.parents])
+    network.add_nodes_from(program.variables)
+    estimator = (DiscreteMLE(state_names=states) if pseudo_counts is None else
+                 DiscreteBayesianEstimator(prior_type="dirichlet", pseudo_counts=pseudo_counts,
+                                           state_names=states))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logging.disable(logging.WARNING)
+        try:
+            cpds = {c.variable: c for c in estimator.fit(network, frame).parameters_}
+        finally:
+            logging.disable(logging.NOTSET)
+    compared = 0
+    for term in fit.program.terms:
+        label = str(term.expression)
+        if label in freeze:
+            continue
+        cpd = cpds[term.child.name]
+        parents = [p.name for p in term.parents]
+        # pgmpy's [child, *evidence] in its state order, to ours: [*parents, child]
+        reference = np.transpose(np.asarray(cpd.values),
+                                 [cpd.variables.index(p) for p in parents] + [0])
+        for axis, var in enumerate([*parents, term.child.name]):
+            reference = np.take(reference, [cpd.state_names[var].index(s) for s in states[var]],
+                                axis=axis)
+        ours = term.params["table"].array
+        np.testing.assert_allclose(ours, reference, rtol=0, atol=1e-12, err_msg=label)
+        np.testing.assert_array_equal(again.program.term(label).params["table"].array, ours)
+        compared += 1
+    assert compared == len(program.terms) - len(freeze)
+    assert fit.record.log_likelihood == pytest.approx(again.record.log_likelihood, rel=1e-12)
+
+
+def _csv_cases(rng: np.random.Generator) -> list[tuple[str, str]]:
+    """CSV texts with what a plain reader could get wrong: long and non-ASCII values, a value
+    first met late, empty cells, spaces after the delimiter, CRLF, a BOM, no final newline."""
+    cases = []
+    for case in range(12):
+        names = ["short", "longer_than_eight", "a_value_longer_than_sixteen_bytes_x", "ünï"]
+        states = {"A": ["y", "n"], "B": ["state_one", "state_two", "state_three"],
+                  "C": [names[2] + str(i) for i in range(3)], "D": ["é", "日本", "ü" * 9]}
+        rows = int(rng.choice([0, 1, 7, 1500, 2500]))
+        lines = [", ".join(states) if case % 3 == 0 else ",".join(states)]
+        for r in range(rows):
+            cells = [rng.choice(v) if rng.random() > 0.05 else "" for v in states.values()]
+            if case % 4 == 1 and r == rows - 1:
+                cells[1] = "state_four"  # not among the first rows' values
+            if case % 5 == 2:
+                cells = [" " + c for c in cells]
+            cells.append(repr(float(rng.normal())) if rng.random() > 0.1 else "")
+            lines.append(",".join(str(c) for c in cells))
+        lines[0] += ",X" if case % 3 else ", X"
+        newline = "\r\n" if case % 2 else "\n"
+        text = ("\ufeff" if case == 5 else "") + newline.join(lines)
+        cases.append((text + (newline if case % 6 else ""), f"case{case}"))
+    return cases
+
+
+def test_plain_csv_reading_equals_the_csv_module(tmp_path, monkeypatch):
+    """The numpy reader of plain CSV files codes every file as the csv module's reading does,
+    errors included (the row and the value named)."""
+    import bayesprog.learning.data as data_module
+    from bayesprog.learning.plain_csv import read_plain_csv
+
+    long = ", ".join(f"a_value_longer_than_sixteen_bytes_x{i}" for i in range(3))
+    program = bayesprog.loads(f"""\
+bayesprog: 1
+variables:
+  A: {{states: [y, n]}}
+  B: {{states: [state_one, state_two, state_three]}}
+  C: {{states: [{long}]}}
+  D: {{states: [é, 日本, üüüüüüüüü]}}
+  X: {{continuous: [-.inf, .inf]}}
+decomposition:
+  - {{term: P(A), form: table, table: [0.5, 0.5]}}
+  - {{term: P(B), form: table, table: [0.3, 0.3, 0.4]}}
+  - {{term: P(C), form: table, table: [0.3, 0.3, 0.4]}}
+  - {{term: P(D), form: table, table: [0.3, 0.3, 0.4]}}
+  - {{term: P(X), form: normal, mean: 0, sigma: 1}}
+""")
+
+    def read(path: Path) -> tuple:
+        try:
+            data = data_module.load_data(path, program.variables)
+        except DataError as exc:
+            return ("error", str(exc))
+        return (data.rows, {k: v.tolist() for k, v in data.discrete.items()},
+                {k: np.nan_to_num(v, nan=-1e300).tolist() for k, v in data.continuous.items()})
+
+    for text, name in _csv_cases(np.random.default_rng(4)):
+        path = tmp_path / f"{name}.csv"
+        path.write_bytes(text.encode("utf-8"))
+        assert read_plain_csv(path.read_bytes(), ",") is not None, name  # the fast way is taken
+        fast = read(path)
+        with monkeypatch.context() as patch:
+            patch.setattr(data_module, "read_plain_csv", lambda raw, sep: None)
+            assert read(path) == fast, name
+
+
+def test_tables_written_in_place_equal_the_round_trip_and_keep_the_file(tmp_path, monkeypatch):
+    """A file of nested lists gets its numbers replaced where they stand (a comment inside a
+    table stays); the values, and the record appended then continued, equal ruamel's round
+    trip's."""
+    import bayesprog.learning.inplace as inplace
+
+    source = _imported(tmp_path, "asia", 1.0)
+    lines = source.read_text().split("\n")
+    first_table = next(i for i, line in enumerate(lines) if "table:" in line)
+    lines[first_table] += "  # learned"  # a comment on a table's line, whatever its layout
+    text = "\n".join(lines)
+    source.write_text(text)
+    frame = _sampled("asia", 3000)
+    csvs = []
+    for i, part in enumerate((frame[:2000], frame[2000:])):
+        csvs.append(tmp_path / f"part{i}.csv")
+        part.to_csv(csvs[-1], index=False)
+    written = {}
+    for way in ("in place", "round trip"):
+        with monkeypatch.context() as patch:
+            if way == "round trip":
+                patch.setattr(inplace, "splice", lambda *args: None)
+            first = tmp_path / f"first {way}.yaml"
+            bayesprog.load(source).fit(csvs[0]).save(first)
+            second = tmp_path / f"second {way}.yaml"
+            bayesprog.load(first).fit(csvs[1]).save(second)
+            written[way] = (first.read_text(), bayesprog.load(second))
+    first, fitted = written["in place"]
+    # outside the numbers and the record, the file as it was
+    assert first.split("\n# Fits that set")[0].count("\n") == text.count("\n")
+    assert first.split("\n")[first_table].endswith("  # learned")
+    assert re.sub(r"[-+.e0-9]+", "#", first.split("\n# Fits that set")[0]) == re.sub(
+        r"[-+.e0-9]+", "#", text.rstrip("\n") + "\n")
+    reference = written["round trip"][1]
+    for term in reference.terms:
+        np.testing.assert_array_equal(fitted.term(str(term.expression)).params["table"].array,
+                                      term.params["table"].array)
+    assert [r.model_dump() for r in fitted.learned] == [r.model_dump() for r in reference.learned]
+    assert len(fitted.learned) == 2 and fitted.learned[-1].rows_supporting == 3000

@@ -1,14 +1,19 @@
 """Data sets for learning: one column per variable, one row per observation, missing values
 allowed. Read from CSV or Parquet files, a pandas DataFrame or a mapping of columns, and checked
-against a program's variables with the file, row and column of every bad value."""
+against a program's variables with the file, row and column of every bad value.
+
+A plain CSV file (no quotes, a row per line) is split by numpy (:mod:`.plain_csv`), any other
+by the csv module; either way each column comes as codes into its distinct values, and only the
+distinct values are looked up among the variable's states."""
 
 from __future__ import annotations
 
 import csv as csvlib
+import functools
 import hashlib
 import io
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import ArgumentError, BayesprogError, short_repr
+from bayesprog.learning.plain_csv import read_plain_csv
 from bayesprog.variables import Continuous, Discrete, Variable
 
 
@@ -109,19 +115,22 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
 def load_data(source: Any, variables: Mapping[str, Variable],
               rename: Mapping[str, str] | None = None) -> Data:
     """Read ``source`` and code its columns for ``variables`` (``rename``: the variable each
-    differently named column holds, ``{"material": "M"}``); every problem names its place."""
-    frame, name, digest, csv = read_frame(source)
+    differently named column holds, ``{"material": "M"}``); every problem names its place.
+
+    Each column is coded through its distinct values: a value is looked up once, however many
+    rows hold it, and the rows take its code by indexing."""
+    read = _read_columns(source)
+    name = read.source
+    columns = list(read.names)
     if rename:
-        found = [str(c) for c in frame.columns]
         for column, variable in rename.items():
-            if column not in found:
+            if column not in columns:
                 raise DataError(f"{name}: no column {column!r} to read as {variable} (columns: "
-                                f"{', '.join(found)})")
+                                f"{', '.join(columns)})")
             if variable not in variables:
                 raise DataError(f"column {column!r}: the program has no variable {variable!r} "
                                 f"(variables: {', '.join(variables)})")
-        frame = frame.rename(columns=dict(rename))
-    columns = [str(c) for c in frame.columns]
+        columns = [rename.get(c, c) for c in columns]
     if len(set(columns)) != len(columns):
         dup = next(c for c in columns if columns.count(c) > 1)
         raise DataError(f"{name}: column {dup!r} appears twice")
@@ -130,19 +139,81 @@ def load_data(source: Any, variables: Mapping[str, Variable],
             raise DataError(f"{name}: column {column!r} (column {i + 1}): the program has no "
                             f"variable {column!r}; expected columns among "
                             f"{', '.join(variables)}")
-    data = Data(name, digest, int(len(frame)), {}, {}, csv)
+    data = Data(name, read.sha256, read.rows, {}, {}, read.csv)
     for column, var in variables.items():
         if column not in columns:
             continue
-        values = frame[column].to_numpy(dtype=object)
+        codes, values = read.column(columns.index(column))
         if isinstance(var, Discrete):
-            data.discrete[column] = _codes(values, var, data, column)
+            data.discrete[column] = _coded(codes, values, data, column, _state_reader(var),
+                                           missing=-1)
         elif var.index is not None:
             raise DataError(f"{name}: column {column!r}: {column} is a field (one value per "
                             f"state of {var.index}); fields are not learned from columns")
         else:
-            data.continuous[column] = _numbers(values, var, data, column)
+            data.continuous[column] = _coded(codes, values, data, column,
+                                             functools.partial(_number, var=var),
+                                             missing=np.nan)
     return data
+
+
+@dataclass
+class _Columns:
+    """A data set's columns, each as codes into its distinct values (-1: a null) by
+    ``column(i)``: the values as read, looked up once each."""
+
+    source: str
+    sha256: str
+    rows: int
+    csv: bool
+    names: list[str]
+    column: Callable[[int], tuple[np.ndarray, Sequence[Any]]]
+
+
+def _read_columns(source: Any) -> _Columns:
+    if isinstance(source, (str, os.PathLike)):
+        fast = _plain_csv(Path(source))
+        if fast is not None:
+            return fast
+    frame, name, digest, csv = read_frame(source)
+    return _Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
+                    lambda i: _factorised(frame.iloc[:, i]))
+
+
+def _factorised(series: Any) -> tuple[np.ndarray, Any]:
+    """A column as codes into its distinct values, nulls coded -1. A column of mixed types
+    keeps each row's own value (1, 1.0 and True are equal keys to a hash table, not to a
+    state's name)."""
+    import pandas as pd
+
+    if isinstance(series.dtype, pd.CategoricalDtype):
+        return (series.cat.codes.to_numpy(np.int64),
+                series.cat.categories.to_numpy(dtype=object))
+    if series.dtype == object and pd.api.types.infer_dtype(series, skipna=True) not in (
+            "string", "empty"):
+        return np.arange(len(series)), series.to_numpy(dtype=object)
+    codes, uniques = pd.factorize(series)
+    return codes.astype(np.int64, copy=False), np.asarray(uniques, dtype=object)
+
+
+def _plain_csv(path: Path) -> _Columns | None:
+    """A plain CSV file read with numpy (:mod:`bayesprog.learning.plain_csv`); None for
+    another file, which the csv module reads."""
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".txt", ".tsv"):
+        return None
+    try:
+        raw = path.read_bytes()
+    except OSError:
+        return None
+    table = read_plain_csv(raw, "\t" if suffix == ".tsv" else ",")
+    if table is None:
+        return None
+    columns = [table.column(i) for i in range(len(table.names))]
+    if any(c is None for c in columns):
+        return None
+    return _Columns(str(path), hashlib.sha256(raw).hexdigest(), table.rows, True, table.names,
+                    columns.__getitem__)  # type: ignore[arg-type]
 
 
 def _missing(value: Any) -> bool:
@@ -157,52 +228,70 @@ def _missing(value: Any) -> bool:
 _MISSING_NUMBERS = {"na", "nan", "n/a", "null", "none", "-"}
 
 
-def _codes(values: np.ndarray, var: Discrete, data: Data, column: str) -> np.ndarray:
-    lookup = {s: i for i, s in enumerate(var.states)}
-    out = np.full(len(values), -1, dtype=np.int64)
-    for row, value in enumerate(values):
-        if _missing(value):
-            continue
-        if var.kind == "bins":  # a number falls in its bin; a bin's name is accepted too
-            try:
-                out[row] = var.index_of(value)
-            except KeyError:
-                raise DataError(f"{data.where(row, column)}: {short_repr(value)} is neither a "
-                                f"number inside the support of {var.name} nor one of its bins "
-                                f"{var.describe_states(10)}") from None
-            continue
-        key = str(value).strip()
-        if isinstance(value, (bool, np.bool_)):
-            key = key if key in lookup else key.lower()
-        elif isinstance(value, float) and value.is_integer():
-            key = str(int(value))
-        elif var.kind == "range" and key not in lookup:
-            try:
-                number = float(key)
-            except ValueError:
-                number = np.nan
-            if np.isfinite(number) and number.is_integer():
-                key = str(int(number))  # a range's value written 3.0
-        index = lookup.get(key)
-        if index is None:
-            raise DataError(f"{data.where(row, column)}: unknown state {short_repr(key)} of "
-                            f"{var.name}: expected one of {var.describe_states(10)}")
-        out[row] = index
-    return out
+class _BadValue(Exception):
+    """A value that cannot be read for its variable (the message, without its place)."""
 
 
-def _numbers(values: np.ndarray, var: Continuous, data: Data, column: str) -> np.ndarray:
-    out = np.full(len(values), np.nan)
-    for row, value in enumerate(values):
-        if _missing(value) or (isinstance(value, str) and value.strip().lower() in _MISSING_NUMBERS):
-            continue
+def _coded(codes: np.ndarray, values: Sequence[Any], data: Data, column: str,
+           read: Callable[[Any], float], missing: float) -> np.ndarray:
+    """Each distinct value read once by ``read`` (a state's index, or a number; ``missing``
+    for a missing value), the rows coded by indexing; a bad value is said at the first row
+    holding it."""
+    table = np.empty(len(values) + 1, dtype=np.int64 if missing == -1 else float)
+    table[-1] = missing  # the null code -1 indexes this
+    bad: dict[int, str] = {}
+    for j, value in enumerate(values):
         try:
-            x = float(value)
-        except (TypeError, ValueError):
-            raise DataError(f"{data.where(row, column)}: expected a number for continuous "
-                            f"{var.name}, found {short_repr(value)}") from None
-        if not np.isfinite(x) or not var.low <= x <= var.high:
-            raise DataError(f"{data.where(row, column)}: {x} is outside the support "
-                            f"[{var.low}, {var.high}] of {var.name}")
-        out[row] = x
-    return out
+            table[j] = read(value)
+        except _BadValue as exc:
+            bad[j] = str(exc)
+    if bad:
+        row = int(np.flatnonzero(np.isin(codes, list(bad)))[0])
+        raise DataError(f"{data.where(row, column)}: {bad[int(codes[row])]}")
+    return table[codes]
+
+
+def _state_reader(var: Discrete) -> Callable[[Any], int]:
+    lookup = {s: i for i, s in enumerate(var.states)}
+    return lambda value: _state_index(value, var, lookup)
+
+
+def _state_index(value: Any, var: Discrete, lookup: Mapping[str, int]) -> int:
+    if _missing(value):
+        return -1
+    if var.kind == "bins":  # a number falls in its bin; a bin's name is accepted too
+        try:
+            return var.index_of(value)
+        except KeyError:
+            raise _BadValue(f"{short_repr(value)} is neither a number inside the support of "
+                            f"{var.name} nor one of its bins {var.describe_states(10)}") from None
+    key = str(value).strip()
+    if isinstance(value, (bool, np.bool_)):
+        key = key if key in lookup else key.lower()
+    elif isinstance(value, float) and value.is_integer():
+        key = str(int(value))
+    elif var.kind == "range" and key not in lookup:
+        try:
+            number = float(key)
+        except ValueError:
+            number = np.nan
+        if np.isfinite(number) and number.is_integer():
+            key = str(int(number))  # a range's value written 3.0
+    index = lookup.get(key)
+    if index is None:
+        raise _BadValue(f"unknown state {short_repr(key)} of {var.name}: expected one of "
+                        f"{var.describe_states(10)}")
+    return index
+
+
+def _number(value: Any, var: Continuous) -> float:
+    if _missing(value) or (isinstance(value, str) and value.strip().lower() in _MISSING_NUMBERS):
+        return np.nan
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise _BadValue(f"expected a number for continuous {var.name}, found "
+                        f"{short_repr(value)}") from None
+    if not np.isfinite(x) or not var.low <= x <= var.high:
+        raise _BadValue(f"{x} is outside the support [{var.low}, {var.high}] of {var.name}")
+    return x

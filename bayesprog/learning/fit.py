@@ -5,8 +5,11 @@ variable is hidden (no column), or a mixture is learned.
 Rows are grouped by which discrete variables they miss. For each group the E-step evaluates
 every term of the decomposition on the group's rows over the joint states of the missing
 variables, so the posterior of each learned term's family, and each row's likelihood, are
-exact. The M-step hands the expected statistics to each form's estimator. Statistics add up
-over data sets: a fit continues from a fitted file's statistics with more data.
+exact. Rows that miss nothing the fit needs are not enumerated: each table's family is
+counted once (np.bincount of its configurations' mixed-radix codes), its statistics are those
+counts and its share of the log-likelihood is their dot product with its log values. The
+M-step hands the expected statistics to each form's estimator. Statistics add up over data
+sets: a fit continues from a fitted file's statistics with more data.
 """
 
 from __future__ import annotations
@@ -18,7 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import networkx as nx
 import numpy as np
 
 from bayesprog.errors import QuestionError
@@ -59,6 +61,27 @@ class _Learned:
     estimator: Estimator
     options: LearnOptions
     prior: Stats | None
+
+
+def _missing_patterns(columns: Sequence[np.ndarray], rows: int
+                      ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The patterns of missing values among ``columns`` (coded, -1 where missing), each with its
+    rows, in np.unique's order of the patterns; only the columns missing in some rows but not
+    all tell the groups apart."""
+    missing = [c < 0 for c in columns]
+    constant = np.array([bool(m[0]) if rows else False for m in missing], dtype=bool)
+    partial = [j for j, m in enumerate(missing) if m.any() and not m.all()]
+    if not partial:
+        return [(constant, np.arange(rows))]
+    packed = np.packbits(np.stack([missing[j] for j in partial], axis=1), axis=1)
+    patterns, inverse = np.unique(packed, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    out = []
+    for g, bits in enumerate(patterns):
+        pattern = constant.copy()
+        pattern[partial] = np.unpackbits(bits, count=len(partial)).astype(bool)
+        out.append((pattern, np.nonzero(inverse == g)[0]))
+    return out
 
 
 class _Group:
@@ -197,12 +220,12 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
 class _Em:
     def __init__(self, variables: Mapping[str, Variable], model: Sequence[Term],
                  todo: list[_Learned], data: Data, used: np.ndarray):
+        everything = len(used) == data.rows  # complete rows are not copied
         self.variables, self.model, self.todo, self.data, self.used = (
-            variables, model, todo, data.take(used), used)
+            variables, model, todo, data if everything else data.take(used), used)
         discrete = [n for n, v in variables.items() if isinstance(v, Discrete)]
-        codes = np.stack([self.data.discrete.get(n, np.full(self.data.rows, -1))
-                          for n in discrete], axis=1) if discrete else np.zeros((self.data.rows, 0))
-        self.codes = {n: codes[:, i] for i, n in enumerate(discrete)}
+        rows = self.data.rows
+        self.codes = {n: self.data.discrete.get(n, np.full(rows, -1)) for n in discrete}
         for term in model:
             parents = {p.name for p in term.parents}
             inputs = [n for n, v in term.params.items() if isinstance(v, InputRef) or (
@@ -211,18 +234,16 @@ class _Em:
                 raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
                                 "input, so the program cannot be evaluated on data rows")
         # the decomposition's DAG: which missing variables a row's likelihood depends on
-        self.graph = nx.DiGraph()
+        self.parents: dict[str, set[str]] = {}
         for term in model:
-            self.graph.add_node(term.child.name)
-            self.graph.add_edges_from((p.name, term.child.name) for p in term.parents)
+            self.parents.setdefault(term.child.name, set()).update(p.name for p in term.parents)
         observed_continuous = set(self.data.continuous)
-        patterns, inverse = np.unique(codes < 0, axis=0, return_inverse=True)
         self.groups = []
-        for g, pattern in enumerate(patterns):
+        for pattern, rows_of in _missing_patterns([self.codes[n] for n in discrete], rows):
             missing = {n for n, miss in zip(discrete, pattern, strict=True) if miss}
-            rows = np.nonzero(inverse.ravel() == g)[0]
             seen = {n for n in discrete if n not in missing} | {
-                n for n in observed_continuous if np.any(~np.isnan(self.data.continuous[n][rows]))}
+                n for n in observed_continuous
+                if np.any(~np.isnan(self.data.continuous[n][rows_of]))}
             needed = self._needed(seen)
             hidden = tuple(n for n in discrete if n in missing and n in needed)
             cards = tuple(variables[n].card for n in hidden)  # type: ignore[union-attr]
@@ -233,9 +254,12 @@ class _Em:
                     f"states to sum over (more than {JOINT_LIMIT:,}); give values for some of "
                     "them, or freeze the terms that tie them to the data")
             terms = [t for t in model if t.child.name in needed or t.child.name in seen]
-            self.groups.append(_Group(rows, hidden, cards, terms))
+            self.groups.append(_Group(rows_of, hidden, cards, terms))
         learns_mixture = any(i.estimator.mixture for i in todo)
         self.iterative = learns_mixture or any(g.hidden for g in self.groups)
+        #: counts of a family's configurations on a chunk of a group's rows, by (group,
+        #: first row, family): what the data say, whatever the parameters, so counted once
+        self._counts: dict[tuple[int, int, tuple[str, ...]], np.ndarray] = {}
 
     def _needed(self, seen: set[str]) -> set[str]:
         """The variables a row's likelihood and the learned terms' posteriors depend on: the
@@ -248,9 +272,12 @@ class _Em:
             if not term.form.is_normalized(term.child):
                 roots |= {term.child.name} | {p.name for p in term.parents}
         needed = set(roots)
-        for name in roots:
-            if name in self.graph:
-                needed |= nx.ancestors(self.graph, name)
+        stack = list(roots)
+        while stack:  # the roots' ancestors
+            for parent in self.parents.get(stack.pop(), ()):
+                if parent not in needed:
+                    needed.add(parent)
+                    stack.append(parent)
         return needed
 
     def start(self, item: _Learned, k: int, params: Params) -> Params:
@@ -298,12 +325,14 @@ class _Em:
         previous = -np.inf
         converged = not self.iterative
         iterations = 0
-        from tqdm import tqdm
+        bar = None
+        if self.iterative and sys.stderr.isatty():  # tqdm imported only to be shown
+            from tqdm import tqdm
 
-        bar = tqdm(total=max_iter, desc="EM", unit="iteration", leave=False,
-                   disable=not (self.iterative and sys.stderr.isatty()))
+            bar = tqdm(total=max_iter, desc="EM", unit="iteration", leave=False)
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
-            bar.update(1)
+            if bar is not None:
+                bar.update(1)
             # one pass needs no starting values: rows are not checked against them
             ll, stats = self.e_step(params, strict=self.iterative)
             objective = ll + self.log_prior(params)
@@ -314,7 +343,8 @@ class _Em:
                 converged = True
                 break
             previous = objective
-        bar.close()
+        if bar is not None:
+            bar.close()
         ll, stats = self.e_step(params)
         total = {i.term.label: self._merged(i, stats[i.term.label]) for i in self.todo}
         return params, ll, iterations, converged, total
@@ -349,18 +379,23 @@ class _Em:
                ) -> tuple[float, dict[str, Stats]]:
         total = 0.0
         stats: dict[str, Stats] = {}
-        for group in self.groups:
-            size = max(1, math.prod(group.cards), self._row_width(params))
+        for g, group in enumerate(self.groups):
+            size = max(1, math.prod(group.cards), self._row_width(params, bool(group.hidden)))
             step = max(1, JOINT_LIMIT // size)
             for start in range(0, len(group.rows), step):
                 rows = group.rows[start:start + step]
-                total += self._chunk(rows, group, params, stats, strict)
+                total += self._chunk(rows, group, params, stats, strict, (g, start))
         return total, stats
 
-    def _row_width(self, params: dict[str, Params]) -> int:
-        """The most entries one row takes in a term's table (parent states x components)."""
+    def _row_width(self, params: dict[str, Params], hidden: bool = True) -> int:
+        """The most entries one row takes in a term's table (parent states x components); where
+        the rows miss nothing (not ``hidden``), only the tables that differ from row to row
+        count."""
         widest = 1
         for term in self.model:
+            if not hidden and term.child.is_discrete and not any(
+                    isinstance(v, FormulaParam) for v in term.params.values()):
+                continue  # one table for every row, its counts taken by np.bincount
             width = math.prod(v.card for v in term.parents if isinstance(v, Discrete))
             estimator = term.form.estimator(term.child)
             if estimator is not None:
@@ -369,7 +404,12 @@ class _Em:
         return widest
 
     def _chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
-               stats: dict[str, Stats], strict: bool = True) -> float:
+               stats: dict[str, Stats], strict: bool = True,
+               key: tuple[int, int] | None = None) -> float:
+        if not group.hidden and key is not None:
+            total = self._complete_chunk(rows, group, params, stats, key)
+            if total is not None:
+                return total
         n, hidden, cards = len(rows), group.hidden, group.cards
         joint = np.zeros((n,) + cards)
         for term in group.terms:
@@ -398,6 +438,57 @@ class _Em:
         for item in self.todo:
             self._accumulate(item, rows, post, hidden, cards, params, stats)
         return float(row_ll.sum())
+
+    def _complete_chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
+                        stats: dict[str, Stats], key: tuple[int, int]) -> float | None:
+        """Rows that miss no variable the fit needs: a table the same for every row adds its
+        log values times the counts of its cells, and a learned table's statistics are its
+        family's counts (a row's posterior is the row itself). None, with nothing added, when
+        a row has probability zero: the general E-step says which, or leaves it out."""
+        total = 0.0
+        per_row = None
+        for term in group.terms:
+            table = self._log_table(term, rows, params[term.label])
+            if table.shape[0] == 1:
+                counts = self._family_counts(key, term.axes, rows)
+                cells = counts > 0
+                logs = table[0][cells]
+                if not np.all(np.isfinite(logs)):
+                    return None
+                total += float(counts[cells] @ logs)
+            else:
+                values = self._gather(table, term, rows, (), ())
+                per_row = values if per_row is None else per_row + values
+        if per_row is not None:
+            if not np.all(np.isfinite(per_row)):
+                return None
+            total += float(per_row.sum())
+        ones = np.ones(len(rows))
+        for item in self.todo:
+            term = item.term
+            if not term.child.is_discrete:
+                self._accumulate(item, rows, ones, (), (), params, stats)
+                continue
+            new = item.estimator.counts(term, self._family_counts(key, term.axes, rows))
+            old = stats.get(term.label)
+            stats[term.label] = new if old is None else item.estimator.merge(old, new)
+        return total
+
+    def _family_counts(self, key: tuple[int, int], axes: tuple[str, ...],
+                       rows: np.ndarray) -> np.ndarray:
+        """How many of ``rows`` (observed on ``axes``) show each configuration of ``axes``:
+        np.bincount of the configurations' mixed-radix codes, counted once per chunk."""
+        counts = self._counts.get((*key, axes))
+        if counts is None:
+            cards = [self.variables[a].card for a in axes]  # type: ignore[union-attr]
+            every = len(rows) == self.data.rows  # the rows in order: no copy of the columns
+            code = np.zeros(len(rows), dtype=np.int64)
+            for a, card in zip(axes, cards, strict=True):
+                code *= card
+                code += self.codes[a] if every else self.codes[a][rows]
+            counts = np.bincount(code, minlength=math.prod(cards)).reshape(cards).astype(float)
+            self._counts[(*key, axes)] = counts
+        return counts
 
     def _log_table(self, term: Term, rows: np.ndarray, params: Params) -> np.ndarray:
         """The term's log values on these rows: ``[rows or 1, *cards of term.axes]`` (0 where a

@@ -1,6 +1,7 @@
 """Writing a fitted program: the input file with its learned parameters replaced in place and
-the fit's record appended, read and written as a round trip so that comments, key order and
-layout stay as the author wrote them."""
+the fit's record appended, so that comments, key order and layout stay as the author wrote
+them: number by number in the text where the values are nested lists
+(:mod:`bayesprog.learning.inplace`), else read and written as a round trip by ruamel.yaml."""
 
 from __future__ import annotations
 
@@ -11,17 +12,17 @@ import re
 from collections.abc import Collection, Mapping, MutableMapping
 from decimal import Decimal
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from ruamel.yaml import YAML
-from ruamel.yaml.comments import CommentedMap, CommentedSeq
-from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
 from bayesprog.expressions import canonical, parse_expression
 from bayesprog.forms import ParamValue
 from bayesprog.records import FitRecord
 from bayesprog.variables import Discrete, Variable
+
+if TYPE_CHECKING:  # ruamel.yaml is imported by the round trip, when a file needs it
+    from ruamel.yaml import YAML
 
 #: the most significant digits a value is written with where it is rounded (a tuned number;
 #: learned parameters are written as fitted, or rounded to the digits their data supports, see
@@ -37,6 +38,8 @@ FLOW_WIDTH = 80
 
 
 def _yaml() -> YAML:
+    from ruamel.yaml import YAML
+
     yaml = YAML()
     yaml.preserve_quotes = True
     yaml.width = 4096  # never re-wrap the author's lines
@@ -50,6 +53,8 @@ def _number(x: float) -> float | int:
 
 def _flow(value: Any) -> Any:
     """Nested lists as YAML flow sequences ([a, b]) at every level; anything else as it is."""
+    from ruamel.yaml.comments import CommentedSeq
+
     if not isinstance(value, list):
         return value
     seq = CommentedSeq([_flow(v) for v in value])
@@ -138,6 +143,7 @@ def _node(value: ParamValue, variables: Mapping[str, Variable], old: Any,
     block style of the node it replaces, and a row written keyed by the child's states stays so.
     A key names its variable (``tub=yes``) where the old key did, or where another variable of
     the ``term`` has the same states, as the loader asks."""
+    from ruamel.yaml.comments import CommentedMap
 
     def ambiguous(var: Discrete) -> bool:
         return any(isinstance(other := variables.get(name), Discrete) and other.name != var.name
@@ -187,6 +193,8 @@ def _key(var: Discrete, state: str, named: bool = False) -> Any:
     """A state as a mapping key: a range's values as numbers, names quoted where a YAML reader
     would take them for something else; ``named``, the key names its variable
     (``tub=yes``)."""
+    from ruamel.yaml.scalarstring import DoubleQuotedScalarString
+
     if named:
         key = f"{var.name}={state}"
         return key if _PLAIN_NAMED.match(key) else DoubleQuotedScalarString(key)
@@ -212,7 +220,9 @@ def _keep(old: Any, new: Any) -> Any:
     return new
 
 
-def _record(record: FitRecord) -> CommentedMap:
+def _record(record: FitRecord) -> Any:
+    from ruamel.yaml.comments import CommentedMap
+
     out = CommentedMap()
     for key, value in record.model_dump().items():
         if key == "digits" and value is None:  # written as fitted
@@ -248,13 +258,54 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
     ``digits``: then to that many (``locations``: each term's location and scale parameters,
     the location written to a twentieth of its standard error instead); ``simplex``: the
     parameters of each term whose last axis is a distribution, kept summing to one as
-    written."""
+    written.
+
+    Values written as nested lists are replaced number by number in the text
+    (:func:`bayesprog.learning.inplace.splice`); a file that needs more (keys naming states,
+    new states) is read and written as a round trip."""
+    values = _written_values(params, record, simplex or {}, locations or {})
+    if not states:
+        from bayesprog.learning.inplace import splice
+
+        arrays = {label: {name: value.array for name, value in named.items()}
+                  for label, named in values.items()}
+        spliced = splice(text, arrays, record.model_dump())
+        if spliced is not None:
+            return spliced
+    return _round_trip(text, values, variables, record, states or {})
+
+
+def _written_values(params: Mapping[str, Mapping[str, ParamValue]], record: FitRecord,
+                    simplex: Mapping[str, Collection[str]],
+                    locations: Mapping[str, tuple[str, str]]
+                    ) -> dict[str, dict[str, ParamValue]]:
+    """The learned values as they are written: as fitted, or rounded as the record says."""
     digits = record.digits
-    simplex, locations = simplex or {}, locations or {}
     rows = record.rows_supporting or record.rows_used
+    out: dict[str, dict[str, ParamValue]] = {}
+    for label, fitted in params.items():
+        location, scale = locations.get(label, (None, None))
+        out[label] = {}
+        for name, value in fitted.items():
+            spread = fitted.get(scale) if name == location and scale else None
+            if digits is not None and spread is not None and spread.axes in ((), value.axes):
+                array = rounded_location(value.array, spread.array, rows)
+            else:
+                array = rounded(value.array, digits or FULL, name in simplex.get(label, ()))
+            out[label][name] = ParamValue(value.axes, array)
+    return out
+
+
+def _round_trip(text: str, values: Mapping[str, Mapping[str, ParamValue]],
+                variables: Mapping[str, Variable], record: FitRecord,
+                states: Mapping[str, list[str]]) -> str:
+    """The file read and written by ruamel.yaml, which keeps its comments, key order and
+    layout: keyed tables are rewritten key by key."""
+    from ruamel.yaml.comments import CommentedSeq
+
     yaml = _yaml()
     doc = yaml.load(text)
-    for name, names in (states or {}).items():
+    for name, names in states.items():
         declaration = doc["variables"][name]
         var = variables[name]
         assert isinstance(var, Discrete)
@@ -262,24 +313,16 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
     done = set()
     for item in doc.get("decomposition", []):
         label = canonical(item.get("term"))
-        if label is None or label not in params:
+        if label is None or label not in values:
             continue
         expression = parse_expression(label)
         child = variables.get(expression.left[0])
         term = (*expression.left, *expression.right)
-        fitted = params[label]
-        location, scale = locations.get(label, (None, None))
-        for name, value in fitted.items():
-            spread = fitted.get(scale) if name == location and scale else None
-            if digits is not None and spread is not None and spread.axes in ((), value.axes):
-                value = ParamValue(value.axes, rounded_location(value.array, spread.array, rows))
-            else:
-                value = ParamValue(value.axes, rounded(value.array, digits or FULL,
-                                                       name in simplex.get(label, ())))
+        for name, value in values[label].items():
             item[name] = _keep(item.get(name), _node(value, variables, item.get(name), child,
                                                      term))
         done.add(label)
-    missing = set(params) - done
+    missing = set(values) - done
     if missing:
         raise ValueError(f"no term {sorted(missing)[0]} in the program text")
     learned = doc.get("learned")
