@@ -665,8 +665,8 @@ def test_query_zero_evidence(capsys, tmp_path):
 
 
 def test_argparse_errors_are_user_errors(capsys):
-    code, out, err = run(capsys, "query", SPRINKLER)  # no question
-    assert code == 2 and "usage" in err
+    code, out, err = run(capsys, "query", SPRINKLER)  # no question (nor --marginals)
+    assert code == 2 and "expected a question" in err and "--marginals" in err
     code, out, err = run(capsys, "frobnicate")
     assert code == 2 and "usage" in err
     code, out, err = run(capsys, "query", SPRINKLER, "why_wet", "--seed", "x")

@@ -44,7 +44,9 @@ _COMMANDS = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: the framework's commands and those of the runner plugins
+    (not loaded when ``argv`` names one of the framework's: a plugin cannot replace them)."""
     parser = argparse.ArgumentParser(
         prog="bayesprog",
         description="Bayesian programs as YAML files: check, show, draw and ask them questions.",
@@ -53,7 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in _COMMANDS:
         add(sub)
-    _plugin_commands(sub)
+    word = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    if word not in sub.choices:
+        _plugin_commands(sub)
     return parser
 
 
@@ -96,7 +100,7 @@ def command() -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    parser = build_parser()
+    parser = build_parser(sys.argv[1:] if argv is None else argv)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse has printed the usage and the problem
