@@ -85,6 +85,9 @@ class JunctionTree:
 #: second on munin (30 million against 16).
 HEURISTICS = ("weight", "fill", "weighted fill")
 HEURISTIC = "weighted fill"
+#: a tree this small (entries in all) by the size alone is kept as it is: choosing by the
+#: fill-in costs more than it could save (hepar2: 3,201 entries against 2,617)
+SMALL_TREE = 1 << 16
 
 
 def _elimination(scopes: list[tuple[str, ...]], names: list[str], cards: dict[str, int],
@@ -149,7 +152,11 @@ def build(scopes: list[tuple[str, ...]], cards: dict[str, int],
     reading ``wanted`` (each of which is in a scope or has its own one-variable clique)."""
     names = list(dict.fromkeys([a for s in scopes for a in s] + list(wanted)))
     rank = {a: i for i, a in enumerate(names)}
-    order, made, _ = _elimination(scopes, names, cards, HEURISTIC)
+    order, made, total = _elimination(scopes, names, cards, "weight")
+    if total > SMALL_TREE:
+        better = _elimination(scopes, names, cards, HEURISTIC)
+        if better[2] < total:
+            order, made, total = better
     position = {a: i for i, a in enumerate(order)}
     # the clique of each eliminated variable; its parent: that of its first other variable out
     parent = [min((position[b] for b in c if b != order[i]), default=-1)
