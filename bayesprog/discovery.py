@@ -53,7 +53,8 @@ _ARC = re.compile(r"^\s*([^\s>-][^>]*?)\s*->\s*(\S.*?)\s*$")
 @dataclass
 class Coded:
     """A data set coded for structure learning: each column's states (as written, sorted, or
-    bins), the rows as state indices (-1 where missing), and the rows as state names."""
+    bins), the rows as state indices (-1 where missing), and the rows as state names
+    (categorical columns, the categories the states in order)."""
 
     source: str
     sha256: str
@@ -91,6 +92,29 @@ def _number(text: str) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _distinct(values: pd.Series) -> tuple[list[Any], np.ndarray]:
+    """A column's distinct values and each row's index among them. A column of Python objects
+    other than strings is read value by value: pandas takes ``True``, ``1`` and ``1.0`` for
+    one value, which are three states as written."""
+    import pandas as pd
+
+    which, uniques = pd.factorize(values, use_na_sentinel=False)
+    distinct = list(uniques)
+    if values.dtype == object and not all(isinstance(v, str) or _missing(v) for v in distinct):
+        return list(values.to_numpy(dtype=object)), np.arange(len(values))
+    return distinct, np.asarray(which, dtype=np.int64)
+
+
+def _named(codes: np.ndarray, states: list[str]) -> Any:
+    """A column of state indices as its states' names (missing where -1): categorical, the
+    categories the states in order, unless two states have one name."""
+    import pandas as pd
+
+    if len(set(states)) == len(states):
+        return pd.Categorical.from_codes(codes, categories=pd.Index(states, dtype=object))
+    return np.array([*states, None], dtype=object)[codes]
+
+
 def code_data(data: Any, *, discretise: int | None = None,
               columns: Mapping[str, str] | None = None) -> Coded:
     """Read ``data`` (a CSV or Parquet file, a DataFrame, a mapping of columns) and code every
@@ -119,7 +143,7 @@ def code_data(data: Any, *, discretise: int | None = None,
             discretise, (int, np.integer)) or discretise < 2):
         raise DataError(f"discretise: expected a number of bins >= 2, found {discretise!r}")
     states: list[list[str]] = []
-    codes = np.full((len(frame), len(names)), -1, dtype=np.int64)
+    codes = np.full((len(frame), len(names)), -1, dtype=np.int64, order="F")
     named = {}
     bins: dict[str, list[float]] = {}
     for j, column in enumerate(names):
@@ -127,19 +151,23 @@ def code_data(data: Any, *, discretise: int | None = None,
             raise DataError(f"{source}: column {j + 1} {column!r} cannot name a variable: "
                             "expected a letter or _ then letters, digits, _ . - (rename it, or "
                             "--column)")
-        values = frame[column].to_numpy(dtype=object)
-        present = np.array([not _missing(v) for v in values], dtype=bool)
-        texts = np.array([_name_of(v) if p else "" for v, p in zip(values, present,
-                                                                    strict=True)], dtype=object)
-        found = sorted(set(texts[present]))
+        distinct, which = _distinct(frame[column])
+        # each distinct value's text (None when missing), read once
+        absent = np.array([_missing(v) for v in distinct], dtype=bool)
+        text_of = np.array([None if a else _name_of(v) for v, a in zip(distinct, absent,
+                                                                         strict=True)],
+                           dtype=object)
+        present = ~absent[which]
+        found = sorted(set(text_of[~absent]))
         count = int(present.sum())
         if count == 0:
             raise DataError(f"{source}: column {column!r} has no value in any of its "
-                            f"{len(values)} rows")
+                            f"{len(which)} rows")
         numbers = [_number(t) for t in found]
         numeric = all(x is not None for x in numbers)
         if discretise is not None and numeric and len(found) > discretise:
-            x = np.array([float(t) for t in texts[present]])
+            number_of = np.array([np.nan if t is None else float(t) for t in text_of])
+            x = number_of[which[present]]
             edges = np.unique(np.quantile(x, np.linspace(0, 1, discretise + 1)))
             inner = edges[1:-1]
             index = np.searchsorted(inner, x, side="right")
@@ -149,12 +177,13 @@ def code_data(data: Any, *, discretise: int | None = None,
             codes[present, j] = index
             column_states = labels
             bins[column] = [float(e) for e in edges]
-            texts[present] = [labels[i] for i in index]
         else:
             if numeric:
                 found = sorted(found, key=lambda t: (float(t), t))
             lookup = {s: i for i, s in enumerate(found)}
-            codes[present, j] = [lookup[t] for t in texts[present]]
+            state_of = np.array([-1 if t is None else lookup[t] for t in text_of],
+                                dtype=np.int64)
+            codes[:, j] = state_of[which]
             column_states = found
         if len(column_states) == 1:
             raise DataError(f"{source}: column {column!r} holds one value, "
@@ -171,8 +200,8 @@ def code_data(data: Any, *, discretise: int | None = None,
                             f"{count / len(column_states):.1f} times (discretise it into bins: "
                             "--discretise K)")
         states.append(column_states)
-        named[column] = [t if p else None for t, p in zip(texts, present, strict=True)]
-    coded_frame = pd.DataFrame(named, columns=names, dtype=object)
+        named[column] = _named(codes[:, j], column_states)
+    coded_frame = pd.DataFrame(named, columns=names)
     return Coded(source, digest, names, states, codes, coded_frame, bins)
 
 
@@ -255,39 +284,45 @@ class StructureWarning(UserWarning):
 ROWS_PER_CONFIGURATION = 5
 
 
-def determined_by(codes: np.ndarray, child: int, candidates: Sequence[int]) -> list[int] | None:
+def determined_by(codes: np.ndarray, child: int, candidates: Sequence[int],
+                  scores: Scores | None = None) -> list[int] | None:
     """The smallest set of ``candidates`` (the first of its size) of which the column ``child``
     is a function in the data: each configuration of them seen (rows where all are known)
     shows one value of ``child``, with ``ROWS_PER_CONFIGURATION`` rows per configuration on
-    average; None when there is none, or ``child`` takes one value only."""
+    average; None when there is none, or ``child`` takes one value only. ``scores``: the
+    :class:`Scores` of ``codes``, whose counts are read (else they are made)."""
     import itertools
 
+    if scores is None:
+        scores = Scores(codes, np.maximum(np.asarray(codes).max(axis=0) + 1, 1))
     for size in range(1, len(candidates)):
         for subset in itertools.combinations(sorted(candidates), size):
-            columns = codes[:, [child, *subset]]
-            known = columns[(columns >= 0).all(axis=1)]
-            if len(known) == 0 or len(np.unique(known[:, 0])) < 2:
+            counts = scores.observed_counts(child, subset)  # configurations x child states
+            seen = counts > 0
+            if np.count_nonzero(seen.any(axis=0)) < 2:
                 continue
-            pairs = np.unique(known, axis=0)
-            configurations = np.unique(pairs[:, 1:], axis=0)
-            if (len(pairs) == len(configurations)
-                    and len(known) >= ROWS_PER_CONFIGURATION * len(configurations)):
+            configurations = int(seen.any(axis=1).sum())
+            known = int(counts.sum())
+            if (int(seen.sum()) == configurations
+                    and known >= ROWS_PER_CONFIGURATION * configurations):
                 return list(subset)
     return None
 
 
-def deterministic_warnings(coded: Coded, parents: Sequence[Sequence[int]],
-                           method: str) -> list[str]:
+def deterministic_warnings(coded: Coded, parents: Sequence[Sequence[int]], method: str,
+                           scores: Scores | None = None) -> list[str]:
     """An arc into a variable that the data show to be a function of its other parents: the
     independence tests (pc) or the scores (hc) cannot place it, since given those parents it
     carries nothing more (the faithfulness the search assumes fails there); such arcs usually
     point the wrong way (the variable's children taken for its parents)."""
     names = coded.names
     out = []
+    if scores is None and any(len(ps) >= 2 for ps in parents):
+        scores = Scores(coded.codes, coded.card)
     for v, ps in enumerate(parents):
         if len(ps) < 2:
             continue
-        determining = determined_by(coded.codes, v, ps)
+        determining = determined_by(coded.codes, v, ps, scores)
         if determining is None:
             continue
         extra = [names[p] for p in sorted(ps) if p not in determining]
@@ -424,7 +459,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
                             f"{len(coded.frame)} rows miss a value")
     structure["constraints"] = constraints
     structure["discretised"] = coded.bins
-    structure["warnings"] = deterministic_warnings(coded, parents, method)
+    structure["warnings"] = deterministic_warnings(coded, parents, method, scores)
     for message in structure["warnings"]:
         warnings.warn(message, StructureWarning, stacklevel=2)
     for v, ps in enumerate(parents):
@@ -444,17 +479,44 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
 
     record = fit.record.model_copy(update=dict(
         data=coded.source, sha256=coded.sha256, structure=StructureRecord(**structure)))
-    fit.estimate.record = record
     import tempfile
 
     with tempfile.TemporaryDirectory() as folder:
         draft = Path(folder) / "discovered.yaml"
         draft.write_text(text, encoding="utf-8")
-        fitted_text = fit.text(draft)
-    program = loads(fitted_text, f"<{title}>")
+        # the fit's record written as the fitted values are (in place), then the search's
+        # added to it; the writer's round trip when the text does not end with that record
+        fit.estimate.record = record.model_copy(update={"structure": None})
+        written = _with_structure(fit.text(draft), record)
+        program = loads(written, f"<{title}>") if written is not None else None
+        fit.estimate.record = record
+        if written is None or program is None or program.learned[-1] != record:
+            written = fit.text(draft)
+            program = loads(written, f"<{title}>")
+        fitted_text = written
     return Discovery(program, fitted_text,
                      {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
                      coded.frame)
+
+
+def _with_structure(text: str, record: Any) -> str | None:
+    """``text``, a fitted program that ends with its ``learned:`` list, the fit's record last
+    (``  - data: ...``, its keys four columns in), with ``record.structure`` added to that
+    record; None when the text does not end so."""
+    import yaml
+
+    lines = text.rstrip("\n").split("\n")
+    top = [i for i, line in enumerate(lines) if line[:1].strip() and line[:1] != "#"]
+    if not top or lines[top[-1]] != "learned:" or not any(
+            line.startswith("  - ") for line in lines[top[-1] + 1:]):
+        return None
+    structure = {k: v for k, v in record.structure.model_dump().items()
+                 if v is not None and v != {} and v != []}
+    lines = yaml.dump({"structure": structure}, Dumper=getattr(yaml, "CSafeDumper",
+                                                                yaml.SafeDumper),
+                      default_flow_style=None, sort_keys=False, width=4096,
+                      allow_unicode=True).splitlines()
+    return text.rstrip("\n") + "\n" + "".join(f"    {line}\n" for line in lines)
 
 
 def _start(start: Any, names: Sequence[str]) -> list[set[int]]:
@@ -503,9 +565,14 @@ def _program_text(coded: Coded, parents: Sequence[Sequence[int]], title: str,
         ps = sorted(parents[v])
         term = f"P({names[v]} | {', '.join(names[p] for p in ps)})" if ps else f"P({names[v]})"
         r = len(coded.states[v])
-        row = ", ".join([f"{1 / r:.6g}"] * (r - 1) + [f"{1 - (r - 1) * float(f'{1 / r:.6g}'):.6g}"])
+        table = "[" + ", ".join([f"{1 / r:.6g}"] * (r - 1)
+                                + [f"{1 - (r - 1) * float(f'{1 / r:.6g}'):.6g}"]) + "]"
+        # the whole table, a row per configuration of the parents (the first parent's states
+        # outermost), so that the fitted values are written over these numbers in place
+        for p in reversed(ps):
+            table = "[" + ", ".join([table] * len(coded.states[p])) + "]"
         q = int(np.prod([len(coded.states[p]) for p in ps], dtype=float))
         counts = 1.0 if k2 else prior / (q * r)
-        lines.append(f"  - {{term: {json.dumps(term)}, form: table, table: [{row}], "
+        lines.append(f"  - {{term: {json.dumps(term)}, form: table, table: {table}, "
                      f"learn: {{pseudo_counts: {counts:.6g}}}}}")
     return "\n".join(lines) + "\n"

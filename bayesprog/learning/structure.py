@@ -5,9 +5,10 @@ each variable's number of states. Two families of methods:
 
 * **score-based**: :func:`hill_climb` adds, deletes and reverses arcs while the score grows,
   with a tabu list and seeded random restarts. The score of a DAG is a sum of family scores
-  (:class:`Scores`: BIC, BDeu or K2), each computed once from the family's counts (one
-  ``bincount`` over the rows) and kept, so that an operation costs only the families it
-  touches.
+  (:class:`Scores`: BIC, BDeu or K2), each counted once in one pass over the data's distinct
+  rows and kept, so that an operation costs only the families it touches and a restart reads
+  the families it meets again. The counts, the scores, their cache and the climb are compiled
+  loops (:mod:`bayesprog.learning._score_kernels`).
 * **constraint-based**: :func:`pc` removes the edges between variables found independent
   (chi-square or G-test, stratified by the conditioning set) at growing sizes of conditioning
   sets, with the adjacencies of each level fixed at its start (the stable PC, whose result
@@ -47,121 +48,129 @@ class StructureError(BayesprogError):
 # scores ----------------------------------------------------------------------------------------
 
 class Scores:
-    """Family scores of coded data, computed once each: ``local(child, parents)``."""
+    """Family scores of coded data, computed once each: ``local(child, parents)``.
+
+    With ``N_jk`` the rows where the child takes its state k and the parents their
+    configuration j (of q; r states of the child), ``N_j = sum_k N_jk`` and N the rows where
+    the family is observed:
+
+    * BIC: ``sum_jk N_jk log(N_jk / N_j) - log(N) / 2 * q (r - 1)``;
+    * BDeu (equivalent sample size a): ``sum_j [lgamma(a/q) - lgamma(N_j + a/q)
+      + sum_k (lgamma(N_jk + a/qr) - lgamma(a/qr))]``;
+    * K2: ``sum_j [lgamma(r) - lgamma(N_j + r) + sum_k lgamma(N_jk + 1)]``, plus ``lgamma(r)``
+      per configuration without rows as pgmpy computes it (``"k2"``; ``"k2-exact"`` without).
+
+    >>> import numpy as np
+    >>> codes = np.array([[0, 0], [0, 0], [1, 1], [1, 0]])
+    >>> scores = Scores(codes, [2, 2])
+    >>> round(scores.local(1, (0,)), 4)  # 2 log 1 + log(1/2) + log(1/2) - log(4) / 2 * 2
+    -2.7726
+    """
 
     def __init__(self, codes: np.ndarray, card: Sequence[int], score: str = "bic",
                  ess: float = 10.0) -> None:
+        from bayesprog.learning import _score_kernels as kernels
+
         if score not in SCORES and score != K2_EXACT:
             raise StructureError(f"score {score!r}: expected one of {', '.join(SCORES)}")
         if not ess > 0:
             raise StructureError(f"equivalent sample size {ess}: expected a number > 0")
-        self.codes = np.ascontiguousarray(codes, dtype=np.int64)
+        self.codes = np.asarray(codes, dtype=np.int64)
         if self.codes.ndim != 2:
             raise StructureError("expected a matrix of state indices: rows x variables")
         self.card = np.asarray(card, dtype=np.int64)
+        if self.card.shape != (self.codes.shape[1],):
+            raise StructureError(f"expected a number of states for each of the "
+                                 f"{self.codes.shape[1]} variables, found {self.card.size}")
+        if self.codes.size and (self.codes >= self.card).any():
+            v = int(np.nonzero((self.codes >= self.card).any(axis=0))[0][0])
+            raise StructureError(f"variable {v} has a state index above its "
+                                 f"{int(self.card[v])} states")
         self.score = score
         self.ess = float(ess)
-        self.observed = self.codes >= 0
-        self.complete = bool(self.observed.all())
-        self.full: np.ndarray = np.asarray(self.observed.all(axis=0))  # columns with no gap
-        self.columns = [self.codes[:, i] for i in range(self.codes.shape[1])]
-        self.cache: dict[tuple[int, tuple[int, ...]], float] = {}
-        self.computed = 0
-        self._last: tuple[tuple[int, tuple[int, ...]], np.ndarray, np.ndarray | None] | None = None
+        self._kind = kernels.KINDS[score]
+        self._data = kernels.prepare(self.codes, self.card)
+        self._table = kernels.empty_table(self.codes.shape[1])
+
+    @property
+    def computed(self) -> int:
+        """Family scores computed (each once: the others were read from the cache)."""
+        return int(self._table[3][1])
+
+    @property
+    def cache(self) -> dict[tuple[int, tuple[int, ...]], float]:
+        """The family scores computed: (child, sorted parents) -> score."""
+        keys, values, filled, _ = self._table
+        out = {}
+        for slot in np.nonzero(filled)[0]:
+            bits = np.unpackbits(keys[slot, 1:].view(np.uint8), bitorder="little")
+            out[(int(keys[slot, 0]), tuple(int(p) for p in np.nonzero(bits)[0]))] = float(
+                values[slot])
+        return out
 
     def cells(self, child: int, parents: Iterable[int]) -> int:
         return int(self.card[child]) * math.prod(int(self.card[p]) for p in parents)
 
-    def _index(self, child: int, parents: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray | None]:
-        """Each available row's cell in the family's table (child state + r x parent
-        configuration, the parents in the order given), and the available rows' mask (None:
-        all rows); the last one is kept, for the families that add one parent to it."""
-        key = (child, parents)
-        if self._last is not None and self._last[0] == key:
-            return self._last[1], self._last[2]
-        rows: np.ndarray | None = None
-        if not self.complete:
-            rows = np.asarray(self.observed[:, (child, *parents)].all(axis=1))
-        index = self.columns[child] if rows is None else self.columns[child][rows]
-        stride = int(self.card[child])
-        for p in parents:
-            column = self.columns[p] if rows is None else self.columns[p][rows]
-            index = index + stride * column
-            stride *= int(self.card[p])
-        self._last = (key, index, rows)
-        return index, rows
-
     def counts(self, child: int, parents: tuple[int, ...]) -> np.ndarray:
-        """Counts of the family over its available rows: (parent configurations, child states)."""
-        index, _ = self._index(child, parents)
+        """Counts of the family over its available rows: (parent configurations, child states),
+        the parents' configurations in mixed radix, the last parent fastest."""
+        columns = self.codes[:, (child, *parents)]
+        columns = columns[(columns >= 0).all(axis=1)]
         q = math.prod(int(self.card[p]) for p in parents)
         r = int(self.card[child])
-        return np.bincount(index, minlength=q * r).reshape(q, r)
+        index = np.zeros(len(columns), dtype=np.int64)
+        for j, p in enumerate(parents):
+            index = index * int(self.card[p]) + columns[:, 1 + j]
+        return np.bincount(index * r + columns[:, 0], minlength=q * r).reshape(q, r)
+
+    def observed_counts(self, child: int, parents: Iterable[int]) -> np.ndarray:
+        """Counts of the family over its available rows: (parent configurations, child
+        states), the configurations in no particular order, and only those met when there are
+        more configurations than rows."""
+        from bayesprog.learning import _score_kernels as kernels
+
+        rows, weights, card = self._data[:3]
+        counts, configurations = kernels.family_counts(
+            rows, weights, card, int(child), np.array(list(parents), dtype=np.int64))
+        return counts.reshape(configurations, int(self.card[child]))
 
     def local(self, child: int, parents: tuple[int, ...]) -> float:
-        """The score of ``child`` given ``parents`` (sorted), from the cache when known."""
-        key = (child, parents)
-        found = self.cache.get(key)
-        if found is not None:
-            return found
-        value = self._score(self.counts(child, parents))
-        self.cache[key] = value
-        return value
+        """The score of ``child`` given ``parents``, from the cache when known."""
+        from bayesprog.learning import _score_kernels as kernels
 
-    def local_with(self, child: int, parents: tuple[int, ...], extra: int) -> float:
-        """The score of ``child`` given ``parents`` (sorted) and ``extra``: counted from the
-        rows' cells of the family without ``extra`` (one pass instead of one per parent)."""
-        key = (child, tuple(sorted((*parents, extra))))
-        found = self.cache.get(key)
-        if found is not None:
-            return found
-        index, rows = self._index(child, parents)
-        column = self.columns[extra]
-        if rows is not None or not self.full[extra]:
-            # the rows available to the wider family: those of the narrower one that also
-            # have a value of ``extra``
-            value = self._score(self.counts(key[0], key[1]))
-            self.cache[key] = value
-            return value
-        r = int(self.card[child])
-        q = math.prod(int(self.card[p]) for p in parents)
-        wide = index + (r * q) * column
-        counts = np.bincount(wide, minlength=r * q * int(self.card[extra]))
-        # the layout (extra slowest) differs from the sorted order's; a score does not depend
-        # on the order of the parent configurations
-        value = self._score(counts.reshape(-1, r))
-        self.cache[key] = value
-        return value
-
-    def _score(self, counts: np.ndarray) -> float:
-        import scipy.special
-
-        self.computed += 1
-        counts = counts.astype(float)
-        q, r = counts.shape
-        totals = counts.sum(axis=1)
-        if self.score == "bic":
-            n = totals.sum()
-            safe = np.where(counts > 0, counts, 1.0)
-            denominators = np.where(totals > 0, totals, 1.0)[:, None]
-            ll = float(np.sum(counts * np.log(safe / denominators)))
-            return ll - 0.5 * np.log(n) * q * (r - 1) if n > 0 else 0.0
-        gammaln = scipy.special.gammaln
-        if self.score in ("k2", K2_EXACT):
-            # the closed form: a parent configuration without rows adds lgamma(r) -
-            # lgamma(0 + r) = 0
-            value = (np.sum(gammaln(counts + 1)) - np.sum(gammaln(totals + r))
-                     + q * gammaln(r))
-            if self.score == "k2":  # as pgmpy: lgamma(r) more per configuration without rows
-                value += (q - np.count_nonzero(totals)) * gammaln(r)
-            return float(value)
-        alpha = self.ess / q  # bdeu
-        beta = self.ess / (q * r)
-        return float(np.sum(gammaln(counts + beta)) - np.sum(gammaln(totals + alpha))
-                     + q * gammaln(alpha) - q * r * gammaln(beta))
+        value, self._table = kernels.family_score(
+            self._data, self._kind, self.ess, int(child),
+            np.array(sorted(parents), dtype=np.int64), self._table)
+        return float(value)
 
     def total(self, parents: Sequence[Iterable[int]]) -> float:
         return sum(self.local(v, tuple(sorted(ps))) for v, ps in enumerate(parents))
+
+    def gains(self, parents: Sequence[Iterable[int]],
+              rules: Constraints | None = None) -> np.ndarray:
+        """``gain[u, v]``: the change of the DAG's score when the arc u -> v is added (or
+        deleted, when it is there); -inf where the constraints forbid it or the family would
+        have more than ``MAX_FAMILY_CELLS`` cells. The climb reads its moves from these."""
+        from bayesprog.learning import _score_kernels as kernels
+
+        n = len(parents)
+        allowed = (rules or Constraints(n)).matrices()[0]
+        gain, _, self._table = kernels.gains(self._data, self._kind, self.ess,
+                                             _adjacency(parents), allowed, MAX_FAMILY_CELLS,
+                                             self._table)
+        return gain
+
+    def climb(self, adjacency: np.ndarray, rules: Constraints, tabu_length: int, max_iter: int,
+              epsilon: float, patience: int, ties: np.ndarray) -> tuple[np.ndarray, float, int]:
+        """One tabu climb from ``adjacency`` (adjacency[u, v]: the arc u -> v): the best DAG
+        met, its score and the moves made (see :func:`hill_climb`)."""
+        from bayesprog.learning import _score_kernels as kernels
+
+        allowed, required, limit = rules.matrices()
+        best, score, iterations, self._table = kernels.climb(
+            self._data, self._kind, self.ess, adjacency, allowed, required, limit, tabu_length,
+            max_iter, epsilon, patience, ties, MAX_FAMILY_CELLS, self._table)
+        return best, float(score), int(iterations)
 
 
 # constraints -------------------------------------------------------------------------------
@@ -183,6 +192,21 @@ class Constraints:
             return False
         return self.tiers is None or self.tiers[u] <= self.tiers[v]
 
+    def matrices(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """allowed[u, v] (may the arc u -> v exist), required[u, v], and the most parents a
+        variable may have."""
+        n = self.n
+        allowed = ~np.eye(n, dtype=bool)
+        if self.tiers is not None:
+            tier = np.asarray(self.tiers)
+            allowed &= tier[:, None] <= tier[None, :]
+        for u, v in self.forbidden:
+            allowed[u, v] = False
+        required = np.zeros((n, n), dtype=bool)
+        for u, v in self.required:
+            required[u, v] = True
+        return allowed, required, self.max_parents if self.max_parents is not None else n
+
 
 # hill climbing -----------------------------------------------------------------------------
 
@@ -197,157 +221,19 @@ class Climb:
     families_scored: int
 
 
-def _reach(parents: Sequence[set[int]]) -> np.ndarray:
-    """reach[a, b]: is there a directed path from a to b (of length >= 1)?"""
+def _adjacency(parents: Sequence[Iterable[int]]) -> np.ndarray:
+    """adjacency[u, v]: is u a parent of v?"""
     n = len(parents)
     adjacency = np.zeros((n, n), dtype=bool)
     for v, ps in enumerate(parents):
         for u in ps:
             adjacency[u, v] = True
-    return _closure(adjacency)
+    return adjacency
 
 
-def _climb(scores: Scores, parents: list[set[int]], rules: Constraints, tabu_length: int,
-           max_iter: int, epsilon: float, patience: int,
-           ties: np.ndarray | None = None) -> tuple[list[set[int]], int]:
-    """Climb from ``parents``; past a local optimum, go on for up to ``patience`` steps with
-    the best move that is not tabu (even one that lowers the score), and return the best graph
-    met (a tabu search: the tabu list keeps it from climbing straight back).
-
-    Every move's change of score is read from two matrices kept up to date: ``gain[u, v]``,
-    the change of v's family score when u is added to its parents (or removed, when u is one),
-    recomputed for a variable only when its parents change; the legal moves are masks over
-    them (no cycle, the constraints, the tabu list). ``ties`` (n x n, tiny) breaks the ties of
-    equal moves (the two directions of an arc are equal under a score-equivalent score) in
-    another order than the variables'."""
-    n = len(parents)
-    ties = np.zeros((n, n)) if ties is None else ties
-    limit = rules.max_parents if rules.max_parents is not None else n
-    allowed = np.array([[u != v and rules.allowed(u, v) for v in range(n)] for u in range(n)])
-    required = np.zeros((n, n), dtype=bool)
-    for u, v in rules.required:
-        required[u, v] = True
-    too_big = np.zeros((n, n), dtype=bool)  # adding u to v's parents makes too large a family
-    gain = np.zeros((n, n))
-
-    def refresh(v: int) -> None:
-        own = tuple(sorted(parents[v]))
-        now = scores.local(v, own)
-        for u in range(n):
-            if u == v:
-                continue
-            if u in parents[v]:
-                gain[u, v] = scores.local(v, tuple(p for p in own if p != u)) - now
-                too_big[u, v] = False
-            else:
-                too_big[u, v] = scores.cells(v, own) * int(scores.card[u]) > MAX_FAMILY_CELLS
-                gain[u, v] = (-np.inf if too_big[u, v] or not allowed[u, v]
-                              else scores.local_with(v, own, u) - now)
-
-    for v in range(n):
-        refresh(v)
-    tabu: list[tuple[str, int, int]] = []
-    iterations = 0
-    current = scores.total(parents)
-    best_parents, best_score = [set(ps) for ps in parents], current
-    stalled = 0
-    while iterations < max_iter:
-        adjacency = np.zeros((n, n), dtype=bool)
-        for v in range(n):
-            for u in parents[v]:
-                adjacency[u, v] = True
-        reach = _closure(adjacency)
-        counts = adjacency.sum(axis=0)
-        room = counts < limit  # v may take one more parent
-        # additions: no arc either way, no path v ~> u, allowed, room, not too big
-        add = (~adjacency & ~adjacency.T & ~reach.T & allowed & room[None, :] & ~too_big)
-        np.fill_diagonal(add, False)
-        # deletions: an arc that is not required
-        delete = adjacency & ~required
-        # reversals of u -> v: not required, v -> u allowed, room at u, no other path u ~> v
-        other = (adjacency.astype(np.int32) @ reach.astype(np.int32)) > 0
-        flip = (adjacency & ~required & allowed.T & room[:, None] & ~other
-                & ~too_big.T)
-        for op, u, v in tabu:
-            (add if op == "+" else delete if op == "-" else flip)[u, v] = False
-        moves = (np.where(add, gain, -np.inf), np.where(delete, gain, -np.inf),
-                 np.where(flip, gain + gain.T, -np.inf))
-        best_kind = max(range(3), key=lambda k: (moves[k] + ties).max())
-        u, v = (int(i) for i in np.unravel_index(np.argmax(moves[best_kind] + ties), (n, n)))
-        delta = float(moves[best_kind][u, v])
-        if not np.isfinite(delta) or (delta < epsilon and stalled >= patience):
-            break
-        if best_kind == 0:
-            parents[v].add(u)
-            tabu.append(("-", u, v))
-            refresh(v)
-        elif best_kind == 1:
-            parents[v].discard(u)
-            tabu.append(("+", u, v))
-            refresh(v)
-        else:
-            parents[v].discard(u)
-            parents[u].add(v)
-            tabu.append(("flip", v, u))
-            refresh(v)
-            refresh(u)
-        if tabu_length > 0:
-            del tabu[:-tabu_length]
-        else:
-            tabu.clear()
-        iterations += 1
-        current += delta
-        if current > best_score + epsilon:
-            best_parents, best_score, stalled = [set(ps) for ps in parents], current, 0
-        else:
-            stalled += 1
-    return best_parents, iterations
-
-
-def _closure(adjacency: np.ndarray) -> np.ndarray:
-    """reach[a, b]: a directed path from a to b (of length >= 1)."""
-    reach = adjacency.copy()
-    while True:
-        wider = reach | ((reach.astype(np.int32) @ reach.astype(np.int32)) > 0)
-        if (wider == reach).all():
-            return reach
-        reach = wider
-
-
-def _perturbed(parents: list[set[int]], rules: Constraints, scores: Scores, steps: int,
-               rng: np.random.Generator) -> list[set[int]]:
-    """``parents`` after ``steps`` random legal operations (a restart's starting point)."""
-    out = [set(ps) for ps in parents]
-    n = len(out)
-    limit = rules.max_parents if rules.max_parents is not None else n
-    for _ in range(steps):
-        reach = _reach(out)
-        moves = []
-        for u in range(n):
-            for v in range(n):
-                if u == v:
-                    continue
-                if u in out[v]:
-                    if (u, v) not in rules.required:
-                        moves.append(("-", u, v))
-                        if (rules.allowed(v, u) and len(out[u]) < limit
-                                and not any(reach[w, v] for w in range(n)
-                                            if u in out[w] and w != v)):
-                            moves.append(("flip", u, v))
-                elif (v not in out[u] and rules.allowed(u, v) and len(out[v]) < limit
-                      and not reach[v, u] and scores.cells(v, out[v] | {u}) <= MAX_FAMILY_CELLS):
-                    moves.append(("+", u, v))
-        if not moves:
-            break
-        op, u, v = moves[int(rng.integers(len(moves)))]
-        if op == "+":
-            out[v].add(u)
-        elif op == "-":
-            out[v].discard(u)
-        else:
-            out[v].discard(u)
-            out[u].add(v)
-    return out
+def _parents(adjacency: np.ndarray) -> list[tuple[int, ...]]:
+    return [tuple(int(u) for u in np.nonzero(adjacency[:, v])[0])
+            for v in range(adjacency.shape[0])]
 
 
 def hill_climb(scores: Scores, rules: Constraints, *, start: Sequence[Iterable[int]] | None = None,
@@ -361,36 +247,51 @@ def hill_climb(scores: Scores, rules: Constraints, *, start: Sequence[Iterable[i
     tabu, even one that lowers the score, to leave a local optimum (the best graph met is
     kept; ``patience=0`` stops at the first optimum, as pgmpy's HillClimbSearch does). Then
     ``restarts`` times: from the best DAG perturbed by random
-    operations (seeded by ``seed``), climb again; the best DAG found is returned."""
+    operations (seeded by ``seed``), climb again; the best DAG found is returned.
+
+    Every move's change of score is read from ``gain[u, v]`` (:meth:`Scores.gains`), the
+    change of v's family score when u joins (or leaves) its parents, recomputed for a variable
+    only when its parents change; ties between equal moves go to the first in the order
+    additions, deletions, reversals, each by (u, v), and a restart from the start breaks them
+    in another order (the two directions of an arc score the same under BIC and BDeu, to the
+    rounding of their sums, which then decides). The families met are kept, so that a restart
+    counts only those it has not met."""
+    from bayesprog.learning import _score_kernels as kernels
+
     n = rules.n
     parents = [set(ps) for ps in start] if start is not None else [set() for _ in range(n)]
     for u, v in rules.required:
         parents[v].add(u)
     check_dag(parents, rules, scores, names)
-    parents, iterations = _climb(scores, parents, rules, tabu_length, max_iter, epsilon,
-                                 patience)
-    best = [set(ps) for ps in parents]
-    best_score = scores.total(best)
+    begin = _adjacency(parents)
+    best, best_score, iterations = scores.climb(begin.copy(), rules, tabu_length, max_iter,
+                                                epsilon, patience, np.zeros((n, n)))
     rng = np.random.default_rng([seed, 1])
     steps = max(1, n // 2)
+    allowed, required, limit = rules.matrices()
     for restart in range(restarts):
         # every other restart from the best graph perturbed, the others from the start again
         # with the ties of equal moves broken in another order
         ties = rng.random((n, n)) * 1e-7
         if restart % 2 == 0:
-            moved = _perturbed(best, rules, scores, steps, rng)
+            moved = best.copy()
+            for _ in range(steps):  # random legal operations
+                moves = kernels.legal_moves(moved, allowed, required, limit, scores.card,
+                                            MAX_FAMILY_CELLS)
+                if len(moves) == 0:
+                    break
+                op, u, v = (int(x) for x in moves[int(rng.integers(len(moves)))])
+                moved[u, v] = op == 0
+                if op == 2:
+                    moved[v, u] = True
         else:
-            moved = [set(ps) for ps in start] if start is not None else [set() for _ in range(n)]
-            for u, v in rules.required:
-                moved[v].add(u)
-        found, more = _climb(scores, moved, rules, tabu_length, max_iter, epsilon, patience,
-                             ties)
+            moved = begin.copy()
+        found, value, more = scores.climb(moved, rules, tabu_length, max_iter, epsilon,
+                                          patience, ties)
         iterations += more
-        value = scores.total(found)
         if value > best_score + epsilon:
-            best, best_score = [set(ps) for ps in found], value
-    return Climb([tuple(sorted(ps)) for ps in best], best_score, iterations, restarts,
-                 scores.computed)
+            best, best_score = found, value
+    return Climb(_parents(best), best_score, iterations, restarts, scores.computed)
 
 
 def check_dag(parents: Sequence[set[int]], rules: Constraints, scores: Scores | None = None,
