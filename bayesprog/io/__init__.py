@@ -54,26 +54,28 @@ def read_network(path: str | Path) -> Any:
     if fmt == "json":
         raise NetworkError(f"{path}: a linear-Gaussian network: read it with "
                            "bayesprog.io.gaussian.read_gaussian")
-    return _pgmpy_model(_read_text(path), fmt, path)
+    return _pgmpy_model(read_text(path), fmt, path)
 
 
-def _read_text(path: Path) -> str:
-    """The text of ``path`` (gunzipped when it ends in ``.gz``), at most :data:`MAX_BYTES`."""
+def read_text(path: Path, limit: int = MAX_BYTES, what: str = "a network file") -> str:
+    """The text of ``path`` (gunzipped when it ends in ``.gz``), at most ``limit`` bytes;
+    ``what``: what the file should be, for the messages."""
     try:
-        opener = gzip.open if path.suffix == ".gz" else open
+        opener = gzip.open if path.suffix.lower() == ".gz" else open
         with opener(path, "rb") as f:
-            raw = f.read(MAX_BYTES + 1)
+            raw = f.read(limit + 1)
     except FileNotFoundError:
         raise NetworkError(f"cannot read {path}: no such file") from None
     except (OSError, EOFError) as exc:
         raise NetworkError(f"cannot read {path}: {exc}") from None
-    if len(raw) > MAX_BYTES:
-        raise NetworkError(f"{path}: more than {MAX_BYTES // 2**20} MB (decompressed): "
-                           "expected a network file of at most that size")
+    if len(raw) > limit:
+        raise NetworkError(f"{path}: more than {limit // 2**20} MB (decompressed): "
+                           f"expected {what} of at most that size")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise NetworkError(f"cannot read {path}: {exc}") from None
+        raise NetworkError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}): "
+                           f"expected {what}") from None
     return text.replace("\r\n", "\n").replace("\r", "\n")  # as a file read as text
 
 
@@ -110,7 +112,7 @@ def _read_bif(path: Path) -> Any:
     :class:`NetworkError` at the line and column of the first problem."""
     from bayesprog.io import bif
 
-    raw = _read_text(path)
+    raw = read_text(path)
     try:
         network = bif.read_bif(raw, str(path))
     except bif.BifError as exc:

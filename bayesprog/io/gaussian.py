@@ -47,7 +47,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from bayesprog.io import NetworkError, dump_document
+from bayesprog.io import NetworkError, dump_document, read_text
 
 #: The largest network file read (decompressed), in bytes: bnlearn's largest Gaussian network
 #: (arth150, 107 nodes) takes 22 kB, so this is some hundred thousand nodes; Python's JSON
@@ -62,29 +62,10 @@ _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _NAMED = re.compile(r"^named ('(?:[^'\\]|\\.)*'|\"(?:[^\"\\]|\\.)*\") in ")
 
 
-def read_text(path: Path) -> str:
-    """The text of ``path`` (gzipped when it ends in ``.gz``), at most :data:`MAX_BYTES`."""
-    try:
-        opener = gzip.open if path.suffix.lower() == ".gz" else open
-        with opener(path, "rb") as f:
-            raw = f.read(MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise NetworkError(f"cannot read {path}: no such file") from None
-    except (OSError, EOFError) as exc:
-        raise NetworkError(f"cannot read {path}: {exc}") from None
-    if len(raw) > MAX_BYTES:
-        raise NetworkError(f"{path}: more than {MAX_BYTES // 2**20} MB: expected a network "
-                           "file of at most that size")
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise NetworkError(f"{path}: not UTF-8 text: expected a JSON network") from None
-
-
 def read_gaussian(path: str | Path) -> dict[str, Any]:
     """The checked network of the JSON file at ``path`` (see :func:`check_network`)."""
     path = Path(path)
-    text = read_text(path)
+    text = read_text(path, MAX_BYTES, "a JSON network")
 
     def no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
         out: dict[str, Any] = {}
