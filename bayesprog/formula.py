@@ -234,20 +234,27 @@ def _evaluate(node: ast.AST, values: Mapping[str, Any]) -> Any:
 
 
 def _affine(node: ast.AST) -> tuple[float, dict[str, float]] | None:
-    """(intercept, coefficients) of an affine sub-tree, or None."""
-    if isinstance(node, ast.Name) and node.id not in CONSTANTS:
-        return 0.0, {node.id: 1.0}
-    functions = {id(n.func) for n in ast.walk(node) if isinstance(n, ast.Call)}
-    if not any(isinstance(n, ast.Name) and n.id not in CONSTANTS and id(n) not in functions
-               for n in ast.walk(node)):
-        with np.errstate(all="ignore"):
-            return float(_evaluate(node, {})), {}
+    """(intercept, coefficients) of an affine sub-tree, or None: one walk, sub-expressions
+    without names folded to numbers on the way."""
+    if isinstance(node, ast.Constant):
+        return float(node.value), {}  # type: ignore[arg-type]  # numbers only, checked by parsing
+    if isinstance(node, ast.Name):
+        return (CONSTANTS[node.id], {}) if node.id in CONSTANTS else (0.0, {node.id: 1.0})
     if isinstance(node, ast.UnaryOp):
         inner = _affine(node.operand)
         if inner is None:
             return None
         sign = -1.0 if isinstance(node.op, ast.USub) else 1.0
         return sign * inner[0], {k: sign * v for k, v in inner[1].items()}
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):  # of numbers: folded
+        numbers = []
+        for arg in node.args:
+            found = _affine(arg)
+            if found is None or found[1]:
+                return None
+            numbers.append(found[0])
+        with np.errstate(all="ignore"):
+            return float(FUNCTIONS[node.func.id][1](*numbers)), {}
     if not isinstance(node, ast.BinOp):
         return None
     left, right = _affine(node.left), _affine(node.right)
@@ -259,12 +266,12 @@ def _affine(node: ast.AST) -> tuple[float, dict[str, float]] | None:
         for k, v in right[1].items():
             coefficients[k] = coefficients.get(k, 0.0) + sign * v
         return left[0] + sign * right[0], coefficients
-    if isinstance(node.op, ast.Mult):
-        if not left[1]:
-            return left[0] * right[0], {k: left[0] * v for k, v in right[1].items()}
-        if not right[1]:
-            return left[0] * right[0], {k: right[0] * v for k, v in left[1].items()}
-        return None
+    if isinstance(node.op, ast.Mult) and not (left[1] and right[1]):
+        scale, (b, terms) = (left[0], right) if not left[1] else (right[0], left)
+        return scale * b, {k: scale * v for k, v in terms.items()}
     if isinstance(node.op, ast.Div) and not right[1] and right[0] != 0:
         return left[0] / right[0], {k: v / right[0] for k, v in left[1].items()}
+    if isinstance(node.op, ast.Pow) and not left[1] and not right[1]:
+        with np.errstate(all="ignore"):
+            return float(np.power(left[0], right[0])), {}
     return None

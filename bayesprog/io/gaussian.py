@@ -345,7 +345,6 @@ def program_to_gaussian(program: Any) -> dict[str, Any]:
     its parents and whose sigma is a number (:func:`variance_of` gives its variance); original
     names read back from the descriptions the importer wrote."""
     from bayesprog.forms import FormulaParam, ParamValue
-    from bayesprog.inference.methods.gaussian import affine_of
 
     def fail(why: str) -> NetworkError:
         return NetworkError(f"{program.name}: {why}: a linear-Gaussian network (JSON) needs "
@@ -369,7 +368,7 @@ def program_to_gaussian(program: Any) -> dict[str, Any]:
         parents = [p.name for p in term.parents]
         mean = term.params[mean_key]
         if isinstance(mean, FormulaParam) and not mean.axes:
-            affine = affine_of(mean.formulas.flat[0])
+            affine = mean.formulas.flat[0].affine()
             if affine is None:
                 raise fail(f"{term.label}: its mean \"{mean.formulas.flat[0]}\" is not affine")
             intercept, slopes = affine

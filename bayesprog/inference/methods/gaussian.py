@@ -24,14 +24,13 @@ one matrix product.
 
 from __future__ import annotations
 
-import ast
 from dataclasses import dataclass
 
 import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, available_forms, get_form
-from bayesprog.formula import CONSTANTS, FUNCTIONS, Formula
+from bayesprog.formula import Formula
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.contraction import contract_factors
 from bayesprog.inference.core import Factor
@@ -454,73 +453,10 @@ def _values(bound: Bound, names: list[str]) -> np.ndarray:
 
 
 def _affine(program: ProgramLike, formula: Formula) -> tuple[float, dict[str, float]] | None:
-    """:func:`affine_of`, kept by the program for each of its formulas (a layout's first
+    """:meth:`Formula.affine`, kept by the program for each of its formulas (a layout's first
     question reads each twice: to choose the method and to solve)."""
     kept = program.inference_cache.derived
     key = ("gaussian affine", id(formula))
     if key not in kept:
-        kept[key] = affine_of(formula)
+        kept[key] = formula.affine()
     return kept[key]
-
-
-def affine_of(formula: Formula) -> tuple[float, dict[str, float]] | None:
-    """``formula.affine()`` in one walk of its tree: ``(intercept, {name: coefficient})`` when
-    it is affine in all its names, else None. (:meth:`Formula.affine` walks every sub-tree
-    again at each node, 1.7 ms for a mean of eight parents; a network of a hundred terms paid
-    that at each new layout.)
-
-    >>> from bayesprog.formula import parse_formula
-    >>> affine_of(parse_formula("0.5 + 1.2*A - B/4 + sqrt(4)*C"))
-    (0.5, {'A': 1.2, 'B': -0.25, 'C': 2.0})
-    >>> affine_of(parse_formula("A*B")) is None, affine_of(parse_formula("exp(A)")) is None
-    (True, True)
-    """
-    found = _affine_walk(formula.tree)
-    if found is None:
-        return None
-    intercept, coefficients = found
-    if not np.all(np.isfinite([intercept, *coefficients.values()])):
-        return None
-    return intercept, {n: coefficients.get(n, 0.0) for n in formula.names}
-
-
-def _affine_walk(node: ast.AST) -> tuple[float, dict[str, float]] | None:
-    if isinstance(node, ast.Constant):
-        return float(node.value), {}  # type: ignore[arg-type]  # numbers only, checked by parsing
-    if isinstance(node, ast.Name):
-        return (CONSTANTS[node.id], {}) if node.id in CONSTANTS else (0.0, {node.id: 1.0})
-    if isinstance(node, ast.UnaryOp):
-        inner = _affine_walk(node.operand)
-        if inner is None:
-            return None
-        sign = -1.0 if isinstance(node.op, ast.USub) else 1.0
-        return sign * inner[0], {k: sign * v for k, v in inner[1].items()}
-    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):  # of numbers: folded
-        numbers = []
-        for arg in node.args:
-            found = _affine_walk(arg)
-            if found is None or found[1]:
-                return None
-            numbers.append(found[0])
-        with np.errstate(all="ignore"):
-            return float(FUNCTIONS[node.func.id][1](*numbers)), {}
-    if not isinstance(node, ast.BinOp):
-        return None
-    left, right = _affine_walk(node.left), _affine_walk(node.right)
-    if left is None or right is None:
-        return None
-    if isinstance(node.op, (ast.Add, ast.Sub)):
-        sign = 1.0 if isinstance(node.op, ast.Add) else -1.0
-        coefficients = dict(left[1])
-        for k, v in right[1].items():
-            coefficients[k] = coefficients.get(k, 0.0) + sign * v
-        return left[0] + sign * right[0], coefficients
-    if isinstance(node.op, ast.Mult) and not (left[1] and right[1]):
-        scale, (b, terms) = (left[0], right) if not left[1] else (right[0], left)
-        return scale * b, {k: scale * v for k, v in terms.items()}
-    if isinstance(node.op, ast.Div) and not right[1] and right[0] != 0:
-        return left[0] / right[0], {k: v / right[0] for k, v in left[1].items()}
-    if isinstance(node.op, ast.Pow) and not left[1] and not right[1]:
-        with np.errstate(all="ignore"):
-            return float(np.power(left[0], right[0])), {}
-    return None
