@@ -53,6 +53,12 @@ class Outcome:
     no_explorer: bool = False
 
 
+#: how long a physics robot that is done waits for a viewer of its fingertip's poses, and how
+#: long it then leaves them to be delivered (seconds)
+POSE_LINGER = 2.0
+POSE_DELIVERY = 0.3
+
+
 class RobotNode(Node):
     """A simulated robot on ``scenario``; :meth:`advance` drives it from a spin loop."""
 
@@ -79,8 +85,27 @@ class RobotNode(Node):
         self._waiting_since = time.monotonic()
         self._created = time.monotonic()
         self.done = False
+        self._done_at: float | None = None
+        self._matched_at: float | None = None
 
     # the loop ---------------------------------------------------------------------------------
+    def settled(self) -> bool:
+        """Done, and the fingertip's last poses given the time to reach a viewer that matched
+        late (transient-local keeps them only while this node lives): at most
+        :data:`POSE_LINGER` seconds, :data:`POSE_DELIVERY` once a viewer is there."""
+        if not self.done:
+            return False
+        if self.fingertip is None:
+            return True
+        now = time.monotonic()
+        if self._done_at is None:
+            self._done_at = now
+        if self.fingertip.get_subscription_count() > 0:
+            if self._matched_at is None:
+                self._matched_at = now
+            return now - self._matched_at >= POSE_DELIVERY
+        return now - self._done_at >= POSE_LINGER
+
     def reset_line(self) -> str:
         """A new session that decides as the robot's run of an experiment does."""
         return json.dumps({"reset": {"seed": self.options.seed, "run": self.options.run}})

@@ -92,7 +92,7 @@ def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) ->
 
         node = _node(lambda: RobotNode(scenario, options, namespace=namespace))
         name = node.get_fully_qualified_name()
-        _spin(node, stop, until=lambda: node.done, tick=node.advance)
+        _spin(node, stop, until=node.settled, tick=node.advance)
         outcome, summary = node.outcome, node.summary()
     if outcome.error is not None and outcome.no_explorer:
         print(f"{name}: {outcome.error}", file=sys.stderr)
