@@ -15,7 +15,7 @@ import re
 import time
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -477,8 +477,8 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     fit = skeleton_program.fit(coded.frame, max_iter=max_iter, tol=tol)
     from bayesprog.records import StructureRecord
 
-    record = fit.record.model_copy(update=dict(
-        data=coded.source, sha256=coded.sha256, structure=StructureRecord(**structure)))
+    record = fit.record.replace(data=coded.source, sha256=coded.sha256,
+                                structure=StructureRecord(**structure))
     import tempfile
 
     with tempfile.TemporaryDirectory() as folder:
@@ -486,7 +486,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
         draft.write_text(text, encoding="utf-8")
         # the fit's record written as the fitted values are (in place), then the search's
         # added to it; the writer's round trip when the text does not end with that record
-        fit.estimate.record = record.model_copy(update={"structure": None})
+        fit.estimate.record = record.replace(structure=None)
         written = _with_structure(fit.text(draft), record)
         program = loads(written, f"<{title}>") if written is not None else None
         fit.estimate.record = record
@@ -510,7 +510,7 @@ def _with_structure(text: str, record: Any) -> str | None:
     if not top or lines[top[-1]] != "learned:" or not any(
             line.startswith("  - ") for line in lines[top[-1] + 1:]):
         return None
-    structure = {k: v for k, v in record.structure.model_dump().items()
+    structure = {k: v for k, v in asdict(record.structure).items()
                  if v is not None and v != {} and v != []}
     lines = yaml.dump({"structure": structure}, Dumper=getattr(yaml, "CSafeDumper",
                                                                 yaml.SafeDumper),

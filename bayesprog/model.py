@@ -4,8 +4,8 @@ reads it from YAML (:mod:`bayesprog.language`) and the inference and learning th
 A :class:`Term` is one factor of the decomposition (its variables, form and parameters), an
 :class:`InputDecl` a runtime input a question binds and :class:`LearnOptions` how a term is
 learned from data (defined beside the forms' estimators, which read it). The provenance of a
-fit, as written into a fitted file, is in :mod:`bayesprog.records`: a pydantic model, built
-only for a program that has one.
+fit, as written into a fitted file, is in :mod:`bayesprog.records` (dataclasses, imported only
+for a program that has one).
 """
 
 from __future__ import annotations

@@ -755,7 +755,7 @@ class Fit:
         record = self.record
         if rounded:
             rows = record.rows_supporting or record.rows_used
-            record = record.model_copy(update={"digits": supported_digits(rows)})
+            record = record.replace(digits=supported_digits(rows))
         text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
                              self.program.variables, record, simplex, locations, self.states)
         # the fitted file must load as a program; where it would not, the lines said are the

@@ -1,75 +1,95 @@
 """The provenance of a fit, as written under ``learned:`` in a fitted file (:class:`FitRecord`),
-and of a discovered decomposition (:class:`StructureRecord`): pydantic models, the data types
-of the model layer that only a learned program needs (imported with it, so that a program
-without a ``learned:`` record never builds their validators).
+and of a discovered decomposition (:class:`StructureRecord`).
+
+Plain dataclasses, so that learning and writing a fitted file never import pydantic: a record
+of the common shape is read by :mod:`bayesprog.language.plain`, any other by pydantic, which
+validates a dataclass field by field (``__pydantic_config__``: no unknown keys) and takes each
+field's description from its metadata for the published schema.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+#: pydantic's configuration of both records, read when a document is validated by pydantic
+_CONFIG = {"extra": "forbid", "strict": False}
 
 
-class StructureRecord(BaseModel):
+def _field(description: str, default: Any = dataclasses.MISSING,
+           default_factory: Any = dataclasses.MISSING) -> Any:
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory,
+                                 metadata={"description": description})
+    return dataclasses.field(default=default, metadata={"description": description})
+
+
+@dataclasses.dataclass(kw_only=True)
+class StructureRecord:
     """How a program's decomposition was discovered from data (``bayesprog discover``)."""
 
-    model_config = ConfigDict(extra="forbid", strict=False)
+    __pydantic_config__ = _CONFIG
 
-    method: str = Field(description="hc (hill climbing) or pc (the stable PC algorithm)")
-    score: str | None = Field(None, description="hc: the score climbed (bic, bdeu, k2)")
-    score_value: float | None = Field(None, description="hc: the discovered DAG's score")
-    equivalent_sample_size: float | None = Field(None, description="bdeu: its prior's weight")
-    test: str | None = Field(None, description="pc: the independence test (chi2, g)")
-    significance: float | None = Field(None, description="pc: the level below which a test "
-                                       "keeps an edge")
-    max_conditioning: int | None = Field(None, description="pc: the largest conditioning set")
-    tests: int | None = Field(None, description="pc: the independence tests run")
-    iterations: int | None = Field(None, description="hc: the operations applied")
-    restarts: int | None = Field(None, description="hc: the random restarts")
-    seed: int | None = Field(None, description="hc: the seed of the restarts")
-    families_scored: int | None = Field(None, description="hc: family scores computed (each "
-                                        "once)")
-    seconds: float = Field(description="the search's time")
-    missing: str = Field(description="how missing values were used")
-    constraints: dict[str, Any] = Field(default_factory=dict, description="forbidden and "
-                                        "required arcs, tiers, the parents' limit, the start")
-    oriented_by_choice: list[str] = Field(default_factory=list, description="pc: arcs whose "
-                                          "direction the data left open, chosen without making "
-                                          "a v-structure or a cycle")
-    discretised: dict[str, list[float]] = Field(default_factory=dict, description="columns "
-                                                "binned by --discretise: their bins' edges")
-    warnings: list[str] = Field(default_factory=list, description="arcs the data contradict "
-                                "in a way the search cannot see: into a variable that is a "
-                                "function of its other parents")
+    method: str = _field("hc (hill climbing) or pc (the stable PC algorithm)")
+    score: str | None = _field("hc: the score climbed (bic, bdeu, k2)", None)
+    score_value: float | None = _field("hc: the discovered DAG's score", None)
+    equivalent_sample_size: float | None = _field("bdeu: its prior's weight", None)
+    test: str | None = _field("pc: the independence test (chi2, g)", None)
+    significance: float | None = _field("pc: the level below which a test keeps an edge", None)
+    max_conditioning: int | None = _field("pc: the largest conditioning set", None)
+    tests: int | None = _field("pc: the independence tests run", None)
+    iterations: int | None = _field("hc: the operations applied", None)
+    restarts: int | None = _field("hc: the random restarts", None)
+    seed: int | None = _field("hc: the seed of the restarts", None)
+    families_scored: int | None = _field("hc: family scores computed (each once)", None)
+    seconds: float = _field("the search's time")
+    missing: str = _field("how missing values were used")
+    constraints: dict[str, Any] = _field("forbidden and required arcs, tiers, the parents' "
+                                         "limit, the start", default_factory=dict)
+    oriented_by_choice: list[str] = _field(
+        "pc: arcs whose direction the data left open, chosen without making a v-structure or "
+        "a cycle", default_factory=list)
+    discretised: dict[str, list[float]] = _field("columns binned by --discretise: their bins' "
+                                                 "edges", default_factory=dict)
+    warnings: list[str] = _field("arcs the data contradict in a way the search cannot see: "
+                                 "into a variable that is a function of its other parents",
+                                 default_factory=list)
 
 
-class FitRecord(BaseModel):
+@dataclasses.dataclass(kw_only=True)
+class FitRecord:
     """The provenance of one fit, written into the fitted file; its statistics let a later fit
     continue with more data."""
 
-    model_config = ConfigDict(extra="forbid", strict=False)
+    __pydantic_config__ = _CONFIG
 
-    data: str = Field(description="the data file's name")
-    sha256: str = Field(description="SHA-256 of the data file's bytes")
-    rows: int = Field(description="rows in the data file")
-    rows_used: int = Field(description="rows with a value for at least one learned term")
-    log_likelihood: float = Field(description="log-likelihood of the rows used, fitted program")
-    method: str = Field(description="maximum likelihood, or EM when values are missing")
+    data: str = _field("the data file's name")
+    sha256: str = _field("SHA-256 of the data file's bytes")
+    rows: int = _field("rows in the data file")
+    rows_used: int = _field("rows with a value for at least one learned term")
+    log_likelihood: float = _field("log-likelihood of the rows used, fitted program")
+    method: str = _field("maximum likelihood, or EM when values are missing")
     iterations: int = 1
-    digits: int | None = Field(
-        None, description="significant digits the learned values are written with, when "
-        "rounded (learn --rounded): as many as the rows behind them support (rounding moves a "
-        "value by under a twentieth of 1/sqrt(rows_supporting)); a learned mean is written to "
-        "a twentieth of its standard error instead. Absent: the values are written as fitted")
-    columns: dict[str, str] = Field(
-        default_factory=dict, description="the data's columns read as variables of other names "
-        "(column: variable)")
-    rows_supporting: int | None = Field(
-        None, description="the rows behind the learned values: these and those of the earlier "
-        "fits this one continued from")
-    terms: list[str] = Field(default_factory=list, description="the terms learned")
-    statistics: dict[str, dict[str, Any]] = Field(
-        default_factory=dict, description="per learned term, its sufficient statistics")
-    structure: StructureRecord | None = Field(
-        None, description="when the decomposition itself was discovered from the data: how")
+    digits: int | None = _field(
+        "significant digits the learned values are written with, when rounded (learn "
+        "--rounded): as many as the rows behind them support (rounding moves a value by under "
+        "a twentieth of 1/sqrt(rows_supporting)); a learned mean is written to a twentieth of "
+        "its standard error instead. Absent: the values are written as fitted", None)
+    columns: dict[str, str] = _field("the data's columns read as variables of other names "
+                                     "(column: variable)", default_factory=dict)
+    rows_supporting: int | None = _field(
+        "the rows behind the learned values: these and those of the earlier fits this one "
+        "continued from", None)
+    terms: list[str] = _field("the terms learned", default_factory=list)
+    statistics: dict[str, dict[str, Any]] = _field("per learned term, its sufficient "
+                                                   "statistics", default_factory=dict)
+    structure: StructureRecord | None = _field("when the decomposition itself was discovered "
+                                               "from the data: how", None)
+
+    def as_data(self) -> dict[str, Any]:
+        """The record as plain data, in the order of its fields (as written into a file)."""
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> FitRecord:
+        """A copy with ``changes``."""
+        return dataclasses.replace(self, **changes)

@@ -883,5 +883,5 @@ def test_tables_written_in_place_equal_the_round_trip_and_keep_the_file(tmp_path
     for term in reference.terms:
         np.testing.assert_array_equal(fitted.term(str(term.expression)).params["table"].array,
                                       term.params["table"].array)
-    assert [r.model_dump() for r in fitted.learned] == [r.model_dump() for r in reference.learned]
+    assert [r.as_data() for r in fitted.learned] == [r.as_data() for r in reference.learned]
     assert len(fitted.learned) == 2 and fitted.learned[-1].rows_supporting == 3000

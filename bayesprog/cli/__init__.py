@@ -43,16 +43,25 @@ _COMMANDS = (
     programs.add_schema,
 )
 
+#: Each framework command's ``add_...`` by the command's name.
+_COMMAND_NAMED = {add.__name__.removeprefix("add_"): add for add in _COMMANDS}
+
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The command line's parser: the framework's commands and those of the runner plugins
-    (not loaded when ``argv`` names one of the framework's: a plugin cannot replace them)."""
+    (not loaded when ``argv`` names one of the framework's: a plugin cannot replace them).
+    When ``argv`` starts with a framework command's name, only that command is built: the
+    others' options are never read."""
     parser = argparse.ArgumentParser(
         prog="bayesprog",
         description="Bayesian programs as YAML files: check, show, draw and ask them questions.",
     )
     parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    named = _COMMAND_NAMED.get(argv[0]) if argv else None
+    if named is not None:  # `bayesprog learn ...`: that command's parser only
+        named(sub)
+        return parser
     for add in _COMMANDS:
         add(sub)
     word = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None

@@ -1,10 +1,11 @@
 """A program file of the common shape read without pydantic: what most files hold (named states,
-ranges, real variables, fields, inputs, terms, questions, time), checked by hand and returned as
-plain objects with the attributes of :mod:`bayesprog.language.document`'s models.
+ranges, real variables, fields, inputs, terms, questions, time, the records of fits), checked by
+hand and returned as plain objects with the attributes of :mod:`bayesprog.language.document`'s
+models.
 
 Building pydantic's validators costs more than a question asked once (docs/performance.md,
 start-up), so a program whose keys and values all fall inside that shape is read here; anything
-else (a grid, bins, a ``learned:`` record, a value of another type, a key that is not one of the
+else (a grid, bins, a discovered structure's record, a value of another type, a key that is not one of the
 document's, any problem at all) gives None, and the document is validated by pydantic, which
 then says what is wrong or reads what is unusual. The two agree on every file this reader
 takes (tests/test_schema.py reads every shipped program both ways).
@@ -14,9 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bayesprog.limits import limit
+
+if TYPE_CHECKING:
+    from bayesprog.records import FitRecord
 
 #: The kinds of question a file may name.
 KINDS = ("posterior", "map", "filter", "smooth", "sequence", "probability")
@@ -137,6 +141,11 @@ def _number(value: Any) -> float:
     return float(value)
 
 
+def _list(value: Any) -> list:
+    _expect(type(value) is list)
+    return value
+
+
 def _texts(value: Any) -> list[str]:
     _expect(type(value) is list)
     return [_text(v) for v in value]
@@ -225,8 +234,33 @@ def _input(raw: Any) -> PlainInput:
     return PlainInput(shape=list(shape), description=_text(spec.get("description", "")))
 
 
+#: A fit's record: each field's plain type (a number may be an integer; None where optional).
+_RECORD: dict[str, tuple[type, ...]] = {
+    "data": (str,), "sha256": (str,), "rows": (int,), "rows_used": (int,),
+    "log_likelihood": (int, float), "method": (str,), "iterations": (int,),
+    "digits": (int, type(None)), "columns": (dict,), "rows_supporting": (int, type(None)),
+    "terms": (list,), "statistics": (dict,), "structure": (type(None),)}
+
+
+def _record(raw: Any) -> FitRecord:
+    from bayesprog.records import FitRecord  # (a program that was never learned needs none)
+
+    spec = _mapping(raw, tuple(_RECORD))
+    _expect(all(type(v) in _RECORD[k] for k, v in spec.items()))
+    columns = _mapping(spec.get("columns", {}))
+    _expect(all(type(v) is str for v in columns.values()))
+    statistics = _mapping(spec.get("statistics", {}))
+    for named in statistics.values():
+        _mapping(named)
+    try:
+        return FitRecord(**{**spec, "log_likelihood": float(spec.get("log_likelihood", 0)),
+                            "terms": _texts(spec.get("terms", []))})
+    except TypeError:  # a required field missing
+        raise _Other from None
+
+
 TOP = ("bayesprog", "name", "description", "variables", "inputs", "decomposition",
-       "soft_evidence", "questions", "time", "ablate")
+       "soft_evidence", "questions", "time", "ablate", "learned")
 
 
 def read_plain(data: Any) -> PlainDocument | None:
@@ -255,7 +289,7 @@ def read_plain(data: Any) -> PlainDocument | None:
             questions={k: _question(v) for k, v in _mapping(top.get("questions", {})).items()},
             time=time,
             ablate=_texts(top.get("ablate", [])),
-            learned=[],
+            learned=[_record(r) for r in _list(top.get("learned", []))],
         )
     except (_Other, ValueError):
         return None

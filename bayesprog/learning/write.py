@@ -224,7 +224,7 @@ def _record(record: FitRecord) -> Any:
     from ruamel.yaml.comments import CommentedMap
 
     out = CommentedMap()
-    for key, value in record.model_dump().items():
+    for key, value in record.as_data().items():
         if key == "digits" and value is None:  # written as fitted
             continue
         if key == "structure":
@@ -269,7 +269,7 @@ def render_fitted(text: str, params: Mapping[str, Mapping[str, ParamValue]],
 
         arrays = {label: {name: value.array for name, value in named.items()}
                   for label, named in values.items()}
-        spliced = splice(text, arrays, record.model_dump())
+        spliced = splice(text, arrays, record.as_data())
         if spliced is not None:
             return spliced
     return _round_trip(text, values, variables, record, states or {})
