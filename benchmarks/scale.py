@@ -15,7 +15,11 @@ bnlearn's larger discrete networks, as pgmpy ships them (``pgmpy/utils/example_m
     pair takes under a second), interleaved;
   - warm: bayesprog's program has answered another evidence set of the same observed variables;
     pyAgrum's ``LazyPropagation`` is the same object, its evidence changed. ``--repeats``
-    rounds over the evidence sets, each call timed alone, the two libraries interleaved.
+    rounds over the evidence sets, each call timed alone, the two libraries interleaved;
+  - varied: as warm, but each call observes five other variables (twice ``--sets`` sets,
+    each a seeded choice of variables with values drawn by forward sampling): what a session
+    of questions does. Our junction tree is the program's whatever is observed (the observed
+    states enter as zeros), so it is built once.
 
   pyAgrum's time up to the end of ``makeInference`` is kept beside (reading hundreds of
   posteriors, each a product of a clique's factors, is most of its time on pigs and munin).
@@ -89,6 +93,10 @@ MODES = {
                       "evidence set of the same observed variables; pyAgrum: the same "
                       "LazyPropagation, eraseAllEvidence, setEvidence, makeInference, "
                       "posterior(v) for every unobserved v",
+    "marginals varied": "as warm, but each call observes another five variables (a seeded "
+                        "choice, values drawn by forward sampling): bayesprog's tree is the "
+                        "program's whatever is observed, pyAgrum's engine is the same "
+                        "LazyPropagation",
     "load cache off": "bayesprog load(path) in a fresh process, BAYESPROG_CACHE=off (YAML read "
                       "and checked); package imported before the clock",
     "load cache on": "bayesprog load(path) in a fresh process, BAYESPROG_CACHE=<work>/cache "
@@ -163,6 +171,20 @@ def evidence_sets(name: str, bn: gum.BayesNet, count: int) -> tuple[list[str], l
     sets = [{v: int(generator.samplesAt(row, column[v])) for v in observed}
             for row in range(count)]
     return observed, sets
+
+
+def varied_sets(name: str, bn: gum.BayesNet, count: int) -> list[dict]:
+    """``count`` evidence sets, each of another five variables (a seeded choice) and their
+    values drawn by forward sampling (state indices)."""
+    rng = np.random.default_rng(sum(map(ord, name)) + 1)
+    names = sorted(bn.names())
+    gum.initRandom(sum(map(ord, name)) + 1)
+    generator = gum.BNDatabaseGenerator(bn)
+    generator.drawSamples(count)
+    column = {v: i for i, v in enumerate(generator.varOrderNames())}
+    return [{names[i]: int(generator.samplesAt(row, column[names[i]]))
+             for i in sorted(rng.choice(len(names), size=OBSERVED, replace=False))}
+            for row in range(count)]
 
 
 def agrum_marginals(engine: gum.LazyPropagation, evidence: dict, unobserved: list[str],
@@ -251,6 +273,26 @@ def bench_marginals(name: str, work: Path, repeats: int, cold_repeats: int, coun
     print(f"  warm: bayesprog {statistics.median(warm_ours) * 1000:.1f} ms, pyAgrum "
           f"{statistics.median(warm_theirs) * 1000:.1f} ms", flush=True)
 
+    # warm, each call observing other variables
+    varied = varied_sets(name, bn, 2 * count)
+    varied_ours, varied_theirs, varied_inference = [], [], []
+    for r in range(repeats):
+        for i, chosen in enumerate(varied):
+            named = {v: program.variables[v].states[k] for v, k in chosen.items()}
+            others = [v for v in program.variables if v not in chosen]
+            for side in ("ours", "theirs") if (r + i) % 2 == 0 else ("theirs", "ours"):
+                t = time.perf_counter()
+                if side == "ours":
+                    program.marginals(named)
+                else:
+                    inferred = []
+                    agrum_marginals(engine, chosen, others, inferred)
+                    varied_inference.append(inferred[0] - t)
+                (varied_ours if side == "ours" else varied_theirs).append(
+                    time.perf_counter() - t)
+    print(f"  varied: bayesprog {statistics.median(varied_ours) * 1000:.1f} ms, pyAgrum "
+          f"{statistics.median(varied_theirs) * 1000:.1f} ms", flush=True)
+
     # exactness, untimed: every marginal of every evidence set, against pyAgrum on our tables
     # and on its own reading of the BIF
     errors = {"ours": 0.0, "parsed": 0.0, "log_evidence": 0.0}
@@ -274,6 +316,7 @@ def bench_marginals(name: str, work: Path, repeats: int, cold_repeats: int, coun
         "labels_agree": labels_agree,
         "cold": summary(cold_ours, cold_theirs, cold_inference, "marginals cold"),
         "warm": summary(warm_ours, warm_theirs, warm_inference, "marginals warm"),
+        "varied": summary(varied_ours, varied_theirs, varied_inference, "marginals varied"),
         "max_abs_error": errors["ours"],
         "max_abs_error_mode": "pyAgrum's CPTs filled in double precision with our tables",
         "max_abs_log_evidence_error": errors["log_evidence"],
@@ -396,6 +439,7 @@ def print_tables(report: dict) -> None:
         print("\nAll marginals, 5 observed (ratio: bayesprog / pyAgrum, median of paired calls)")
         print(f"{'network':9s} {'vars':>5s} | {'cold ours':>10s} {'cold pyA':>10s} {'ratio':>6s} "
               f"| {'warm ours':>10s} {'warm pyA':>10s} {'(infer)':>10s} {'ratio':>6s} "
+              f"| {'varied':>10s} {'ratio':>6s} "
               f"| {'max err':>8s} "
               f"{'(parsed)':>8s} "
               f"| {'our tree: cliques entries largest':>34s} | pyAgrum tree entries")
@@ -405,11 +449,13 @@ def print_tables(report: dict) -> None:
                   f"{ms(c['pyagrum_s']):>10s} {c['paired_ratio']:6.2f} | "
                   f"{ms(w['bayesprog_s']):>10s} {ms(w['pyagrum_s']):>10s} "
                   f"{ms(w['pyagrum_until_make_inference_s']):>10s} "
-                  f"{w['paired_ratio']:6.2f} | {row['max_abs_error']:8.1e} "
+                  f"{w['paired_ratio']:6.2f} | {ms(row['varied']['bayesprog_s']):>10s} "
+                  f"{row['varied']['paired_ratio']:6.2f} | {row['max_abs_error']:8.1e} "
                   f"{row['max_abs_error_pyagrum_parsed']:8.1e} | "
                   f"{t['cliques']:>12d} {t['entries']:>11,d} {t['largest']:>9,d} | "
                   f"{row['pyagrum_tree']['entries']:,d}")
         print("(infer): pyAgrum's warm time up to the end of makeInference, before posterior(v)")
+        print("varied: warm calls each observing five other variables (the same engines)")
         print("max err: the largest |bayesprog - pyAgrum| over every marginal of every evidence "
               "set, pyAgrum's CPTs filled with our tables in double precision; (parsed): "
               "pyAgrum's CPTs as its BIF reader makes them (single precision)")

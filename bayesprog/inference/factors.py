@@ -283,15 +283,17 @@ def slice_factor(f: Factor, bound: Bound) -> Factor:
     return Factor(tuple(f.axes[i] for i in rest), sliced, any_batched)
 
 
-def question_factors(program: ProgramLike, terms: list[Term], bound: Bound) -> list[Factor]:
+def question_factors(program: ProgramLike, terms: list[Term], bound: Bound, *,
+                     sliced: bool = True) -> list[Factor]:
     """The log-factors of a question: its relevant terms and the soft evidence given with it,
-    sliced at the observed discrete variables."""
-    factors = [slice_factor(term_factor(program, term, bound), bound) for term in terms]
+    sliced at the observed discrete variables (``sliced``; else whole, the evidence left to
+    the caller)."""
+    factors = [term_factor(program, term, bound) for term in terms]
     for name, pv in bound.soft.items():
         with np.errstate(divide="ignore"):
             log = np.log(pv.array)
-        factors.append(slice_factor(Factor((name,), log, pv.batched), bound))
-    return factors
+        factors.append(Factor((name,), log, pv.batched))
+    return [slice_factor(f, bound) for f in factors] if sliced else factors
 
 
 def _row_max(f: Factor) -> np.ndarray:
