@@ -212,25 +212,11 @@ def _score_counts(counts: np.ndarray, configurations: int, r: int, q: float, kin
         if total == 0.0:
             return 0.0
         return ll - 0.5 * math.log(total) * q * (r - 1)
-    if kind == BDEU:
-        alpha = ess / q
-        beta = ess / (q * r)
-        lg_alpha = math.lgamma(alpha)
-        lg_beta = math.lgamma(beta)
-        value = 0.0
-        for j in range(configurations):
-            nj = 0.0
-            for s in range(r):
-                x = float(counts[j * r + s])
-                if x > 0.0:
-                    nj += x
-                    value += math.lgamma(x + beta) - lg_beta
-            if nj > 0.0:
-                value += lg_alpha - math.lgamma(nj + alpha)
-        return value
-    # K2: one count per cell; a configuration without rows adds nothing to the closed form,
-    # and lgamma(r) to pgmpy's
-    lg_r = math.lgamma(float(r))
+    # BDeu and K2: a Dirichlet prior of ``beta`` per cell (``alpha`` per configuration); K2's
+    # is one count per cell, and pgmpy's counts lgamma(r) for a configuration without rows
+    alpha, beta = (ess / q, ess / (q * r)) if kind == BDEU else (float(r), 1.0)
+    lg_alpha = math.lgamma(alpha)
+    lg_beta = math.lgamma(beta)
     value = 0.0
     seen = 0
     for j in range(configurations):
@@ -239,12 +225,12 @@ def _score_counts(counts: np.ndarray, configurations: int, r: int, q: float, kin
             x = float(counts[j * r + s])
             if x > 0.0:
                 nj += x
-                value += math.lgamma(x + 1.0)
+                value += math.lgamma(x + beta) - lg_beta
         if nj > 0.0:
-            value += lg_r - math.lgamma(nj + r)
+            value += lg_alpha - math.lgamma(nj + alpha)
             seen += 1
     if kind == K2:
-        value += (q - seen) * lg_r
+        value += (q - seen) * lg_alpha
     return value
 
 
