@@ -16,8 +16,6 @@ def atomic_write(path: Path, data: bytes, *, parents: bool = True) -> None:
     as a results folder's chunks). A path the user names (``-o``) is written with
     ``parents=False``: a folder that does not exist is then a ``FileNotFoundError`` that names
     it, never a new tree made from a typing mistake."""
-    import tempfile  # (with the first file written, not with the package)
-
     path = Path(path)
     if parents:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -25,11 +23,17 @@ def atomic_write(path: Path, data: bytes, *, parents: bool = True) -> None:
         what = "not a folder" if path.parent.exists() else "no such folder"
         raise FileNotFoundError(errno.ENOENT, f"{what}: {path.parent} (make it first)",
                                 str(path))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    # a new file beside it, of a name no other writer takes (O_EXCL), its mode that of an
+    # ordinary new file (the umask applied)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    while True:
+        tmp = path.parent / f".{path.name}.{os.urandom(6).hex()}.tmp"
+        try:
+            fd = os.open(tmp, flags, 0o666)
+            break
+        except FileExistsError:
+            continue
     try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # as an ordinary new file, not mkstemp's 0600
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()

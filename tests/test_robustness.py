@@ -366,3 +366,37 @@ def test_the_quick_reading_of_a_question_is_the_general_one(left, right, bar, pa
         return e.left, e.right, e.values
 
     assert read(parse_expression) == read(_parse_general)
+
+
+def test_a_file_written_at_once_has_an_ordinary_files_mode_and_leaves_nothing_beside(
+        tmp_path, monkeypatch):
+    import os
+
+    from bayesprog.files import atomic_write
+
+    umask = os.umask(0o027)
+    try:
+        target = tmp_path / "out.yaml"
+        atomic_write(target, b"first")
+        atomic_write(target, b"second")
+    finally:
+        os.umask(umask)
+    assert target.read_bytes() == b"second"
+    assert target.stat().st_mode & 0o777 == 0o666 & ~0o027
+    assert [p.name for p in tmp_path.iterdir()] == ["out.yaml"]
+
+    class Interrupted(Exception):
+        pass
+
+    opened = os.fdopen
+
+    def interrupted(fd, mode):  # a write that stops half-way
+        f = opened(fd, mode)
+        f.write = lambda data: (_ for _ in ()).throw(Interrupted())
+        return f
+
+    monkeypatch.setattr(os, "fdopen", interrupted)
+    with pytest.raises(Interrupted):
+        atomic_write(target, b"third")
+    assert target.read_bytes() == b"second"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.yaml"]

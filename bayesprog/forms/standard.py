@@ -62,7 +62,9 @@ class Categorical(Form):
     def log_factor(self, ctx: TermContext) -> np.ndarray:
         p = ctx.param(self.params[0].name, 1)[:, 0]
         with np.errstate(divide="ignore"):
-            return np.moveaxis(np.log(p), -1, 1)
+            log = np.log(p)
+        # the child's axis (last) moved after the batch's
+        return log.transpose((0, log.ndim - 1) + tuple(range(1, log.ndim - 1)))
 
 
 @register_form

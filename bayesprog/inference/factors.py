@@ -215,7 +215,8 @@ def log_values(program: ProgramLike, term: Term, params: dict[str, ParamValue],
             # a field value that is not observed: the density integrates to one over it
             # (masked before broadcasting over the axes the value does not vary with)
             log = np.where(missing.aligned(axes, 0), 0.0, log)
-        np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
+        if log.shape[1:] != cards:
+            np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
     except ValueError as exc:
         raise QuestionError(f"term {term.label}: {exc}") from None
     return log
@@ -226,8 +227,11 @@ def as_factor(program: ProgramLike, term: Term, log: np.ndarray, batched: bool,
     """The factor of ``term`` from its log values (:func:`term_log`), broadcast over its
     axes (a view): ``[size] + cards`` when ``batched``, else ``cards``."""
     cards = tuple(discrete(program.variables[a]).card for a in term.axes)
-    full = np.broadcast_shapes(log.shape, (log.shape[0],) + cards)
-    log = np.broadcast_to(log, full)
+    if log.shape[1:] != cards:
+        log = np.broadcast_to(log, np.broadcast_shapes(log.shape, (log.shape[0],) + cards))
+    else:  # read-only as a broadcast view is: a static factor is shared by every question
+        log = log.view()
+        log.flags.writeable = False
     if not batched:
         log = log[0]
     elif log.shape[0] != size:

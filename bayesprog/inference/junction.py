@@ -69,8 +69,9 @@ class JunctionTree:
     home: dict[str, tuple[int, tuple[int, ...]]]
     #: the most entries a clique's table holds (per row of evidence)
     largest: int
-    #: clique -> its factors' arrays at the last call, their product and its log scale
-    initial: dict[int, tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]] = field(
+    #: clique -> its factors' arrays at the last call, when none varies by row: their
+    #: product (before it is broadcast over the clique) and its log scale
+    initial: dict[int, tuple[tuple[np.ndarray, ...], np.ndarray, float]] = field(
         default_factory=dict)
 
     @property
@@ -268,52 +269,64 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
         full = (size,) + tuple(tree.cards[a] for a in clique)
         own = tuple(factors[i].log for i in by_clique[k])
         kept = tree.initial.get(k)
-        if kept is not None and kept[1].shape == full and len(kept[0]) == len(own) \
+        if kept is not None and len(kept[0]) == len(own) \
                 and all(a is b for a, b in zip(kept[0], own, strict=True)):
             log_scale += kept[2]
-            tables.append(kept[1].copy())
+            tables.append(np.broadcast_to(kept[1], full).copy())
             continue
         table: np.ndarray | None = None
         offset = np.zeros(size)
         for i in by_clique[k]:
             factor, (_, perm, shape) = factors[i], tree.placed[i]
-            log = factor.log if factor.batched else factor.log[np.newaxis]
-            axes = tuple(range(1, log.ndim))
-            with np.errstate(invalid="ignore"):
-                top = np.max(log, axis=axes, keepdims=True) if axes else log
-            top = np.where(np.isfinite(top), top, 0.0)
+            log = factor.log
+            # each factor scaled by its largest value (per row), kept in log
+            if factor.batched:
+                axes = tuple(range(1, log.ndim))
+                with np.errstate(invalid="ignore"):
+                    top = log.max(axis=axes, keepdims=True) if axes else log
+                top = np.where(np.isfinite(top), top, 0.0)
+                offset = offset + top.reshape(top.shape[0])
+            else:
+                largest = float(log.max()) if log.size else 0.0
+                top = largest if math.isfinite(largest) else 0.0
+                offset = offset + top
+                log = log[np.newaxis]
             values = np.exp(log - top)
-            offset = offset + top.reshape(top.shape[0])
             values = values.transpose((0,) + tuple(1 + j for j in perm)).reshape(
                 (values.shape[0],) + shape)
             table = values if table is None else table * values
-        table = np.ones(full) if table is None else np.broadcast_to(table, full).copy()
+        if table is None:
+            table = np.ones((1,) * len(full))
         log_scale += offset
-        if all(not factors[i].batched for i in by_clique[k]):
-            tree.initial[k] = (own, table, offset)
-            table = table.copy()
-        tables.append(table)
+        if all(not factors[i].batched for i in by_clique[k]):  # the same for every row
+            tree.initial[k] = (own, table, float(offset[0]) if size else 0.0)
+        tables.append(np.broadcast_to(table, full).copy())
     for name, state in (observed or {}).items():  # the other states' entries made zero
         k, _ = tree.home[name]
         clique, card = tree.cliques[k], tree.cards[name]
-        shape = [1] * (1 + len(clique))
-        shape[1 + clique.index(name)] = card
+        sizes: list[int] = [1] * (1 + len(clique))
+        sizes[1 + clique.index(name)] = card
+        mask: np.ndarray
         if isinstance(state, np.ndarray):
-            shape[0] = size
+            sizes[0] = size
             mask = np.zeros((size, card))
             mask[np.arange(size), state] = 1.0
         else:
             mask = np.zeros(card)
             mask[state] = 1.0
-        tables[k] *= mask.reshape(shape)
+        tables[k] *= mask.reshape(sizes)
     sent: list[np.ndarray | None] = [None] * len(tree.cliques)
     scales: list[np.ndarray | None] = [None] * len(tree.cliques)
+    # messages on their way into a clique, those of the same shape multiplied together first
+    # (at the separator's size), each shape then multiplied into the clique's table once
+    arriving: list[dict[tuple[int, ...], np.ndarray]] = [{} for _ in tree.cliques]
     with np.errstate(divide="ignore", invalid="ignore"):
         # collect: a clique after its children
         for k in tree.post:
             p = tree.parent[k]
             table = tables[k]
-            assert table is not None
+            for shape, product in arriving[k].items():
+                table *= product.reshape((size,) + shape)
             if p < 0:
                 continue
             summed, shape, _ = tree.up[k]
@@ -323,9 +336,8 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
             log_scale += np.log(total)
             sent[k] = message
             scales[k] = total
-            parent_table = tables[p]
-            assert parent_table is not None
-            parent_table *= message.reshape((size,) + shape)
+            waiting = arriving[p].get(shape)
+            arriving[p][shape] = message if waiting is None else waiting * message
         for k, p in enumerate(tree.parent):  # the roots: each tree's total
             if p < 0:
                 table = tables[k]
@@ -333,7 +345,8 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
                 total = table.reshape(size, -1).sum(axis=1)
                 log_scale += np.log(total)
                 table /= np.where(total > 0, total, 1.0).reshape((size,) + (1,) * (table.ndim - 1))
-        # distribute: a parent before its children
+        # distribute: a parent before its children (its table summed once per separator)
+        summed_parent: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}
         for k in reversed(tree.post):
             p = tree.parent[k]
             if p < 0:
@@ -341,11 +354,15 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
             _, _, others = tree.up[k]
             parent_table, table, old, scale = tables[p], tables[k], sent[k], scales[k]
             assert old is not None and scale is not None
-            new = parent_table.sum(axis=others) if others else parent_table
+            new = summed_parent.get((p, others))
+            if new is None:
+                new = summed_parent[p, others] = (parent_table.sum(axis=others) if others
+                                                  else parent_table)
             # the clique's table summed to the scale of its message up: its belief sums to 1
-            scale = np.where(scale > 0, scale, 1.0).reshape((size,) + (1,) * (old.ndim - 1))
-            ratio = np.where(old > 0, new.reshape(old.shape) / (np.where(old > 0, old, 1.0)
-                                                                * scale), 0.0)
+            # (where the message up was zero, the parent's belief is zero too)
+            before = old * scale.reshape((size,) + (1,) * (old.ndim - 1))
+            ratio = np.zeros(before.shape)
+            np.divide(new.reshape(before.shape), before, out=ratio, where=before > 0)
             table *= ratio.reshape((size,) + tree.down[k])
     marginals: dict[str, np.ndarray] = {}
     homed: dict[int, list[str]] = {}

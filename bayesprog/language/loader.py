@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import secrets
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -342,9 +341,10 @@ def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
     diagnostics."""
     if len(text) < BLOCK_MIN_CHARS:
         return text, {}, 0
-    token = "__table_" + secrets.token_hex(4)
+    token, n = "__table_", 0  # a placeholder the text does not hold
     while token in text:
-        token = "__table_" + secrets.token_hex(4)
+        n += 1
+        token = f"__table{n}_"
     pieces: list[str] = []
     blocks: dict[str, tuple[Any, str]] = {}
     numbers, done, at = 0, 0, 0

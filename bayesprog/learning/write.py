@@ -10,7 +10,6 @@ import math
 import os
 import re
 from collections.abc import Collection, Mapping, MutableMapping
-from decimal import Decimal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -100,6 +99,8 @@ def rounded(array: np.ndarray, digits: int, simplex: bool = False) -> np.ndarray
     out = np.vectorize(lambda x: float(f"{x:.{digits}g}"), otypes=[float])(array) \
         if array.size else array.copy()
     if simplex and out.ndim and out.size:
+        from decimal import Decimal  # (a rounded file's, not every file's)
+
         rows, source = out.reshape(-1, out.shape[-1]), array.reshape(-1, array.shape[-1])
         for r in range(rows.shape[0]):
             k = int(np.argmax(source[r]))
