@@ -79,6 +79,8 @@ def read_plain_csv(raw: bytes, sep: str) -> PlainCsv | None:
         body += b"\n"
     text = np.frombuffer(body, dtype=np.uint8)
     ends = np.flatnonzero((text == ord(sep)) | (text == ord("\n")))
+    offsets = np.int32 if len(body) + 16 < 2**31 else np.int64
+    ends = ends.astype(offsets, copy=False)
     newline = text[ends] == ord("\n")
     width = int(np.argmax(newline)) + 1  # fields of the header line
     lines = len(ends) // width
@@ -97,9 +99,8 @@ def read_plain_csv(raw: bytes, sep: str) -> PlainCsv | None:
     # padded to whole 8-byte words, and one more, for the words read from each field
     padded = body + bytes(16 - len(body) % 8)
     # a column's fields side by side in memory: the reads of each column are sequential
-    offsets = np.int32 if len(padded) < 2**31 else np.int64
-    return PlainCsv(names, lines - 1, padded, np.ascontiguousarray(first.T, dtype=offsets),
-                    np.ascontiguousarray(lengths.T, dtype=offsets))
+    return PlainCsv(names, lines - 1, padded, np.ascontiguousarray(first.T),
+                    np.ascontiguousarray(lengths.T))
 
 
 def _words(body: bytes, starts: np.ndarray, lengths: np.ndarray) -> list[np.ndarray]:
