@@ -87,8 +87,12 @@ class FitRecord:
                                                "from the data: how", None)
 
     def as_data(self) -> dict[str, Any]:
-        """The record as plain data, in the order of its fields (as written into a file)."""
-        return dataclasses.asdict(self)
+        """The record as plain data, in the order of its fields (as written into a file); its
+        statistics as they are, not copied (read them, do not change them)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if self.structure is not None:
+            out["structure"] = dataclasses.asdict(self.structure)
+        return out
 
     def replace(self, **changes: Any) -> FitRecord:
         """A copy with ``changes``."""

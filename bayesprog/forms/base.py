@@ -67,19 +67,21 @@ class Constraint:
 
 
 def _finite(a: np.ndarray) -> bool:
-    return bool(np.all(np.isfinite(a)))
+    return bool(np.isfinite(a).all())
+
+
+def _simplex(a: np.ndarray) -> bool:
+    a = np.asarray(a)
+    return _finite(a) and bool((a >= 0).all()) and bool(
+        (np.abs(a.sum(axis=-1) - 1.0) <= 1e-6).all())
 
 
 real = Constraint("a finite real", _finite)
-positive = Constraint("> 0", lambda a: _finite(a) and bool(np.all(a > 0)))
-nonnegative = Constraint(">= 0", lambda a: _finite(a) and bool(np.all(a >= 0)))
-unit_interval = Constraint("in [0, 1]", lambda a: _finite(a) and bool(np.all((a >= 0) & (a <= 1))))
-simplex = Constraint(
-    "non-negative and summing to 1",
-    lambda a: _finite(a)
-    and bool(np.all(a >= 0))
-    and bool(np.allclose(a.sum(axis=-1), 1.0, rtol=0, atol=1e-6)),
-)
+positive = Constraint("> 0", lambda a: _finite(a) and bool((np.asarray(a) > 0).all()))
+nonnegative = Constraint(">= 0", lambda a: _finite(a) and bool((np.asarray(a) >= 0).all()))
+unit_interval = Constraint("in [0, 1]", lambda a: _finite(a) and bool(
+    ((np.asarray(a) >= 0) & (np.asarray(a) <= 1)).all()))
+simplex = Constraint("non-negative and summing to 1", _simplex)
 
 
 @dataclass(frozen=True)
