@@ -479,22 +479,17 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
 
     record = fit.record.replace(data=coded.source, sha256=coded.sha256,
                                 structure=StructureRecord(**structure))
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as folder:
-        draft = Path(folder) / "discovered.yaml"
-        draft.write_text(text, encoding="utf-8")
-        # the fit's record written as the fitted values are (in place), then the search's
-        # added to it; the writer's round trip when the text does not end with that record
-        fit.estimate.record = record.replace(structure=None)
-        written = _with_structure(fit.text(draft), record)
-        program = loads(written, f"<{title}>") if written is not None else None
-        fit.estimate.record = record
-        if written is None or program is None or program.learned[-1] != record:
-            written = fit.text(draft)
-            program = loads(written, f"<{title}>")
-        fitted_text = written
-    return Discovery(program, fitted_text,
+    # the fit's record written as the fitted values are (in place), then the search's added
+    # to it; the writer's round trip when the text does not end with that record (what is
+    # written is loaded, which checks it)
+    fit.estimate.record = record.replace(structure=None)
+    written = _with_structure(fit.fitted_text(text), record)
+    program = loads(written, f"<{title}>") if written is not None else None
+    fit.estimate.record = record
+    if written is None or program is None or program.learned[-1] != record:
+        written = fit.fitted_text(text)
+        program = loads(written, f"<{title}>")
+    return Discovery(program, written,
                      {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
                      coded.frame)
 

@@ -740,14 +740,24 @@ class Fit:
         so that the file loads as :attr:`program`; ``rounded`` writes them to the precision their rows support
         instead (the significant digits of :func:`~bayesprog.learning.write.supported_digits`,
         a mean to a twentieth of its standard error), the digits in the record."""
-        from bayesprog.forms.base import simplex as simplex_constraint
-        from bayesprog.learning import render_fitted
-        from bayesprog.learning.write import supported_digits
-
         path = Path(source) if source is not None else self.source
         if path is None:
             raise QuestionError("this program was not loaded from a file: give the program "
                                 "file to write the fitted values into (source=...)")
+        text = self.fitted_text(path.read_text(encoding="utf-8"), rounded=rounded)
+        # the fitted file must load as a program; where it would not, the lines said are the
+        # fitted text's, not the input's
+        loads(text, f"{path} (as fitted)", path.parent)
+        return text
+
+    def fitted_text(self, text: str, *, rounded: bool = False) -> str:
+        """``text`` (the program file's text) with the learned values in place and the fit's
+        record appended, as :meth:`text` writes it, but not loaded again to check it (for a
+        caller that loads what it writes)."""
+        from bayesprog.forms.base import simplex as simplex_constraint
+        from bayesprog.learning import render_fitted
+        from bayesprog.learning.write import supported_digits
+
         simplex = {t.label: [p.name for p in t.form.params if p.constraint is simplex_constraint]
                    for t in self.program.terms}
         locations = {t.label: t.form.location_scale for t in self.program.terms
@@ -756,12 +766,8 @@ class Fit:
         if rounded:
             rows = record.rows_supporting or record.rows_used
             record = record.replace(digits=supported_digits(rows))
-        text = render_fitted(path.read_text(encoding="utf-8"), self.estimate.params,
-                             self.program.variables, record, simplex, locations, self.states)
-        # the fitted file must load as a program; where it would not, the lines said are the
-        # fitted text's, not the input's
-        loads(text, f"{path} (as fitted)", path.parent)
-        return text
+        return render_fitted(text, self.estimate.params, self.program.variables, record,
+                             simplex, locations, self.states)
 
     def save(self, path: str | Path, source: str | Path | None = None, *,
              rounded: bool = False) -> Path:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -680,8 +681,7 @@ def test_discovery_on_a_dict_of_columns_is_deterministic():
     first = bayesprog.discover(data)
 
     def timeless(text: str) -> str:  # the record's search time is the clock's, not the data's
-        return "\n".join(line for line in text.splitlines()
-                         if not line.strip().startswith("seconds:"))
+        return re.sub(r"\bseconds: [0-9.e+-]+", "seconds: _", text)
 
     assert timeless(first.text) == timeless(bayesprog.discover(data).text)
     assert "seconds:" in first.text
