@@ -9,9 +9,9 @@ first of its other variables to be eliminated, and a clique contained in its par
 into it. The tree is compiled once per program and set of terms, whatever is observed, and
 kept by the program; each call then multiplies the factors into their cliques, enters the
 evidence, sends the messages up (collect) and back down (distribute, Hugin's update), and sums
-each searched variable's smallest clique down to it. Every table has the batch as its first axis, so N evidence sets are
-one pass; messages are scaled to sum to one per row and their scales kept in log, so that a large
-network's evidence neither underflows nor is lost.
+each searched variable's smallest clique down to it. Every table has the batch as its first
+axis, so N evidence sets are one pass; messages are scaled to sum to one per row and their
+scales kept in log, so that a large network's evidence neither underflows nor is lost.
 """
 
 from __future__ import annotations
