@@ -86,6 +86,14 @@ class FitRecord:
     structure: StructureRecord | None = _field("when the decomposition itself was discovered "
                                                "from the data: how", None)
 
+    def __post_init__(self) -> None:
+        # a statistic the loader read as an array (as it reads tables) is kept as lists, as
+        # a fit makes it: records compare and write alike however they were read
+        for named in self.statistics.values():
+            for name, value in named.items():
+                if hasattr(value, "tolist"):
+                    named[name] = value.tolist()
+
     def as_data(self) -> dict[str, Any]:
         """The record as plain data, in the order of its fields (as written into a file); its
         statistics as they are, not copied (read them, do not change them)."""

@@ -184,3 +184,31 @@ def test_tables_past_the_limit_are_refused_before_they_are_read(monkeypatch):
     assert "big.yaml:1:1: the file's tables hold at least 24 numbers, more than the 20" \
         in str(caught.value)
     assert not [t for t in read if t.count(",") > 2]  # P(A)'s three numbers only
+
+
+def test_a_fitted_files_statistics_are_read_as_arrays_and_give_the_yaml_record(monkeypatch,
+                                                                               tmp_path):
+    """A fit's statistics under learned: are read like tables (as arrays, not a YAML node per
+    number): the record is the one YAML gives, and what follows them keeps its place."""
+    program = bayesprog.loads(TWO_PARENTS.replace("TABLE", flow_table(_table(2), column=11)))
+    rng = np.random.default_rng(5)
+    rows = {"A": rng.choice(["a0", "a1", "a2"], 400).tolist(),
+            "B": rng.choice(["b0", "b1"], 400).tolist(),
+            "C": rng.choice(["c0", "c1", "c2", "c3"], 400).tolist()}
+    source = tmp_path / "net.yaml"
+    source.write_text(TWO_PARENTS.replace("TABLE", flow_table(_table(2), column=11)))
+    text = program.fit(rows).text(source) + "# after the record\nname: fitted\n"
+    blocks = loader._number_blocks(text)[1]
+    # the counts of P(C | A, B): one per row
+    assert any(array.shape == (3, 2, 4) and array.sum() == 400 for array, _ in blocks.values())
+    fast = bayesprog.loads(text)
+    with monkeypatch.context() as patch:
+        patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+        slow = bayesprog.loads(text)
+    assert fast.learned == slow.learned
+    assert fast.learned[-1].statistics["P(C | A, B)"]["counts"] == \
+        slow.learned[-1].statistics["P(C | A, B)"]["counts"]
+    assert isinstance(fast.learned[-1].statistics["P(C | A, B)"]["counts"], list)
+    assert fast.name == slow.name == "fitted"
+    broken = text.replace("name: fitted", "name: [fitted")
+    assert _problems(broken, False, monkeypatch) == _problems(broken, True, monkeypatch)

@@ -329,12 +329,34 @@ BLOCK_MIN_CHARS = 10
 #: ``table:`` followed by a nested list made only of numbers, brackets, commas and spaces
 _BLOCK_START = re.compile(r"(?:^|[\s{,])table[ \t]*:[ \t]*(?=\[)")
 _BLOCK_BODY = re.compile(r"[\[\]0-9.,eE+\- \t\r\n]*")
+#: the fits' records, and in them each one's sufficient statistics (a key per statistic)
+_LEARNED = re.compile(r"^learned[ \t]*:", re.MULTILINE)
+_STATISTICS = re.compile(r"^([ \t]*(?:-[ \t]+)?)statistics[ \t]*:[ \t]*(?:#[^\n]*)?$",
+                         re.MULTILINE)
+_LIST_VALUE = re.compile(r":[ \t]*(?=\[)")
+
+
+def _block_starts(text: str) -> list[int]:
+    """Where each list that may be read as an array starts: a table's, and each statistic's
+    in the ``statistics:`` of a fit's record (under the top-level ``learned:``)."""
+    starts = [m.end() for m in _BLOCK_START.finditer(text)]
+    learned = _LEARNED.search(text)
+    if learned is not None:
+        for found in _STATISTICS.finditer(text, learned.end()):
+            # the statistics' lines: those indented past the key, up to the next that is not
+            column = len(found.group(1))
+            after = re.compile(rf"^[ ]{{0,{column}}}(?=[^ \t\r\n#])", re.MULTILINE).search(
+                text, found.end() + 1)
+            stop = after.start() if after is not None else len(text)
+            starts += [m.end() for m in _LIST_VALUE.finditer(text, found.end(), stop)]
+    return sorted(set(starts))
 
 
 def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
-    """The text with each large table of numbers (``table: [[0.1, 0.9], ...]``) replaced by a
-    placeholder on its first line (the lines and the columns after it kept), the arrays by
-    placeholder (with their text, to place a row later), and how many numbers they hold.
+    """The text with each large table of numbers (``table: [[0.1, 0.9], ...]``, or a fit's
+    statistic, ``counts: [[7.0, 99.0], ...]``) replaced by a placeholder on its first line
+    (the lines and the columns after it kept), the arrays by placeholder (with their text, to
+    place a row later), and how many numbers they hold.
 
     A table is taken only when it is a regular nested list of plain decimal numbers (what JSON
     reads); anything else (a ragged row, a word, ``.5``) is left to the YAML reader and its
@@ -348,11 +370,9 @@ def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
     pieces: list[str] = []
     blocks: dict[str, tuple[Any, str]] = {}
     numbers, done, at = 0, 0, 0
-    while True:
-        found = _BLOCK_START.search(text, at)
-        if found is None:
-            break
-        start = found.end()
+    for start in _block_starts(text):
+        if start < at:  # inside the list just looked at
+            continue
         body = _BLOCK_BODY.match(text, start)
         end = _closing(text, start, body.end() if body else start)
         at = max(end, start + 1)
