@@ -246,3 +246,61 @@ def test_questions_observing_other_variables_share_one_tree_and_stay_exact():
             assert np.allclose(answer.probabilities[row], expected[name], rtol=0, atol=1e-12)
             assert float(answer.log_evidence[row]) == pytest.approx(log_z, abs=1e-10)
     assert len([k for k in program.inference_cache.layouts if k[0] == "junction"]) == 1
+
+
+def _grid(size: int, seed: int = 0) -> bayesprog.Program:
+    """A square grid of two-state variables, each cell's parents its upper and left cells."""
+    rng = np.random.default_rng(seed)
+    doc = {"bayesprog": 1, "variables": {}, "decomposition": []}
+    for i in range(size):
+        for j in range(size):
+            name = f"X{i}_{j}"
+            doc["variables"][name] = {"states": ["a", "b"]}
+            parents = ([f"X{i - 1}_{j}"] if i else []) + ([f"X{i}_{j - 1}"] if j else [])
+            table = rng.dirichlet([1.0, 1.0], size=(2,) * len(parents))
+            doc["decomposition"].append({
+                "term": f"P({name} | {', '.join(parents)})" if parents else f"P({name})",
+                "form": "table", "table": table.tolist()})
+    return bayesprog.loads(dump_document(doc))
+
+
+def test_evidence_that_splits_the_graph_is_answered_on_the_smaller_tree(monkeypatch):
+    """Every other column of a grid observed: the factors sliced at the evidence make a far
+    smaller tree than the whole ones (even one within the limits when the whole one is not),
+    and that one answers, as single questions do."""
+    from bayesprog.inference import junction
+    from bayesprog.limits import set_limits
+
+    program = _grid(8)
+    evidence = {f"X{i}_{j}": "ab"[(i + j) % 2] for i in range(8) for j in range(1, 8, 2)}
+    asked = ["X2_0", "X5_4", "X7_6"]
+    monkeypatch.setattr(junction, "WHOLE_TREE", 100)
+    found = program.marginals(evidence, variables=asked)
+    given = ", ".join(evidence)
+    for name in asked:
+        single = program.posterior(f"P({name} | {given})", evidence)
+        assert np.allclose(found[name].probabilities, single.probabilities, rtol=0, atol=1e-12)
+    chosen = [v for k, v in program.inference_cache.layouts.items() if k[0] == "junction sliced"]
+    whole = [v for k, v in program.inference_cache.layouts.items() if k[0] == "junction"]
+    assert len(chosen) == 1 and chosen[0] is not whole[0]
+    assert chosen[0].entries * 2 < whole[0].entries
+
+    fresh = _grid(8)
+    set_limits(entries=2_000)  # the whole factors' tree is past it, the sliced one is not
+    try:
+        again = fresh.marginals(evidence, variables=asked)
+    finally:
+        set_limits()
+    for name in asked:
+        assert np.allclose(again[name].probabilities, found[name].probabilities, atol=1e-12)
+
+
+def test_no_rows_of_evidence_give_answers_of_no_rows_and_change_nothing_kept():
+    program, net = _random_network(3, size=6)
+    before = program.marginals({"V2": 1})
+    empty = program.marginals({"V2": np.array([], dtype=int)})
+    assert all(a.probabilities.shape == (0, net["cards"][n]) for n, a in empty.items())
+    after = program.marginals({"V2": 1})
+    for name, answer in after.items():
+        assert answer.log_evidence == before[name].log_evidence
+        assert np.array_equal(answer.probabilities, before[name].probabilities)

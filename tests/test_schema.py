@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
 
+import bayesprog
 from bayesprog.language.document import Document, validate_located
 from bayesprog.language.json_schema import json_schema
 from bayesprog.language.loader import Located, load_yaml
@@ -143,3 +144,21 @@ def test_whatever_the_plain_reader_takes_pydantic_takes_the_same(data):
         else:
             node[key] = data.draw(LEAVES)
     _agree(doc)
+
+
+@pytest.mark.parametrize("change, word", [
+    (lambda record: record.pop("log_likelihood"), "log_likelihood"),
+    (lambda record: record.update(log_likelihood=10**400), "log_likelihood"),
+    (lambda record: record.update(rows="many"), "rows"),
+])
+def test_a_wrong_fit_record_is_left_to_pydantic_which_says_what_is_wrong(change, word):
+    from bayesprog.errors import SpecError
+
+    text = (ROOT / "models" / "pi_per_identified.yaml").read_text()
+    located, plain = _located(text).data, yaml.safe_load(text)
+    change(located["learned"][0])
+    change(plain["learned"][0])
+    assert not _agree(located)
+    with pytest.raises(SpecError) as caught:
+        bayesprog.loads(yaml.safe_dump(plain, sort_keys=False), "fitted.yaml")
+    assert any(word in str(d) for d in caught.value.diagnostics), caught.value.diagnostics

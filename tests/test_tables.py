@@ -212,3 +212,11 @@ def test_a_fitted_files_statistics_are_read_as_arrays_and_give_the_yaml_record(m
     assert fast.name == slow.name == "fitted"
     broken = text.replace("name: fitted", "name: [fitted")
     assert _problems(broken, False, monkeypatch) == _problems(broken, True, monkeypatch)
+
+
+def test_only_the_statistics_of_the_fits_records_are_read_as_arrays():
+    text = ("bayesprog: 1\nlearned:\n  - data: d.csv\n    statistics:\n      P(A):\n"
+            "        counts: [137.0, 163.0, 100.0]\n"
+            "inputs:\n  statistics:\n    shape: [100000, 3, 7]\n")
+    taken = [written for _, written in loader._number_blocks(text)[1].values()]
+    assert taken == ["[137.0, 163.0, 100.0]"]

@@ -33,19 +33,15 @@ from bayesprog.inference.factors import (
     latent_continuous,
     question_factors,
     relevant_names,
+    slice_factor,
     terms_of,
 )
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.limits import check_size
+from bayesprog.limits import SizeError, check_size
 from bayesprog.variables import Discrete, discrete
 
-
-@dataclass(frozen=True)
-class _Placed:
-    """How an array over some axes (in the tree's order) broadcasts into a clique: the shape
-    with ones where the clique has axes the array does not, after the batch axis."""
-
-    shape: tuple[int, ...]
+#: what the cache keeps for a tree of the whole factors too large to build
+_TOO_LARGE: Any = object()
 
 
 @dataclass
@@ -276,6 +272,7 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
             continue
         table: np.ndarray | None = None
         offset = np.zeros(size)
+        constant = 0.0  # the part of the offset that is the same for every row
         for i in by_clique[k]:
             factor, (_, perm, shape) = factors[i], tree.placed[i]
             log = factor.log
@@ -289,7 +286,7 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
             else:
                 largest = float(log.max()) if log.size else 0.0
                 top = largest if math.isfinite(largest) else 0.0
-                offset = offset + top
+                constant += top
                 log = log[np.newaxis]
             values = np.exp(log - top)
             values = values.transpose((0,) + tuple(1 + j for j in perm)).reshape(
@@ -297,9 +294,9 @@ def calibrate(tree: JunctionTree, factors: list[Factor], size: int,
             table = values if table is None else table * values
         if table is None:
             table = np.ones((1,) * len(full))
-        log_scale += offset
+        log_scale += offset + constant
         if all(not factors[i].batched for i in by_clique[k]):  # the same for every row
-            tree.initial[k] = (own, table, float(offset[0]) if size else 0.0)
+            tree.initial[k] = (own, table, constant)
         tables.append(np.broadcast_to(table, full).copy())
     for name, state in (observed or {}).items():  # the other states' entries made zero
         k, _ = tree.home[name]
@@ -392,6 +389,50 @@ def _read_each(table: np.ndarray, names: list[str], into: dict[str, np.ndarray])
     _read_each(table.sum(axis=tuple(range(1, 1 + half))), names[half:], into)
 
 
+#: a tree of the whole factors larger than this (entries) is weighed against the tree of the
+#: factors sliced at the evidence, once per set of observed variables
+WHOLE_TREE = 1 << 20
+
+
+def _tree(program: ProgramLike, factors: list[Factor], wanted: list[str], bound: Any
+          ) -> tuple[JunctionTree, bool]:
+    """The tree to calibrate, and whether it is that of the factors sliced at the evidence.
+
+    The tree of the whole factors (the observed states entered as zeros) is the program's,
+    whatever is observed: built once, it serves every question. Evidence can also split a
+    graph (a grid with every other column observed), and then the whole factors' tree is far
+    larger than it needs to be, or too large to build: where it is large, the size of the
+    sliced factors' tree is estimated (the elimination alone, by size) for this set of
+    observed variables, and that tree is taken when it is under half the whole one."""
+    layouts = program.inference_cache.layouts
+    scopes = [f.axes for f in factors]
+    held = list(dict.fromkeys([n for axes in scopes for n in axes] + wanted))
+    key = ("junction", tuple(scopes), tuple(held))
+    whole = layouts.get(key)
+    if whole is None:
+        cards = {n: discrete(program.variables[n]).card for n in held}
+        try:
+            whole = build(scopes, cards, held)
+        except SizeError:
+            if not bound.discrete:
+                raise
+            whole = _TOO_LARGE
+        layouts[key] = whole
+    if not bound.discrete or (whole is not _TOO_LARGE and whole.entries <= WHOLE_TREE):
+        return whole, False
+    observed = tuple(sorted(bound.discrete))
+    choice_key = ("junction sliced", tuple(scopes), tuple(wanted), observed)
+    chosen = layouts.get(choice_key)
+    if chosen is None:
+        cut = [tuple(a for a in axes if a not in bound.discrete) for axes in scopes]
+        names = list(dict.fromkeys([a for axes in cut for a in axes] + wanted))
+        cards = {n: discrete(program.variables[n]).card for n in names}
+        estimate = _elimination(cut, names, cards, "weight")[2]
+        chosen = layouts[choice_key] = build(cut, cards, wanted) if (
+            whole is _TOO_LARGE or 2 * estimate < whole.entries) else whole
+    return chosen, chosen is not whole
+
+
 def all_marginals(program: ProgramLike, evidence: Mapping[str, Any] | None,
                   variables: Sequence[str] | None, inputs: Mapping[str, Any] | None = None,
                   soft: Mapping[str, Any] | None = None,
@@ -430,18 +471,18 @@ def all_marginals(program: ProgramLike, evidence: Mapping[str, Any] | None,
         raise QuestionError(f"all marginals in one pass need every unobserved variable "
                             f"discrete; {', '.join(latent)} is real: ask each variable "
                             "(program.posterior) instead")
-    # the factors whole, the observed states entered as zeros: one tree whatever is observed
     factors = question_factors(program, terms, bound, sliced=False)
-    scopes = [f.axes for f in factors]
-    held = list(dict.fromkeys([n for axes in scopes for n in axes] + wanted))
-    key = ("junction", tuple(scopes), tuple(held))
-    tree = program.inference_cache.layouts.get(key)
-    if tree is None:
-        cards = {n: discrete(program.variables[n]).card for n in held}
-        tree = program.inference_cache.layouts[key] = build(scopes, cards, held)
-    entered = {n: state for n, state in bound.discrete.items() if n in tree.home}
-    found, log_evidence = calibrate(tree, factors, bound.size, entered, wanted)
+    tree, sliced = _tree(program, factors, wanted, bound)
     batch = bound.batch_shape
+    if bound.size == 0:  # no rows of evidence: answers of no rows
+        found = {n: np.empty((0, discrete(program.variables[n]).card)) for n in wanted}
+        log_evidence = np.empty(0)
+    elif sliced:
+        found, log_evidence = calibrate(tree, [slice_factor(f, bound) for f in factors],
+                                        bound.size, None, wanted)
+    else:
+        entered = {n: state for n, state in bound.discrete.items() if n in tree.home}
+        found, log_evidence = calibrate(tree, factors, bound.size, entered, wanted)
     answers = {}
     for name in wanted:
         var = program.variables[name]

@@ -334,6 +334,7 @@ _LEARNED = re.compile(r"^learned[ \t]*:", re.MULTILINE)
 _STATISTICS = re.compile(r"^([ \t]*(?:-[ \t]+)?)statistics[ \t]*:[ \t]*(?:#[^\n]*)?$",
                          re.MULTILINE)
 _LIST_VALUE = re.compile(r":[ \t]*(?=\[)")
+_TOP_LEVEL = re.compile(r"^(?=[^ \t\r\n#-])", re.MULTILINE)
 
 
 def _block_starts(text: str) -> list[int]:
@@ -342,7 +343,10 @@ def _block_starts(text: str) -> list[int]:
     starts = [m.end() for m in _BLOCK_START.finditer(text)]
     learned = _LEARNED.search(text)
     if learned is not None:
-        for found in _STATISTICS.finditer(text, learned.end()):
+        # up to the next top-level key (a record's dash may stand in the first column)
+        following = _TOP_LEVEL.search(text, learned.end())
+        records_end = following.start() if following is not None else len(text)
+        for found in _STATISTICS.finditer(text, learned.end(), records_end):
             # the statistics' lines: those indented past the key, up to the next that is not
             column = len(found.group(1))
             after = re.compile(rf"^[ ]{{0,{column}}}(?=[^ \t\r\n#])", re.MULTILINE).search(

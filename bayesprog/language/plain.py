@@ -252,9 +252,11 @@ def _record(raw: Any) -> FitRecord:
     statistics = _mapping(spec.get("statistics", {}))
     for named in statistics.values():
         _mapping(named)
+    if "log_likelihood" in spec:
+        _expect(type(spec["log_likelihood"]) is float or abs(spec["log_likelihood"]) < 2**53)
+        spec = {**spec, "log_likelihood": float(spec["log_likelihood"])}
     try:
-        return FitRecord(**{**spec, "log_likelihood": float(spec.get("log_likelihood", 0)),
-                            "terms": _texts(spec.get("terms", []))})
+        return FitRecord(**{**spec, "terms": _texts(spec.get("terms", []))})
     except TypeError:  # a required field missing
         raise _Other from None
 
