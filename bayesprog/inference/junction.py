@@ -401,9 +401,9 @@ def _tree(program: ProgramLike, factors: list[Factor], wanted: list[str], bound:
     The tree of the whole factors (the observed states entered as zeros) is the program's,
     whatever is observed: built once, it serves every question. Evidence can also split a
     graph (a grid with every other column observed), and then the whole factors' tree is far
-    larger than it needs to be, or too large to build: where it is large, the size of the
-    sliced factors' tree is estimated (the elimination alone, by size) for this set of
-    observed variables, and that tree is taken when it is under half the whole one."""
+    larger than it needs to be, or too large to build: where it is large, and its cliques
+    without the observed variables hold under half its entries (or it could not be built),
+    the sliced factors' tree is built for this set of observed variables and taken."""
     layouts = program.inference_cache.layouts
     scopes = [f.axes for f in factors]
     held = list(dict.fromkeys([n for axes in scopes for n in axes] + wanted))
@@ -424,12 +424,19 @@ def _tree(program: ProgramLike, factors: list[Factor], wanted: list[str], bound:
     choice_key = ("junction sliced", tuple(scopes), tuple(wanted), observed)
     chosen = layouts.get(choice_key)
     if chosen is None:
-        cut = [tuple(a for a in axes if a not in bound.discrete) for axes in scopes]
-        names = list(dict.fromkeys([a for axes in cut for a in axes] + wanted))
-        cards = {n: discrete(program.variables[n]).card for n in names}
-        estimate = _elimination(cut, names, cards, "weight")[2]
-        chosen = layouts[choice_key] = build(cut, cards, wanted) if (
-            whole is _TOO_LARGE or 2 * estimate < whole.entries) else whole
+        # the whole tree's cliques without the observed variables are a tree for the sliced
+        # factors: their size bounds the sliced tree's, and costs nothing to count
+        smaller = whole is _TOO_LARGE or 2 * sum(
+            math.prod(whole.cards[a] for a in clique if a not in bound.discrete)
+            for clique in whole.cliques) < whole.entries
+        if smaller:
+            cut = [tuple(a for a in axes if a not in bound.discrete) for axes in scopes]
+            names = list(dict.fromkeys([a for axes in cut for a in axes] + wanted))
+            chosen = build(cut, {n: discrete(program.variables[n]).card for n in names},
+                           wanted)
+        else:
+            chosen = whole
+        layouts[choice_key] = chosen
     return chosen, chosen is not whole
 
 
