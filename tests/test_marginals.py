@@ -304,3 +304,16 @@ def test_no_rows_of_evidence_give_answers_of_no_rows_and_change_nothing_kept():
     for name, answer in after.items():
         assert answer.log_evidence == before[name].log_evidence
         assert np.array_equal(answer.probabilities, before[name].probabilities)
+
+
+def test_a_tree_far_past_the_limit_is_refused_in_words():
+    from bayesprog.limits import SizeError, set_limits
+
+    program = _grid(10)
+    set_limits(entries=500)  # the elimination stops past 4 x 500 entries
+    try:
+        with pytest.raises(SizeError, match="junction tree of 99 variables needs more than "
+                           "2,000 entries, more than the limit of 500"):
+            program.marginals({"X0_1": "a"})
+    finally:
+        set_limits()

@@ -37,8 +37,13 @@ from bayesprog.inference.factors import (
     terms_of,
 )
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.limits import SizeError, check_size
+from bayesprog.limits import SizeError, check_size, limit
 from bayesprog.variables import Discrete, discrete
+
+#: an elimination whose cliques hold this many times the limit on entries in all is stopped:
+#: merging the cliques contained in others does not bring it under (bnlearn's networks: by
+#: under 2)
+BUDGET = 4
 
 #: what the cache keeps for a tree of the whole factors too large to build
 _TOO_LARGE: Any = object()
@@ -91,8 +96,10 @@ SMALL_TREE = 1 << 20
 
 
 def _elimination(scopes: list[tuple[str, ...]], names: list[str], cards: dict[str, int],
-                 heuristic: str) -> tuple[list[str], list[frozenset[str]], int]:
-    """A greedy elimination order, the clique each step makes, and their entries in all."""
+                 heuristic: str, budget: float = math.inf
+                 ) -> tuple[list[str], list[frozenset[str]], int]:
+    """A greedy elimination order, the clique each step makes, and their entries in all; as
+    far as it went when the entries passed ``budget`` (then more than it)."""
     rank = {a: i for i, a in enumerate(names)}
     adjacent: dict[str, set[str]] = {a: set() for a in names}
     for scope in scopes:
@@ -132,6 +139,8 @@ def _elimination(scopes: list[tuple[str, ...]], names: list[str], cards: dict[st
         order.append(a)
         made.append(frozenset(around | {a}))
         total += cards[a] * math.prod(cards[b] for b in around)
+        if total > budget:
+            break
         added = []  # the edges this step adds, each once
         for b in around:
             neighbours = adjacent[b]
@@ -157,11 +166,18 @@ def build(scopes: list[tuple[str, ...]], cards: dict[str, int],
     reading ``wanted`` (each of which is in a scope or has its own one-variable clique)."""
     names = list(dict.fromkeys([a for s in scopes for a in s] + list(wanted)))
     rank = {a: i for i, a in enumerate(names)}
-    order, made, total = _elimination(scopes, names, cards, "weight")
+    # an elimination stops once its cliques pass what merging them could bring under the
+    # limit (a far too large tree is refused at once), or what a better one already made
+    budget = BUDGET * limit("entries")
+    order, made, total = _elimination(scopes, names, cards, "weight", budget)
     if total > SMALL_TREE:
-        better = _elimination(scopes, names, cards, HEURISTIC)
+        better = _elimination(scopes, names, cards, HEURISTIC, min(total, budget))
         if better[2] < total:
             order, made, total = better
+    if total > budget:
+        raise SizeError(f"the junction tree of {len(names)} variables needs more than "
+                        f"{budget:,} entries, more than the limit of {limit('entries'):,} "
+                        "(raise it with the environment variable BAYESPROG_MAX_ENTRIES)")
     position = {a: i for i, a in enumerate(order)}
     # the clique of each eliminated variable; its parent: that of its first other variable out
     parent = [min((position[b] for b in c if b != order[i]), default=-1)
