@@ -142,6 +142,13 @@ def worker_init(preload: tuple[str, ...] = ()) -> None:
 
 
 def _exit_quietly(signum: int, frame: Any) -> None:
+    # stopped inside a call from compiled code back into Python (numba's compiler, through
+    # llvmlite's callbacks, while it caches a kernel), SystemExit would be printed with a
+    # traceback and ignored there: the worker leaves at once instead, as while it starts
+    while frame is not None:
+        if "llvmlite" in frame.f_code.co_filename:
+            os._exit(128 + signum)
+        frame = frame.f_back
     raise SystemExit(128 + signum)
 
 

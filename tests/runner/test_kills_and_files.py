@@ -286,3 +286,27 @@ def test_a_folder_named_like_the_package_where_the_run_starts_does_not_hide_it(t
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "decoy" not in done.stderr and (tmp_path / "out" / "chunks").is_dir()
+
+
+STOPPED_IN_A_CALLBACK = """
+import ctypes, os, signal, time
+from runner.experiments.executors import _exit_quietly
+
+signal.signal(signal.SIGTERM, _exit_quietly)
+# a Python function called back from C, as llvmlite's object cache is while numba compiles
+namespace = {}
+exec(compile("def notify():\\n    os.kill(os.getpid(), signal.SIGTERM)\\n"
+             "    for _ in range(200):\\n        time.sleep(0.01)\\n",
+             "/site-packages/llvmlite/binding/executionengine.py", "exec"),
+     {"os": os, "signal": signal, "time": time}, namespace)
+callback = ctypes.CFUNCTYPE(None)(namespace["notify"])
+callback()
+print("still running", flush=True)
+"""
+
+
+def test_a_worker_stopped_inside_a_callback_from_compiled_code_leaves_without_a_traceback():
+    done = subprocess.run([sys.executable, "-c", STOPPED_IN_A_CALLBACK], capture_output=True,
+                          text=True, timeout=60, cwd=Path(__file__).parents[2])
+    assert done.returncode == 128 + signal.SIGTERM, (done.returncode, done.stderr)
+    assert "Traceback" not in done.stderr and "still running" not in done.stdout, done.stderr
