@@ -602,11 +602,7 @@ def climb(data: Data, kind: int, ess: float, adjacency: np.ndarray, allowed: np.
     :func:`bayesprog.learning.structure.hill_climb` describes; the best DAG met, its score
     (the sum of its families'), the moves made, and the cache."""
     n = adjacency.shape[0]
-    gain = np.zeros((n, n))
-    too_big = np.zeros((n, n), np.bool_)
-    for v in range(n):
-        table = _refresh(v, adjacency, data, kind, ess, allowed, max_cells, gain, too_big,
-                         table)
+    gain, too_big, table = gains(data, kind, ess, adjacency, allowed, max_cells, table)
     current = 0.0
     for v in range(n):
         value, table = family_score(data, kind, ess, v, np.nonzero(adjacency[:, v])[0], table)
