@@ -35,6 +35,7 @@ from bayesprog.forms.estimators import (
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
 from bayesprog.inference.formulas import formula_value, log_factor
+from bayesprog.inference.relevance import Family
 from bayesprog.learning.data import Data, DataError, load_data
 from bayesprog.model import LearnOptions, Term
 from bayesprog.records import FitRecord
@@ -234,9 +235,10 @@ class _Em:
                 raise DataError(f"term {term.label} takes its {inputs[0]!r} from a runtime "
                                 "input, so the program cannot be evaluated on data rows")
         # the decomposition's DAG: which missing variables a row's likelihood depends on
-        self.parents: dict[str, set[str]] = {}
+        self.graph = Family()
         for term in model:
-            self.parents.setdefault(term.child.name, set()).update(p.name for p in term.parents)
+            self.graph.parents.setdefault(term.child.name, []).extend(
+                p.name for p in term.parents)
         observed_continuous = set(self.data.continuous)
         self.groups = []
         for pattern, rows_of in _missing_patterns([self.codes[n] for n in discrete], rows):
@@ -271,14 +273,7 @@ class _Em:
         for term in self.model:  # potentials do not sum to one: keep their variables
             if not term.form.is_normalized(term.child):
                 roots |= {term.child.name} | {p.name for p in term.parents}
-        needed = set(roots)
-        stack = list(roots)
-        while stack:  # the roots' ancestors
-            for parent in self.parents.get(stack.pop(), ()):
-                if parent not in needed:
-                    needed.add(parent)
-                    stack.append(parent)
-        return needed
+        return self.graph.ancestors(roots)
 
     def start(self, item: _Learned, k: int, params: Params) -> Params:
         """Starting values of a mixture with ``k`` components: the file's when it has ``k``."""
