@@ -15,7 +15,7 @@ import re
 import time
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -479,39 +479,14 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
 
     record = fit.record.replace(data=coded.source, sha256=coded.sha256,
                                 structure=StructureRecord(**structure))
-    # the fit's record written as the fitted values are (in place), then the search's added
-    # to it; the writer's round trip when the text does not end with that record (what is
-    # written is loaded, which checks it)
-    fit.estimate.record = record.replace(structure=None)
-    written = _with_structure(fit.fitted_text(text), record)
-    program = loads(written, f"<{title}>") if written is not None else None
+    # the fit's record, the search's in it, written with the fitted values (what is written
+    # is loaded, which checks it)
     fit.estimate.record = record
-    if written is None or program is None or program.learned[-1] != record:
-        written = fit.fitted_text(text)
-        program = loads(written, f"<{title}>")
+    written = fit.fitted_text(text)
+    program = loads(written, f"<{title}>")
     return Discovery(program, written,
                      {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
                      coded.frame)
-
-
-def _with_structure(text: str, record: Any) -> str | None:
-    """``text``, a fitted program that ends with its ``learned:`` list, the fit's record last
-    (``  - data: ...``, its keys four columns in), with ``record.structure`` added to that
-    record; None when the text does not end so."""
-    import yaml
-
-    lines = text.rstrip("\n").split("\n")
-    top = [i for i, line in enumerate(lines) if line[:1].strip() and line[:1] != "#"]
-    if not top or lines[top[-1]] != "learned:" or not any(
-            line.startswith("  - ") for line in lines[top[-1] + 1:]):
-        return None
-    structure = {k: v for k, v in asdict(record.structure).items()
-                 if v is not None and v != {} and v != []}
-    lines = yaml.dump({"structure": structure}, Dumper=getattr(yaml, "CSafeDumper",
-                                                                yaml.SafeDumper),
-                      default_flow_style=None, sort_keys=False, width=4096,
-                      allow_unicode=True).splitlines()
-    return text.rstrip("\n") + "\n" + "".join(f"    {line}\n" for line in lines)
 
 
 def _start(start: Any, names: Sequence[str]) -> list[set[int]]:

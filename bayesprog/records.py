@@ -55,6 +55,11 @@ class StructureRecord:
                                  "into a variable that is a function of its other parents",
                                  default_factory=list)
 
+    def as_data(self) -> dict[str, Any]:
+        """The fields that say something (neither None nor empty), as written into a file."""
+        return {k: v for k, v in dataclasses.asdict(self).items()
+                if v is not None and v != {} and v != []}
+
 
 @dataclasses.dataclass(kw_only=True)
 class FitRecord:
@@ -95,11 +100,12 @@ class FitRecord:
                     named[name] = value.tolist()
 
     def as_data(self) -> dict[str, Any]:
-        """The record as plain data, in the order of its fields (as written into a file); its
-        statistics as they are, not copied (read them, do not change them)."""
+        """The record as plain data, in the order of its fields (as written into a file; its
+        structure's fields that say something); its statistics as they are, not copied (read
+        them, do not change them)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         if self.structure is not None:
-            out["structure"] = dataclasses.asdict(self.structure)
+            out["structure"] = self.structure.as_data()
         return out
 
     def replace(self, **changes: Any) -> FitRecord:

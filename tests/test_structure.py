@@ -239,22 +239,20 @@ def test_a_discovered_program_validates_answers_and_is_relearned(tmp_path, asia,
 
 
 def test_the_written_record_is_the_search_record(asia, monkeypatch):
-    """The fit's record is written with the fitted values, the search's added to it: the file
-    reads back as the record (constraints, lists, numbers), and a text that does not end with
-    its record is left to the writer."""
-    from bayesprog.discovery import _with_structure
-
+    """The fit's record, the search's in it, is written with the fitted values in place: the
+    file reads back as the record (constraints, lists, numbers), and so does the round trip's
+    writing of it, where the text cannot be written in place."""
     frame, _ = asia
     found = bayesprog.discover(frame, forbid=["lung->either"], require=["asia->dysp"],
                                tiers=[["asia", "smoke"]], max_parents=3)
     assert bayesprog.loads(found.text).learned[-1] == found.record
     assert found.record.structure.constraints["max_parents"] == 3
-    assert _with_structure("bayesprog: 1\nlearned: []\nname: x\n", found.record) is None
-    # where it cannot add it, the writer writes the whole record
-    monkeypatch.setattr("bayesprog.discovery._with_structure", lambda text, record: None)
+    assert "    structure: {method: hc," in found.text  # written in place
+    monkeypatch.setattr("bayesprog.learning.inplace.splice", lambda *args: None)
     again = bayesprog.discover(frame, forbid=["lung->either"], require=["asia->dysp"],
                                tiers=[["asia", "smoke"]], max_parents=3)
     assert bayesprog.loads(again.text).learned[-1] == again.record
+    assert "    structure:\n      method: hc\n" in again.text  # by the round trip
     assert again.parents == found.parents
 
 

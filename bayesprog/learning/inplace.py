@@ -147,12 +147,8 @@ def record_lines(record: Mapping[str, Any], indent: str = "") -> list[str] | Non
     this writer knows."""
     lines: list[str] = []
     for key, value in record.items():
-        if key == "digits" and value is None:  # written as fitted
+        if value is None and key in ("digits", "structure"):  # as fitted; not discovered
             continue
-        if key == "structure":
-            if value is None:
-                continue
-            return None
         head = indent + ("- " if not lines else "  ")
         if key == "statistics" and isinstance(value, Mapping) and value:
             lines.append(f"{head}statistics:")

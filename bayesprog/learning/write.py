@@ -230,8 +230,7 @@ def _record(record: FitRecord) -> Any:
             continue
         if key == "structure":
             if value is not None:
-                out[key] = CommentedMap((k, _flow(v)) for k, v in value.items()
-                                        if v is not None and v != {} and v != [])
+                out[key] = CommentedMap((k, _flow(v)) for k, v in value.items())
             continue
         if key == "statistics":
             stats = CommentedMap()
