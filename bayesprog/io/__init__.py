@@ -10,9 +10,11 @@ back. pgmpy is imported lazily (importing it is slow).
 
 from __future__ import annotations
 
+import graphlib
 import gzip
 import re
 import warnings
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -223,17 +225,25 @@ def _topological(nodes: list[Any], edges: list[tuple[Any, Any]], source: str) ->
                     following.append(child)
                     del waiting[child]
         generation = following
-    if waiting:  # every node left has a parent left: walk up parents to a node met twice
-        seen: dict[Any, int] = {}
-        node = next(iter(waiting))
-        while node not in seen:
-            seen[node] = len(seen)
-            node = next(p for p in parents[node] if p in waiting)
-        walk = list(seen)[seen[node]:]  # node, a parent of it, ..., a child of node
-        cycle = [node, *walk[:0:-1], node]
+    if waiting:
+        cycle = find_cycle(list(parents), parents)
+        assert cycle is not None
         raise NetworkError(f"{source}: a cycle: {' -> '.join(map(str, cycle))}: expected a "
                            "directed acyclic graph")
     return order
+
+
+def find_cycle(nodes: list[Any], parents: Mapping[Any, Iterable[Any]]) -> list[Any] | None:
+    """A cycle of the arcs parent -> node, as the nodes along it from the first of ``nodes``
+    on it back to that node; None when there is none."""
+    try:
+        graphlib.TopologicalSorter({n: list(parents.get(n, ())) for n in nodes}).prepare()
+    except graphlib.CycleError as exc:
+        ring = list(exc.args[1])[:-1]  # each node a parent of the next, the first repeated
+        first = min(ring, key=nodes.index)
+        at = ring.index(first)
+        return ring[at:] + ring[:at] + [first]
+    return None
 
 
 class _Dumper12(yaml.SafeDumper):

@@ -47,7 +47,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from bayesprog.io import NetworkError, dump_document, read_text
+from bayesprog.io import NetworkError, dump_document, find_cycle, read_text
 
 #: The largest network file read (decompressed), in bytes: bnlearn's largest Gaussian network
 #: (arth150, 107 nodes) takes 22 kB, so this is some hundred thousand nodes; Python's JSON
@@ -149,7 +149,7 @@ def check_network(data: Any, source: str) -> dict[str, Any]:
             problems.append(f"cpds[{v!r}].parents: {p!r}, but arcs has no {p} -> {v}")
     if problems:
         raise NetworkError(_joined(source, problems))
-    cycle = _cycle(nodes, out["parents"])
+    cycle = find_cycle(nodes, out["parents"])
     if cycle:
         raise NetworkError(f"{source}: a cycle: {' -> '.join(cycle)}: expected a directed "
                            "acyclic graph")
@@ -223,19 +223,6 @@ def _number(value: Any, where: str, problems: list[str]) -> float | None:
                         f"{_short(value)}")
         return None
     return float(value)
-
-
-def _cycle(nodes: list[str], parents: dict[str, list[str]]) -> list[str] | None:
-    import networkx as nx
-
-    graph = nx.DiGraph()
-    graph.add_nodes_from(nodes)
-    graph.add_edges_from((p, v) for v, ps in parents.items() for p in ps)
-    try:
-        edges = nx.find_cycle(graph)
-    except nx.NetworkXNoCycle:
-        return None
-    return [u for u, _ in edges] + [edges[0][0]]
 
 
 def _topological(nodes: list[str], parents: dict[str, list[str]]) -> list[str]:
