@@ -594,6 +594,15 @@ def _reach(adjacency: np.ndarray, reach: np.ndarray) -> None:
 
 
 @njit(cache=True)
+def _other_path(adjacency: np.ndarray, reach: np.ndarray, u: int, v: int) -> bool:
+    """A path from u to v besides the arc u -> v: reversing that arc would close a cycle."""
+    for w in range(adjacency.shape[0]):
+        if w != v and adjacency[u, w] and reach[w, v]:
+            return True
+    return False
+
+
+@njit(cache=True)
 def climb(data: Data, kind: int, ess: float, adjacency: np.ndarray, allowed: np.ndarray,
           required: np.ndarray, limit: int, tabu_length: int, max_iter: int, epsilon: float,
           patience: int, ties: np.ndarray, max_cells: int,
@@ -653,12 +662,7 @@ def climb(data: Data, kind: int, ess: float, adjacency: np.ndarray, allowed: np.
                 if (not adjacency[u, v] or required[u, v] or not allowed[v, u]
                         or count[u] >= limit or too_big[v, u] or tabu[2, u, v] > 0):
                     continue
-                other = False
-                for w in range(n):
-                    if w != v and adjacency[u, w] and reach[w, v]:
-                        other = True
-                        break
-                if other:
+                if _other_path(adjacency, reach, u, v):
                     continue
                 value = gain[u, v] + gain[v, u]
                 rank = value + ties[u, v]
@@ -737,12 +741,7 @@ def legal_moves(adjacency: np.ndarray, allowed: np.ndarray, required: np.ndarray
                         cells *= card[w]
                 if not allowed[v, u] or parents_u >= limit or cells > max_cells:
                     continue
-                other = False
-                for w in range(n):
-                    if w != v and adjacency[u, w] and reach[w, v]:
-                        other = True
-                        break
-                if not other:
+                if not _other_path(adjacency, reach, u, v):
                     moves[count, 0], moves[count, 1], moves[count, 2] = 2, u, v
                     count += 1
             elif not adjacency[v, u] and allowed[u, v] and not reach[v, u]:
