@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog import cache, inference, rich
+from bayesprog import cache, rich
 from bayesprog.errors import (
     ArgumentError,
     Diagnostic,
@@ -32,10 +32,10 @@ from bayesprog.expressions import (
     canonical,
     parse_expression,
 )
+from bayesprog.extras import LazyModule
 from bayesprog.files import atomic_write
 from bayesprog.forms import ParamValue, get_form
-from bayesprog.inference import MapResult, Posterior, quick
-from bayesprog.inference.density import Density
+from bayesprog.inference.core import InferenceCache
 from bayesprog.language.check import check_document, question_problem
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.language.plain import PlainDocument, read_plain
@@ -46,12 +46,22 @@ if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayes
     import networkx as nx
     import pandas as pd
 
+    from bayesprog.inference import MapResult, Posterior
+    from bayesprog.inference.density import Density
     from bayesprog.inference.event import Probability
     from bayesprog.inference.mixed import Joint
     from bayesprog.language.document import Document
     from bayesprog.learning import Estimate
     from bayesprog.learning.evidence import Evidence
     from bayesprog.records import FitRecord
+
+
+# the question machinery, imported at the first question: loading, checking and learning a
+# program do not need it
+quick = LazyModule("bayesprog.inference.quick")
+dispatch = LazyModule("bayesprog.inference.dispatch")
+answers = LazyModule("bayesprog.inference.answers")
+densities = LazyModule("bayesprog.inference.density")
 
 
 class Program:
@@ -99,7 +109,7 @@ class Program:
         self.learned = list(learned)
         #: the (previous, state) pairs when the decomposition is one time step, else None
         self.time = time
-        self.inference_cache = inference.InferenceCache()
+        self.inference_cache = InferenceCache()
         self._parsed: dict[str, Question] = {}  # question texts asked before, parsed
 
     # structure -------------------------------------------------------------------------------------
@@ -375,7 +385,7 @@ class Program:
             from bayesprog.inference.mixed import mixed
 
             return mixed(self, q, evidence, inputs, soft, method, options)
-        result = inference.ask(self, q, evidence, inputs, soft, rng, method, options,
+        result = dispatch.ask(self, q, evidence, inputs, soft, rng, method, options,
                                rows_ablated)
         if warm:
             quick.learn(self, kept, q, evidence or {})
@@ -400,7 +410,7 @@ class Program:
         """The posterior of discrete searched variables (:meth:`ask` of kind ``posterior``);
         a question on real variables is asked with :meth:`density`."""
         result = self.ask(question, evidence, kind="posterior", **kw)
-        if not isinstance(result, Posterior):
+        if not isinstance(result, answers.Posterior):
             raise QuestionError(_other_answer(result, "posterior"))
         return result
 
@@ -452,7 +462,7 @@ class Program:
         (1.0, 0.5)
         """
         result = self.ask(question, evidence, kind="posterior", **kw)
-        if not isinstance(result, Density):
+        if not isinstance(result, densities.Density):
             raise QuestionError(_other_answer(result, "density"))
         return result
 
@@ -487,7 +497,7 @@ class Program:
     def map(self, question: str | Question, evidence: Mapping[str, Any] | None = None,
             **kw: Any) -> MapResult:
         result = self.ask(question, evidence, kind="map", **kw)
-        if not isinstance(result, MapResult):  # real variables searched: a density's mode
+        if not isinstance(result, answers.MapResult):  # real variables searched: a density's mode
             raise QuestionError(f"{question}: searches real variables, whose most probable "
                                 f"values are not a table's MAP: ask it with "
                                 f"program.ask(...) (here a {type(result).__name__}, whose "
@@ -555,7 +565,7 @@ class Program:
         resolved = [str(self.term(n).expression) for n in names]
         new = copy.copy(self)
         new.ablated = tuple(dict.fromkeys(self.ablated + tuple(resolved)))
-        new.inference_cache = inference.InferenceCache()
+        new.inference_cache = InferenceCache()
         new.__dict__.pop("active_terms", None)
         return new
 
@@ -782,11 +792,11 @@ def _other_answer(result: Any, asked: str) -> str:
     """Why :meth:`Program.posterior` or :meth:`Program.density` cannot give ``result``, and
     which method does."""
     question = getattr(result, "question", "the question")
-    if isinstance(result, Density):
+    if isinstance(result, densities.Density):
         return (f"{question} searches real variables ({', '.join(result.variables)}): its "
                 "posterior is a density; ask it with program.density(...) (mean, sd, "
                 "quantile, pdf, map) or program.ask(...)")
-    if isinstance(result, Posterior):
+    if isinstance(result, answers.Posterior):
         return (f"{question} searches discrete variables ({', '.join(result.variables)}): "
                 "its posterior is a table; ask it with program.posterior(...)")
     return (f"{question} searches discrete and real variables together: ask it with "

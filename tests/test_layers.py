@@ -21,7 +21,7 @@ RUNNER = PACKAGE.parent / "runner"
 #: From the bottom up: a layer may import its own modules and the layers below it only.
 LAYERS = [
     {"errors", "variables", "expressions", "formula", "files", "rich", "limits", "bundled",
-     "extras", "cache"},
+     "extras", "cache", "yamltext"},
     {"forms"},
     {"model", "records"},
     {"language"},

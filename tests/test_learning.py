@@ -846,6 +846,63 @@ decomposition:
             assert read(path) == fast, name
 
 
+def test_numbers_are_replaced_where_they_stand_past_wide_characters(tmp_path, monkeypatch):
+    """The writer finds each number as the loader reads the file: tables of numbers in the
+    text (one on several lines, one after a word on its line), small ones and single numbers as
+    YAML nodes, after comments in characters of several bytes; what it writes loads as the
+    round trip's file does."""
+    import bayesprog.learning.inplace as inplace
+
+    text = """\
+# Modèle: 材料 et capteur (résumé ✓)
+bayesprog: 1
+variables:
+  M: {states: [bois, soie, métal]}   # é, 日本
+  S: {states: [lisse, rugueux]}
+  E: {continuous: [-.inf, .inf]}
+decomposition:
+  - term: P(M)   # a priori: « uniforme »
+    table: [0.3333333333333333, 0.3333333333333333, 0.3333333333333334]
+  - {term: P(S | M), form: table, table: [[0.5, 0.5],
+                                          [0.25, 0.75], [0.9, 0.1]]}
+  - term: P(E | M)  # ✓ ✓
+    form: normal
+    mean: [0.0, 1.0, 2.0]   # bois, soie, métal
+    sigma: [1.0, 1.0, 1.0]
+"""
+    text = text.replace("  - term: P(M)   # a priori", "  - form: table\n    term: P(M)   # a priori")
+    source = tmp_path / "capteur.yaml"
+    source.write_text(text, encoding="utf-8")
+    rng = np.random.default_rng(3)
+    m = rng.choice(["bois", "soie", "métal"], 300, p=[0.2, 0.3, 0.5])
+    rows = {"M": m.tolist(), "S": rng.choice(["lisse", "rugueux"], 300).tolist(),
+            "E": (rng.normal(size=300) + (m == "soie")).tolist()}
+    program = bayesprog.load(source)
+    found = {}
+
+    def keep(*args):
+        found["spliced"] = spliced = splice(*args)
+        return spliced
+
+    splice = inplace.splice
+    with monkeypatch.context() as patch:
+        patch.setattr(inplace, "splice", keep)
+        in_place = program.fit(rows).text()
+    assert found["spliced"] is not None  # written in place, not by the round trip
+    with monkeypatch.context() as patch:
+        patch.setattr(inplace, "splice", lambda *args: None)
+        round_trip = program.fit(rows).text()
+    # every character but the numbers (and the record after them) as written
+    assert re.sub(r"[-+.e0-9]+", "#", in_place.split("\n# Fits that set")[0]) == re.sub(
+        r"[-+.e0-9]+", "#", text)
+    ours, reference = bayesprog.loads(in_place), bayesprog.loads(round_trip)
+    for term in reference.terms:
+        for name, value in term.params.items():
+            np.testing.assert_array_equal(ours.term(str(term.expression)).params[name].array,
+                                          value.array)
+    assert ours.term("P(S | M)").params["table"].array[2].tolist() != [0.9, 0.1]
+
+
 def test_tables_written_in_place_equal_the_round_trip_and_keep_the_file(tmp_path, monkeypatch):
     """A file of nested lists gets its numbers replaced where they stand (a comment inside a
     table stays); the values, and the record appended then continued, equal ruamel's round

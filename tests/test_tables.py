@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import bayesprog
+from bayesprog import yamltext
 from bayesprog.errors import SpecError
 from bayesprog.io import dump_document
 from bayesprog.language import loader
@@ -40,7 +41,7 @@ def _table(seed: int = 0) -> np.ndarray:
 def _problems(text: str, as_yaml: bool, monkeypatch) -> list[str]:
     with monkeypatch.context() as patch:
         if as_yaml:
-            patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+            patch.setattr(yamltext, "BLOCK_MIN_CHARS", 10**9)
         try:
             bayesprog.loads(text, "net.yaml")
         except SpecError as exc:
@@ -90,7 +91,7 @@ def test_a_good_table_gives_the_same_program_both_ways(monkeypatch):
     text = TWO_PARENTS.replace("TABLE", flow_table(_table(3), column=11))
     fast = bayesprog.loads(text)
     with monkeypatch.context() as patch:
-        patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+        patch.setattr(yamltext, "BLOCK_MIN_CHARS", 10**9)
         slow = bayesprog.loads(text)
     for question in ["P(C)", "P(A | C=c2)", "P(B | C=c0)"]:
         assert np.array_equal(fast.posterior(question).probabilities,
@@ -175,9 +176,9 @@ def test_an_alias_bomb_beside_a_large_table_is_still_refused(tmp_path):
 
 
 def test_tables_past_the_limit_are_refused_before_they_are_read(monkeypatch):
-    monkeypatch.setattr(loader, "MAX_TABLE_NUMBERS", 20)
+    monkeypatch.setattr(yamltext, "MAX_TABLE_NUMBERS", 20)
     read = []
-    monkeypatch.setattr(loader.json, "loads", lambda text: read.append(text) or [])
+    monkeypatch.setattr(yamltext.json, "loads", lambda text: read.append(text) or [])
     text = TWO_PARENTS.replace("TABLE", flow_table(_table(), column=11))
     with pytest.raises(SpecError) as caught:
         bayesprog.loads(text, "big.yaml")
@@ -198,12 +199,12 @@ def test_a_fitted_files_statistics_are_read_as_arrays_and_give_the_yaml_record(m
     source = tmp_path / "net.yaml"
     source.write_text(TWO_PARENTS.replace("TABLE", flow_table(_table(2), column=11)))
     text = program.fit(rows).text(source) + "# after the record\nname: fitted\n"
-    blocks = loader._number_blocks(text)[1]
+    blocks = yamltext.number_blocks(text)[1]
     # the counts of P(C | A, B): one per row
-    assert any(array.shape == (3, 2, 4) and array.sum() == 400 for array, _ in blocks.values())
+    assert any(array.shape == (3, 2, 4) and array.sum() == 400 for array, _, _ in blocks.values())
     fast = bayesprog.loads(text)
     with monkeypatch.context() as patch:
-        patch.setattr(loader, "BLOCK_MIN_CHARS", 10**9)
+        patch.setattr(yamltext, "BLOCK_MIN_CHARS", 10**9)
         slow = bayesprog.loads(text)
     assert fast.learned == slow.learned
     assert fast.learned[-1].statistics["P(C | A, B)"]["counts"] == \
@@ -218,5 +219,5 @@ def test_only_the_statistics_of_the_fits_records_are_read_as_arrays():
     text = ("bayesprog: 1\nlearned:\n  - data: d.csv\n    statistics:\n      P(A):\n"
             "        counts: [137.0, 163.0, 100.0]\n"
             "inputs:\n  statistics:\n    shape: [100000, 3, 7]\n")
-    taken = [written for _, written in loader._number_blocks(text)[1].values()]
+    taken = [written for _, written, _ in yamltext.number_blocks(text)[1].values()]
     assert taken == ["[137.0, 163.0, 100.0]"]

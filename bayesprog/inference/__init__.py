@@ -13,13 +13,49 @@ dispatcher knows them only through the registry. What it keeps per layout of que
 :class:`~bayesprog.inference.schedule.Schedule`.
 """
 
-from bayesprog.inference.answers import MapResult, Posterior
-from bayesprog.inference.binding import Bound, bind
-from bayesprog.inference.core import InferenceCache
-from bayesprog.inference.dispatch import ask, compute_posterior
-from bayesprog.inference.methods import Cost, Method, register_method, registered_methods
-from bayesprog.inference.plan import QuestionPlan
-from bayesprog.inference.protocol import ProgramLike
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+#: Where each public name lives. They are imported when first used: a program that is loaded,
+#: learned or checked, and never asked, does not import the question machinery.
+_WHERE = {
+    "Bound": "bayesprog.inference.binding",
+    "bind": "bayesprog.inference.binding",
+    "Cost": "bayesprog.inference.methods",
+    "InferenceCache": "bayesprog.inference.core",
+    "MapResult": "bayesprog.inference.answers",
+    "Method": "bayesprog.inference.methods",
+    "Posterior": "bayesprog.inference.answers",
+    "ProgramLike": "bayesprog.inference.protocol",
+    "QuestionPlan": "bayesprog.inference.plan",
+    "ask": "bayesprog.inference.dispatch",
+    "compute_posterior": "bayesprog.inference.dispatch",
+    "register_method": "bayesprog.inference.methods",
+    "registered_methods": "bayesprog.inference.methods",
+}
+
+if TYPE_CHECKING:  # what the names are, for type checkers and editors
+    from bayesprog.inference.answers import MapResult, Posterior
+    from bayesprog.inference.binding import Bound, bind
+    from bayesprog.inference.core import InferenceCache
+    from bayesprog.inference.dispatch import ask, compute_posterior
+    from bayesprog.inference.methods import Cost, Method, register_method, registered_methods
+    from bayesprog.inference.plan import QuestionPlan
+    from bayesprog.inference.protocol import ProgramLike
+
+
+def __getattr__(name: str) -> Any:
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'bayesprog.inference' has no attribute {name!r}")
+    value = getattr(import_module(where), name)
+    globals()[name] = value  # found once; later reads are plain attribute reads
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = [
     "Bound", "Cost", "InferenceCache", "MapResult", "Method", "Posterior", "ProgramLike",

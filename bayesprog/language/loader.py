@@ -11,17 +11,17 @@ the name is the text as written: ``1.50``, ``true``, ``null``.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 import yaml
 
+from bayesprog import yamltext
 from bayesprog.errors import Diagnostic
 from bayesprog.files import a_or_an
+from bayesprog.yamltext import FAST_LOADER
 
 Path = tuple[str | int | float, ...]
 
@@ -43,7 +43,7 @@ class Located:
     texts: dict[Path, str] = field(default_factory=dict)
     #: the paths of values written in quotes on one line (their text starts a column later)
     quoted: set[Path] = field(default_factory=set)
-    #: tables of numbers read as arrays (see :func:`_number_blocks`): their text, by path
+    #: tables of numbers read as arrays (see :func:`bayesprog.yamltext.number_blocks`): their text, by path
     blocks: dict[Path, str] = field(default_factory=dict)
 
     def where(self, path: Path) -> tuple[int, int]:
@@ -199,11 +199,11 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     the located data and the problems found (maybe several)."""
     problems: list[Diagnostic] = []
     # large tables of numbers are read as arrays, not as a YAML node per number
-    text, blocks, numbers = _number_blocks(text)
-    if numbers > MAX_TABLE_NUMBERS:
+    text, blocks, numbers = yamltext.number_blocks(text)
+    if numbers > yamltext.MAX_TABLE_NUMBERS:
         return Located(None, file), [Diagnostic(
             file, 1, 1, f"the file's tables hold at least {numbers:,} numbers, more than the "
-            f"{MAX_TABLE_NUMBERS:,} a file may hold: give large arrays as inputs (.npy files)")]
+            f"{yamltext.MAX_TABLE_NUMBERS:,} a file may hold: give large arrays as inputs (.npy files)")]
     # a linear count before anything is built: no file holds more values than it has commas
     # and lines, and one past the limit is refused without parsing it
     estimate = text.count(",") + text.count("\n")
@@ -216,7 +216,7 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     try:
         # libyaml's parser where it is installed (a few times faster); PyYAML's own to say
         # what is malformed, in the words of yaml_problem
-        node = yaml.compose(text, Loader=_FAST_LOADER)
+        node = yaml.compose(text, Loader=FAST_LOADER)
     except yaml.YAMLError:
         node = None
         try:
@@ -294,7 +294,7 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
     def build_scalar(node: yaml.Node, path: Path) -> Any:
         assert isinstance(node, yaml.ScalarNode)
         if blocks and not node.style and node.value in blocks:
-            array, written = blocks.pop(node.value)  # each placeholder stands once
+            array, written, _ = blocks.pop(node.value)  # each placeholder stands once
             located.blocks[path] = written
             return array
         if node.style:  # quoted or block scalar: always a string (plain: None, or "" from libyaml)
@@ -319,103 +319,8 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
 
 
 #: the most values a file may expand to (aliases included), tables of numbers read as arrays
-#: aside (:data:`MAX_TABLE_NUMBERS`); reading that many as YAML takes about 3 s and 400 MB
+#: aside (:data:`bayesprog.yamltext.MAX_TABLE_NUMBERS`); reading that many as YAML takes about 3 s and 400 MB
 MAX_VALUES = 500_000
-#: the most numbers the tables of a file may hold (8 bytes each once read; the largest bnlearn
-#: networks, diabetes and mildew, hold about half a million)
-MAX_TABLE_NUMBERS = 20_000_000
-#: a table shorter than this (in characters) is read as YAML, like everything else
-BLOCK_MIN_CHARS = 10
-#: ``table:`` followed by a nested list made only of numbers, brackets, commas and spaces
-_BLOCK_START = re.compile(r"(?:^|[\s{,])table[ \t]*:[ \t]*(?=\[)")
-_BLOCK_BODY = re.compile(r"[\[\]0-9.,eE+\- \t\r\n]*")
-#: the fits' records, and in them each one's sufficient statistics (a key per statistic)
-_LEARNED = re.compile(r"^learned[ \t]*:", re.MULTILINE)
-_STATISTICS = re.compile(r"^([ \t]*(?:-[ \t]+)?)statistics[ \t]*:[ \t]*(?:#[^\n]*)?$",
-                         re.MULTILINE)
-_LIST_VALUE = re.compile(r":[ \t]*(?=\[)")
-_TOP_LEVEL = re.compile(r"^(?=[^ \t\r\n#-])", re.MULTILINE)
-
-
-def _block_starts(text: str) -> list[int]:
-    """Where each list that may be read as an array starts: a table's, and each statistic's
-    in the ``statistics:`` of a fit's record (under the top-level ``learned:``)."""
-    starts = [m.end() for m in _BLOCK_START.finditer(text)]
-    learned = _LEARNED.search(text)
-    if learned is not None:
-        # up to the next top-level key (a record's dash may stand in the first column)
-        following = _TOP_LEVEL.search(text, learned.end())
-        records_end = following.start() if following is not None else len(text)
-        for found in _STATISTICS.finditer(text, learned.end(), records_end):
-            # the statistics' lines: those indented past the key, up to the next that is not
-            column = len(found.group(1))
-            after = re.compile(rf"^[ ]{{0,{column}}}(?=[^ \t\r\n#])", re.MULTILINE).search(
-                text, found.end() + 1)
-            stop = after.start() if after is not None else len(text)
-            starts += [m.end() for m in _LIST_VALUE.finditer(text, found.end(), stop)]
-    return sorted(set(starts))
-
-
-def _number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str]], int]:
-    """The text with each large table of numbers (``table: [[0.1, 0.9], ...]``, or a fit's
-    statistic, ``counts: [[7.0, 99.0], ...]``) replaced by a placeholder on its first line
-    (the lines and the columns after it kept), the arrays by placeholder (with their text, to
-    place a row later), and how many numbers they hold.
-
-    A table is taken only when it is a regular nested list of plain decimal numbers (what JSON
-    reads); anything else (a ragged row, a word, ``.5``) is left to the YAML reader and its
-    diagnostics."""
-    if len(text) < BLOCK_MIN_CHARS:
-        return text, {}, 0
-    token, n = "__table_", 0  # a placeholder the text does not hold
-    while token in text:
-        n += 1
-        token = f"__table{n}_"
-    pieces: list[str] = []
-    blocks: dict[str, tuple[Any, str]] = {}
-    numbers, done, at = 0, 0, 0
-    for start in _block_starts(text):
-        if start < at:  # inside the list just looked at
-            continue
-        body = _BLOCK_BODY.match(text, start)
-        end = _closing(text, start, body.end() if body else start)
-        at = max(end, start + 1)
-        if end - start < BLOCK_MIN_CHARS:
-            continue
-        written = text[start:end]
-        if numbers + written.count(",") + 1 > MAX_TABLE_NUMBERS:  # refused before it is read
-            return text, {}, numbers + written.count(",") + 1
-        try:
-            array = np.asarray(json.loads(written), dtype=float)
-        except (ValueError, TypeError):  # not JSON's numbers, or ragged
-            continue
-        if array.dtype != np.float64 or array.ndim < 1 or not np.all(np.isfinite(array)):
-            continue
-        name = f"{token}_{len(blocks)}"
-        blocks[name] = (array, written)
-        numbers += array.size
-        lines = written.count("\n")
-        # what follows the table keeps its line and column
-        pad = end - (text.rfind("\n", 0, end) + 1) if lines else end - start - len(name)
-        pieces += [text[done:start], name, "\n" * lines, " " * pad]
-        done = end
-    if not blocks:
-        return text, {}, 0
-    pieces.append(text[done:])
-    return "".join(pieces), blocks, numbers
-
-
-def _closing(text: str, start: int, stop: int) -> int:
-    """Where the bracket opened at ``start`` closes (one past it), looking no further than
-    ``stop``; ``start`` when it does not close there."""
-    depth = 0
-    for match in re.finditer(r"[\[\]]", text[start:stop]):
-        depth += 1 if match.group() == "[" else -1
-        if depth == 0:
-            return start + match.end()
-    return start
-
-
 def _position_in_block(written: str, line: int, column: int, inside: list[Any]) -> tuple[int, int]:
     """Line and column of the row or number at indices ``inside`` of a table written as
     ``written`` from (``line``, ``column``)."""
@@ -426,7 +331,6 @@ def _position_in_block(written: str, line: int, column: int, inside: list[Any]) 
     return line + newlines, at - written.rfind("\n", 0, at)
 
 
-_FAST_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _SCALAR = re.compile(r"[^\s,\[\]{}:#-][^,\[\]{}\n]*")
 
 

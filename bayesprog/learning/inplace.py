@@ -25,13 +25,14 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import yaml
 
 from bayesprog.expressions import canonical
+from bayesprog.yamltext import FAST_LOADER, number_blocks
 
 #: the comment the round trip writes above a new ``learned:`` list
 LEARNED_COMMENT = "# Fits that set this program's parameters (bayesprog learn)."
@@ -41,7 +42,9 @@ LINE_WIDTH = 100
 
 _NUMBER = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?|[-+]?\.(inf|Inf|INF)"
                      r"|\.(nan|NaN|NAN)")
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_NEWLINE = re.compile("\n")
+#: a number of a table read as a block (its text holds only numbers, brackets, commas, spaces)
+_BLOCK_NUMBER = re.compile(r"[-+0-9.eE]+")
 _DOCUMENT_END = re.compile(r"^\.\.\.\s*$", re.MULTILINE)
 
 
@@ -50,12 +53,20 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
     """``text`` with the arrays of ``values`` (by term label, then parameter) written over the
     numbers they replace, and ``record`` (a fit's record, as plain data) appended to the
     ``learned:`` list; None where that cannot be done in place."""
+    # the large tables found as the loader finds them (their numbers by a pattern, not a YAML
+    # node each); the text around them keeps its lines and columns
+    read, blocks, _ = number_blocks(text)
     try:
-        root = yaml.compose(text, Loader=_LOADER)
-    except yaml.YAMLError:
+        root = yaml.compose(read, Loader=FAST_LOADER)
+    except (yaml.YAMLError, RecursionError):
         return None
     if not isinstance(root, yaml.MappingNode):
         return None
+    line_starts = [0, *(m.end() for m in _NEWLINE.finditer(text))]
+
+    def offset(mark: Any) -> int:
+        return line_starts[mark.line] + mark.column
+
     top = {key.value: value for key, value in root.value if isinstance(key, yaml.ScalarNode)}
     decomposition = top.get("decomposition")
     if not isinstance(decomposition, yaml.SequenceNode):
@@ -71,18 +82,18 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
         if label is None or label not in values:
             continue
         for name, array in values[label].items():
-            leaves = _leaves(fields.get(name), np.shape(array))
-            if leaves is None:
+            spans = _spans(fields.get(name), np.shape(array), blocks, offset)
+            if spans is None:
                 return None
-            for leaf, x in zip(leaves, np.ravel(array), strict=True):
-                start = leaf.start_mark.index
+            for (start, end), x in zip(spans, np.ravel(np.asarray(array, dtype=float)).tolist(),
+                                       strict=True):
                 if start in edits:  # an alias: one text for two values
                     return None
-                edits[start] = (leaf.end_mark.index, number(float(x)))
+                edits[start] = (end, number(x))
         done.add(label)
     if set(values) - done:
         return None
-    ending = _learned_ending(text, root, top)
+    ending = _learned_ending(text, root, top, offset)
     if ending is None:
         return None
     prefix, indent = ending
@@ -99,6 +110,21 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
     if not out.endswith("\n"):
         out += "\n"
     return out + prefix + "".join(line + "\n" for line in entry)
+
+
+def _spans(node: Any, shape: tuple[int, ...], blocks: Mapping[str, tuple[Any, str, int]],
+           offset: Callable[[Any], int]) -> list[tuple[int, int]] | None:
+    """Where the numbers of ``node`` stand in the text, in row-major order, if it is nested
+    lists of ``shape``: a table read as a block (its numbers found in its text), or nodes."""
+    if isinstance(node, yaml.ScalarNode) and not node.style and node.value in blocks:
+        array, written, start = blocks[node.value]
+        if array.shape != shape:
+            return None
+        return [(start + m.start(), start + m.end()) for m in _BLOCK_NUMBER.finditer(written)]
+    leaves = _leaves(node, shape)
+    if leaves is None:
+        return None
+    return [(offset(leaf.start_mark), offset(leaf.end_mark)) for leaf in leaves]
 
 
 def _leaves(node: Any, shape: tuple[int, ...]) -> list[yaml.ScalarNode] | None:
@@ -120,8 +146,8 @@ def _leaves(node: Any, shape: tuple[int, ...]) -> list[yaml.ScalarNode] | None:
     return out
 
 
-def _learned_ending(text: str, root: yaml.MappingNode, top: Mapping[str, Any]
-                    ) -> tuple[str, str] | None:
+def _learned_ending(text: str, root: yaml.MappingNode, top: Mapping[str, Any],
+                    offset: Callable[[Any], int]) -> tuple[str, str] | None:
     """What to write before the new record's lines, and their indentation: a new ``learned:``
     list at the end, or one more entry of the block list that ends the file."""
     if root.flow_style or _DOCUMENT_END.search(text):
@@ -134,7 +160,8 @@ def _learned_ending(text: str, root: yaml.MappingNode, top: Mapping[str, Any]
             or last_key.value != "learned"):
         return None
     first = learned.value[0]
-    line = text[text.rfind("\n", 0, first.start_mark.index) + 1:first.start_mark.index]
+    at = offset(first.start_mark)
+    line = text[text.rfind("\n", 0, at) + 1:at]
     dash = re.fullmatch(r"( *)- +", line)  # "  - " before the first entry's first key
     if dash is None or len(line) - len(dash.group(1)) != 2:
         return None
