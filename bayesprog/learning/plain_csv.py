@@ -31,8 +31,9 @@ _MIX = np.uint64(0x9E3779B97F4A7C15)
 
 @dataclass
 class PlainCsv:
-    """The header's names, the number of rows, and what :meth:`column` needs: the text, each
-    field's first byte and length (a row per column, a column per line)."""
+    """The header's names, the number of rows, and what :meth:`column` needs: the text (16
+    NUL bytes after it), each field's first byte and length (a row per line, a column per
+    field)."""
 
     names: list[str]
     rows: int
@@ -44,10 +45,14 @@ class PlainCsv:
         """Column ``i`` as codes into its distinct values (the values as written, the spaces
         after the delimiter skipped, as the csv module reads them); None when two values
         could not be told apart by their hash (then the csv module reads the file)."""
-        starts, lengths = self.starts[i], self.lengths[i]
-        parts = _words(self.body, starts, lengths)
-        key = parts[0]
-        for part in parts[1:]:  # a longer value: its 8-byte words hashed into one key
+        # a column at a time: its arrays are small, and stay in the processor's cache
+        starts, lengths = self.starts[:, i], self.lengths[:, i]
+        key = _words(self.body, starts, lengths, 0)  # a value of up to 8 bytes: its bytes
+        widest = int(lengths.max()) if len(lengths) else 0
+        parts = [key]
+        for k in range(8, widest, 8):  # a longer value: its 8-byte words hashed into one key
+            part = _words(self.body, starts, lengths, k)
+            parts.append(part)
             key = key * _MIX + (part ^ (part >> np.uint64(29)))
         distinct, first = np.unique(key[:SAMPLE], return_index=True)
         codes = np.minimum(np.searchsorted(distinct, key), len(distinct) - 1) if len(
@@ -94,28 +99,20 @@ def read_plain_csv(raw: bytes, sep: str) -> PlainCsv | None:
                  for s, e in zip(starts[:width].tolist(), ends[:width].tolist(), strict=True)]
     except UnicodeDecodeError:
         return None
-    first = starts[width:].reshape(lines - 1, width)
-    lengths = ends[width:].reshape(lines - 1, width) - first
-    # padded to whole 8-byte words, and one more, for the words read from each field
-    padded = body + bytes(16 - len(body) % 8)
-    # a column's fields side by side in memory: the reads of each column are sequential
-    return PlainCsv(names, lines - 1, padded, np.ascontiguousarray(first.T),
-                    np.ascontiguousarray(lengths.T))
+    starts, ends = starts[width:], ends[width:]
+    shape = (lines - 1, width)
+    # the 8 bytes from any field's first byte can be read
+    return PlainCsv(names, lines - 1, body + bytes(16), starts.reshape(shape),
+                    (ends - starts).reshape(shape))
 
 
-def _words(body: bytes, starts: np.ndarray, lengths: np.ndarray) -> list[np.ndarray]:
-    """Each field's bytes as little-endian 8-byte words, the bytes past its end zeroed (a
-    field holds no NUL, so the words tell fields apart)."""
-    aligned = np.frombuffer(body, dtype="<u8", count=len(body) // 8)
-    widest = int(lengths.max()) if len(lengths) else 0
-    # the 8 bytes from a byte offset: the aligned word holding the first byte shifted down,
-    # the next word's low bytes above them (its shift by 64 - 8r done as two, for r = 0)
-    word = starts >> 3
-    down = (starts & 7).astype(np.uint64) << np.uint64(3)
-    up = np.uint64(63) - down
-    out = []
-    for k in range(0, max(widest, 1), 8):
-        at = np.minimum(word + k // 8, len(aligned) - 2)  # past a short field: masked below
-        value = (aligned[at] >> down) | ((aligned[at + 1] << np.uint64(1)) << up)
-        out.append(value & _MASKS[np.clip(lengths - k, 0, 8)])
-    return out
+def _words(body: bytes, starts: np.ndarray, lengths: np.ndarray, k: int) -> np.ndarray:
+    """The bytes ``k`` to ``k + 8`` of each field as a little-endian 8-byte word, the bytes past
+    its end zeroed (a field holds no NUL, so the words tell fields apart); ``body`` ends with
+    16 NUL bytes."""
+    # every 8 bytes of the text, from each byte: one unaligned read per field
+    at_each_byte = np.ndarray((len(body) - 7,), dtype="<u8", buffer=body, strides=(1,))
+    if not k:
+        return at_each_byte[starts] & _MASKS[np.minimum(lengths, 8)]
+    at = np.minimum(starts + k, len(body) - 8)  # past a short field's end: masked to 0 below
+    return at_each_byte[at] & _MASKS[np.clip(lengths - k, 0, 8)]
