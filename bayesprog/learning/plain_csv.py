@@ -32,8 +32,8 @@ _MIX = np.uint64(0x9E3779B97F4A7C15)
 @dataclass
 class PlainCsv:
     """The header's names, the number of rows, and what :meth:`column` needs: the text (16
-    NUL bytes after it), each field's first byte and length (a row per line, a column per
-    field)."""
+    NUL bytes after it), each field's first byte and length (a row per column, a column per
+    line)."""
 
     names: list[str]
     rows: int
@@ -45,8 +45,7 @@ class PlainCsv:
         """Column ``i`` as codes into its distinct values (the values as written, the spaces
         after the delimiter skipped, as the csv module reads them); None when two values
         could not be told apart by their hash (then the csv module reads the file)."""
-        # a column at a time: its arrays are small, and stay in the processor's cache
-        starts, lengths = self.starts[:, i], self.lengths[:, i]
+        starts, lengths = self.starts[i], self.lengths[i]
         key = _words(self.body, starts, lengths, 0)  # a value of up to 8 bytes: its bytes
         widest = int(lengths.max()) if len(lengths) else 0
         parts = [key]
@@ -99,11 +98,12 @@ def read_plain_csv(raw: bytes, sep: str) -> PlainCsv | None:
                  for s, e in zip(starts[:width].tolist(), ends[:width].tolist(), strict=True)]
     except UnicodeDecodeError:
         return None
-    starts, ends = starts[width:], ends[width:]
-    shape = (lines - 1, width)
-    # the 8 bytes from any field's first byte can be read
-    return PlainCsv(names, lines - 1, body + bytes(16), starts.reshape(shape),
-                    (ends - starts).reshape(shape))
+    first = starts[width:].reshape(lines - 1, width)
+    lengths = ends[width:].reshape(lines - 1, width) - first
+    # a column's fields side by side in memory: the reads of each column are sequential; the
+    # 8 bytes from any field's first byte can be read
+    return PlainCsv(names, lines - 1, body + bytes(16), np.ascontiguousarray(first.T),
+                    np.ascontiguousarray(lengths.T))
 
 
 def _words(body: bytes, starts: np.ndarray, lengths: np.ndarray, k: int) -> np.ndarray:
