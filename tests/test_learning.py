@@ -807,7 +807,8 @@ def _csv_cases(rng: np.random.Generator) -> list[tuple[str, str]]:
 
 def test_plain_csv_reading_equals_the_csv_module(tmp_path, monkeypatch):
     """The numpy reader of plain CSV files codes every file as the csv module's reading does,
-    errors included (the row and the value named)."""
+    errors included (the row and the value named), its columns coded one after the other or
+    side by side on threads."""
     import bayesprog.learning.data as data_module
     from bayesprog.learning.plain_csv import read_plain_csv
 
@@ -843,6 +844,10 @@ decomposition:
         fast = read(path)
         with monkeypatch.context() as patch:
             patch.setattr(data_module, "read_plain_csv", lambda raw, sep: None)
+            assert read(path) == fast, name
+        with monkeypatch.context() as patch:  # its columns coded on several threads
+            patch.setattr(data_module, "THREADED_FIELDS", 0)
+            patch.setattr(data_module.os, "cpu_count", lambda: 3)
             assert read(path) == fast, name
 
 
