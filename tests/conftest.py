@@ -19,11 +19,14 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 # checked programs are kept in a folder of the test run's own, not in the user's cache (the
-# processes the tests start inherit it)
+# processes the tests start inherit it, the parallel workers too); the process that made it
+# removes it when it ends
 if "BAYESPROG_CACHE" not in os.environ:
+    import atexit  # noqa: E402
     import tempfile  # noqa: E402
 
     os.environ["BAYESPROG_CACHE"] = tempfile.mkdtemp(prefix="bayesprog-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["BAYESPROG_CACHE"], ignore_errors=True)
 
 
 @pytest.fixture
