@@ -14,10 +14,10 @@
 [[0.998, 0.002], [0.002, 0.998]]
 """
 
-from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from bayesprog import rich
+from bayesprog.extras import lazy_names
 
 __version__ = "0.5.0"
 
@@ -103,17 +103,7 @@ def _load_display() -> None:
 rich.defer(_load_display)
 
 
-def __getattr__(name: str) -> Any:
-    where = _WHERE.get(name)
-    if where is None:
-        raise AttributeError(f"module 'bayesprog' has no attribute {name!r}")
-    value = getattr(import_module(where), name)
-    globals()[name] = value  # found once; later reads are plain attribute reads
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 
 
 __all__ = [

@@ -9,6 +9,7 @@ True
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable, Mapping
 from types import ModuleType
 from typing import Any
 
@@ -43,3 +44,24 @@ class LazyModule:
         value = getattr(importlib.import_module(self._name), attribute)
         setattr(self, attribute, value)  # read directly from now on
         return value
+
+
+def lazy_names(namespace: dict[str, Any], where: Mapping[str, str], package: str
+               ) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """A package's ``__getattr__`` and ``__dir__`` (PEP 562) for the public names of ``where``
+    (name -> the module it lives in): each is imported from its module at its first read and
+    kept in ``namespace`` (the package's globals), so that importing the package costs little
+    and later reads are plain attribute reads."""
+
+    def __getattr__(name: str) -> Any:
+        module = where.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(module), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(where))
+
+    return __getattr__, __dir__

@@ -13,8 +13,9 @@ dispatcher knows them only through the registry. What it keeps per layout of que
 :class:`~bayesprog.inference.schedule.Schedule`.
 """
 
-from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from bayesprog.extras import lazy_names
 
 #: Where each public name lives. They are imported when first used: a program that is loaded,
 #: learned or checked, and never asked, does not import the question machinery.
@@ -44,17 +45,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.inference.protocol import ProgramLike
 
 
-def __getattr__(name: str) -> Any:
-    where = _WHERE.get(name)
-    if where is None:
-        raise AttributeError(f"module 'bayesprog.inference' has no attribute {name!r}")
-    value = getattr(import_module(where), name)
-    globals()[name] = value  # found once; later reads are plain attribute reads
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 
 
 __all__ = [
