@@ -71,7 +71,7 @@ def test_dask_cluster_gives_the_same_numbers(reference, tmp_path):
 
     path = write_experiment(tmp_path)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster:
+                      dashboard_address="127.0.0.1:0") as cluster:
         run_experiment(load_experiment(path), tmp_path / "out", scheduler=cluster.scheduler_address,
                        progress=False)
     assert_same(results_of(tmp_path / "out"), reference[1])

@@ -148,7 +148,7 @@ def test_a_dask_cluster_gives_the_replications_the_same_numbers(replicated, tmp_
     path, _, thrice = replicated
     experiment = load_experiment(path, replications=3)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster:
+                      dashboard_address="127.0.0.1:0") as cluster:
         run_experiment(experiment, tmp_path / "out", scheduler=cluster.scheduler_address,
                        progress=False)
     for a, b in zip(load_replications(ResultStore(tmp_path / "out"), experiment.spec),

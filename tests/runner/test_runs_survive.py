@@ -197,7 +197,7 @@ def test_dask_a_unit_whose_worker_died_is_computed_again(finished, tmp_path, mon
 
     monkeypatch.setattr(experiment_module, "compute_unit", dies_once)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster:
+                      dashboard_address="127.0.0.1:0") as cluster:
         run_experiment(load_experiment(path), tmp_path / "out",
                        scheduler=cluster.scheduler_address, progress=False)
     assert killed.exists()
@@ -209,7 +209,7 @@ def test_dask_a_scheduler_without_workers_is_reported(finished, tmp_path, monkey
 
     path = finished[0]
     monkeypatch.setattr(experiment_module, "WORKER_TIMEOUT", 2.0)
-    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0") as cluster:
         started = time.monotonic()
         with pytest.raises(BayesprogError, match="no worker"):
             run_experiment(load_experiment(path), tmp_path / "out",

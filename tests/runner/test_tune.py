@@ -105,7 +105,7 @@ def test_a_search_on_a_dask_cluster_is_the_local_one(fresh, tmp_path):
     result, _ = fresh
     search = load_search(write_search(tmp_path))
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster:
+                      dashboard_address="127.0.0.1:0") as cluster:
         on_dask = run_search(search, tmp_path / "out", scheduler=cluster.scheduler_address,
                              progress=False)
         assert main(["tune", str(write_search(tmp_path)), "--out", str(tmp_path / "cli"),
@@ -136,7 +136,7 @@ def test_dask_an_evaluation_whose_worker_died_is_run_again(fresh, tmp_path, monk
     monkeypatch.setattr(tune_module, "_evaluate_at", dies_once)
     search = load_search(write_search(tmp_path))
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster:
+                      dashboard_address="127.0.0.1:0") as cluster:
         again = run_search(search, tmp_path / "out", scheduler=cluster.scheduler_address,
                            progress=False)
     assert killed.exists()
