@@ -854,8 +854,8 @@ decomposition:
 def test_numbers_are_replaced_where_they_stand_past_wide_characters(tmp_path, monkeypatch):
     """The writer finds each number as the loader reads the file: tables of numbers in the
     text (one on several lines, one after a word on its line), small ones and single numbers as
-    YAML nodes, after comments in characters of several bytes; what it writes loads as the
-    round trip's file does."""
+    YAML nodes, after comments in characters of several bytes and line ends other than a
+    newline; what it writes loads as the round trip's file does."""
     import bayesprog.learning.inplace as inplace
 
     text = """\
@@ -876,6 +876,9 @@ decomposition:
     sigma: [1.0, 1.0, 1.0]
 """
     text = text.replace("  - term: P(M)   # a priori", "  - form: table\n    term: P(M)   # a priori")
+    # characters the YAML parser takes for line ends, which a text editor may not
+    text = text.replace("bayesprog: 1\n", 'bayesprog: 1\ndescription: "Mesures\u2028du capteur'
+                        '\x85(deux lignes)"\n')
     source = tmp_path / "capteur.yaml"
     source.write_text(text, encoding="utf-8")
     rng = np.random.default_rng(3)

@@ -42,7 +42,9 @@ LINE_WIDTH = 100
 
 _NUMBER = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?|[-+]?\.(inf|Inf|INF)"
                      r"|\.(nan|NaN|NAN)")
-_NEWLINE = re.compile("\n")
+#: what ends a line for the YAML parser (its marks count lines so)
+_LINE_BREAK = re.compile("\r\n|[\n\r\x85\u2028\u2029]")
+_LONE_CR = re.compile("\r(?!\n)")
 #: a number of a table read as a block (its text holds only numbers, brackets, commas, spaces)
 _BLOCK_NUMBER = re.compile(r"[-+0-9.eE]+")
 _DOCUMENT_END = re.compile(r"^\.\.\.\s*$", re.MULTILINE)
@@ -62,7 +64,9 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
         return None
     if not isinstance(root, yaml.MappingNode):
         return None
-    line_starts = [0, *(m.end() for m in _NEWLINE.finditer(text))]
+    if any(_LONE_CR.search(written) for _, written, _ in blocks.values()):
+        return None  # a line the placeholder text would not have
+    line_starts = [0, *(m.end() for m in _LINE_BREAK.finditer(text))]
 
     def offset(mark: Any) -> int:
         return line_starts[mark.line] + mark.column
