@@ -12,6 +12,7 @@ with warnings.catch_warnings():
 
 import os  # noqa: E402
 import shutil  # noqa: E402
+import signal  # noqa: E402
 import subprocess  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -27,6 +28,11 @@ if "BAYESPROG_CACHE" not in os.environ:
 
     os.environ["BAYESPROG_CACHE"] = tempfile.mkdtemp(prefix="bayesprog-test-cache-")
     atexit.register(shutil.rmtree, os.environ["BAYESPROG_CACHE"], ignore_errors=True)
+
+# the tests stop the commands they start with Ctrl-C as a terminal would; a test run started in
+# the background by a shell, which ignores Ctrl-C there, would pass that on to them
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
