@@ -98,6 +98,7 @@ def stop_pool(pool: Any) -> None:
     import time
 
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
@@ -106,6 +107,11 @@ def stop_pool(pool: Any) -> None:
         process.join(max(deadline - time.monotonic(), 0.0))
         if process.is_alive():
             process.kill()
+    if manager is not None:
+        # the pool's thread ends once its processes have, closing its wake-up pipe; at exit,
+        # Python (3.11) wakes every such thread, and a wake-up that races the close is printed
+        # as an error ("Bad file descriptor")
+        manager.join(STOP_GRACE)
 
 
 def worker_init(preload: tuple[str, ...] = ()) -> None:
