@@ -58,14 +58,14 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
     # the large tables found as the loader finds them (their numbers by a pattern, not a YAML
     # node each); the text around them keeps its lines and columns
     read, blocks, _ = number_blocks(text)
+    if any(_LONE_CR.search(written) for _, written, _ in blocks.values()):
+        return None  # a line the placeholder text would not have
     try:
         root = yaml.compose(read, Loader=FAST_LOADER)
     except (yaml.YAMLError, RecursionError):
         return None
     if not isinstance(root, yaml.MappingNode):
         return None
-    if any(_LONE_CR.search(written) for _, written, _ in blocks.values()):
-        return None  # a line the placeholder text would not have
     line_starts = [0, *(m.end() for m in _LINE_BREAK.finditer(text))]
 
     def offset(mark: Any) -> int:
