@@ -592,7 +592,9 @@ class Program:
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
             states_from_data: Sequence[str] = ()) -> Fit:
         """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
-        DataFrame or a mapping of columns; one column per variable, missing values allowed
+        DataFrame or a mapping of columns (or a CSV file being read on a thread meanwhile,
+        :class:`~bayesprog.learning.plain_csv.ReadAhead`, as ``bayesprog learn`` reads it
+        while the program loads); one column per variable, missing values allowed
         (``columns`` maps a column of another name to its variable: ``{"material": "M"}``).
         ``states_from_data`` names variables whose states are those found in their column
         (sorted, as written: a lab's own materials), the terms over them learned anew; the

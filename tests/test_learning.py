@@ -808,9 +808,10 @@ def _csv_cases(rng: np.random.Generator) -> list[tuple[str, str]]:
 def test_plain_csv_reading_equals_the_csv_module(tmp_path, monkeypatch):
     """The numpy reader of plain CSV files codes every file as the csv module's reading does,
     errors included (the row and the value named), its columns coded one after the other or
-    side by side on threads."""
+    side by side on threads, or read ahead on a thread of its own."""
     import bayesprog.learning.data as data_module
-    from bayesprog.learning.plain_csv import read_plain_csv
+    import bayesprog.learning.plain_csv as plain_module
+    from bayesprog.learning.plain_csv import ReadAhead, read_plain_csv
 
     long = ", ".join(f"a_value_longer_than_sixteen_bytes_x{i}" for i in range(3))
     program = bayesprog.loads(f"""\
@@ -829,7 +830,7 @@ decomposition:
   - {{term: P(X), form: normal, mean: 0, sigma: 1}}
 """)
 
-    def read(path: Path) -> tuple:
+    def read(path: Path | ReadAhead) -> tuple:
         try:
             data = data_module.load_data(path, program.variables)
         except DataError as exc:
@@ -842,13 +843,56 @@ decomposition:
         path.write_bytes(text.encode("utf-8"))
         assert read_plain_csv(path.read_bytes(), ",") is not None, name  # the fast way is taken
         fast = read(path)
+        assert read(ReadAhead(path)) == fast, name
         with monkeypatch.context() as patch:
-            patch.setattr(data_module, "read_plain_csv", lambda raw, sep: None)
+            patch.setattr(plain_module, "read_plain_csv", lambda raw, sep, padded=False: None)
             assert read(path) == fast, name
+            assert read(ReadAhead(path)) == fast, name  # not plain: read by the csv module
         with monkeypatch.context() as patch:  # its columns coded on several threads
-            patch.setattr(data_module, "THREADED_FIELDS", 0)
-            patch.setattr(data_module.os, "cpu_count", lambda: 3)
+            patch.setattr(plain_module, "THREADED_FIELDS", 0)
+            patch.setattr(plain_module.os, "cpu_count", lambda: 3)
             assert read(path) == fast, name
+
+
+def test_a_file_read_ahead_fails_as_the_file_read_then(tmp_path, monkeypatch):
+    """Data read ahead on a thread give the fit and the errors the path gives: a missing
+    file, a folder, a file that is not CSV, one with a bad value (its row named); what the
+    thread raised is raised where the data are used."""
+    import bayesprog.learning.plain_csv as plain_module
+    from bayesprog.learning.plain_csv import ReadAhead
+
+    program = bayesprog.loads("""\
+bayesprog: 1
+variables: {A: {states: [y, n]}, B: {states: [y, n]}}
+decomposition:
+  - {term: P(A), form: table, table: [0.5, 0.5]}
+  - {term: P(B | A), form: table, table: [[0.5, 0.5], [0.5, 0.5]]}
+""")
+    good = tmp_path / "good.csv"
+    good.write_text("A,B\ny,n\nn,n\ny,y\n")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("A,B\ny,n\nmaybe,n\n")
+    json_file = tmp_path / "d.json"
+    json_file.write_text("{}")
+
+    def outcome(source):
+        try:
+            fit = program.fit(source)
+        except DataError as exc:
+            return "error", str(exc)
+        return fit.program.term("P(B | A)").params["table"].array.tolist(), fit.record.sha256
+
+    for path in (good, bad, tmp_path / "missing.csv", tmp_path, json_file):
+        assert outcome(ReadAhead(path)) == outcome(path), path
+    assert outcome(ReadAhead(bad))[1] == f"{bad}: row 2 (line 3), column 'A': unknown state " \
+        "'maybe' of A: expected one of y, n"
+
+    def broken(path, threads):
+        raise MemoryError("no room")
+
+    monkeypatch.setattr(plain_module, "read_file", broken)
+    with pytest.raises(MemoryError, match="no room"):
+        program.fit(ReadAhead(good))
 
 
 def test_numbers_are_replaced_where_they_stand_past_wide_characters(tmp_path, monkeypatch):

@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
-
-import numpy as np
 
 from bayesprog.cli.common import UserError, column_renames, load_program, output_file
 
@@ -50,16 +49,18 @@ def cmd_learn(args: argparse.Namespace) -> int:
     if args.max_iter < 1:
         raise UserError(f"--max-iter: expected at least 1, found {args.max_iter}")
     from bayesprog.bundled import bundled_path
+    from bayesprog.learning.plain_csv import ReadAhead
 
+    args.data = str(bundled_path(args.data, "data"))
+    data = ReadAhead(args.data)  # read on a thread while the program loads
     program = load_program(args.file)
     output_file(args.output)
-    args.data = str(bundled_path(args.data, "data"))
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise UserError(f"-o {args.output}: that is the data file; expected a new program file")
-    if not (args.tol >= 0 and np.isfinite(args.tol)):
+    if not (args.tol >= 0 and math.isfinite(args.tol)):
         raise UserError(f"--tol: expected a number >= 0, found {args.tol}")
     columns = column_renames(args.column)
-    fit = program.fit(args.data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
+    fit = program.fit(data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
                       columns=columns or None, states_from_data=args.states_from_data)
     try:
         out = fit.save(args.output, rounded=args.rounded)
@@ -146,10 +147,10 @@ def cmd_discover(args: argparse.Namespace) -> int:
         raise UserError(f"-o {args.output}: that is the data file; expected a new program file")
     if out.suffix not in (".yaml", ".yml"):
         raise UserError(f"-o {args.output}: expected a .yaml program file")
-    if not np.isfinite(args.significance) or not 0 < args.significance < 1:
+    if not math.isfinite(args.significance) or not 0 < args.significance < 1:
         raise UserError(f"--significance: expected a number in (0, 1), found "
                         f"{args.significance}")
-    if not (np.isfinite(args.ess) and args.ess > 0):
+    if not (math.isfinite(args.ess) and args.ess > 0):
         raise UserError(f"--ess: expected a number > 0, found {args.ess}")
     for option, value in (("--max-conditioning", args.max_conditioning),
                           ("--restarts", args.restarts), ("--tabu", args.tabu),
@@ -211,7 +212,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if len(args.files) < 2:
         raise UserError("compare: expected one or more programs, then the data file")
     *files, data = args.files
-    if not np.isfinite(args.ess) or args.ess <= 0:
+    if not math.isfinite(args.ess) or args.ess <= 0:
         raise UserError(f"--ess: expected a number > 0, found {args.ess}")
     programs = [load_program(f) for f in files]
     rows = compare(programs, str(bundled_path(data, "data")), score=args.score,

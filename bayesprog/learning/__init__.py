@@ -1,8 +1,27 @@
 """Identification: learning a program's parameters from data (``Program.fit``,
-``bayesprog learn``)."""
+``bayesprog learn``).
 
-from bayesprog.learning.data import Data, DataError, load_data
-from bayesprog.learning.fit import Estimate, fit_terms
-from bayesprog.learning.write import render_fitted
+The names are imported at their first read: ``bayesprog learn`` starts reading its data file
+(:class:`~bayesprog.learning.plain_csv.ReadAhead`) before the fit's modules are imported."""
+
+from typing import TYPE_CHECKING
+
+from bayesprog.extras import lazy_names
+
+_WHERE = {
+    "Data": "bayesprog.learning.data",
+    "DataError": "bayesprog.learning.data",
+    "load_data": "bayesprog.learning.data",
+    "Estimate": "bayesprog.learning.fit",
+    "fit_terms": "bayesprog.learning.fit",
+    "render_fitted": "bayesprog.learning.write",
+}
+
+if TYPE_CHECKING:  # what the names are, for type checkers and editors
+    from bayesprog.learning.data import Data, DataError, load_data
+    from bayesprog.learning.fit import Estimate, fit_terms
+    from bayesprog.learning.write import render_fitted
+
+__getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 
 __all__ = ["Data", "DataError", "Estimate", "fit_terms", "load_data", "render_fitted"]

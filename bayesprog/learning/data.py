@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import ArgumentError, BayesprogError, short_repr
-from bayesprog.learning.plain_csv import read_plain_csv
+from bayesprog.learning.plain_csv import ReadAhead, read_file
 from bayesprog.variables import Continuous, Discrete, Variable
 
 
@@ -56,6 +56,8 @@ def read_frame(source: Any) -> tuple[Any, str, str, bool]:
     """(DataFrame of strings and numbers, source name, SHA-256, read from CSV?)."""
     import pandas as pd
 
+    if isinstance(source, ReadAhead):  # read again as a frame: the path it reads
+        source = source.path
     if isinstance(source, pd.DataFrame):
         hashed = pd.util.hash_pandas_object(source, index=False).to_numpy().tobytes()
         return source, "<data frame>", hashlib.sha256(hashed).hexdigest(), False
@@ -171,10 +173,12 @@ class _Columns:
 
 
 def _read_columns(source: Any) -> _Columns:
-    if isinstance(source, (str, os.PathLike)):
-        fast = _plain_csv(Path(source))
+    if isinstance(source, (str, os.PathLike, ReadAhead)):
+        fast = _plain_csv(source if isinstance(source, ReadAhead) else Path(source))
         if fast is not None:
             return fast
+        if isinstance(source, ReadAhead):
+            source = source.path
     frame, name, digest, csv = read_frame(source)
     return _Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
                     lambda i: _factorised(frame.iloc[:, i]))
@@ -196,42 +200,15 @@ def _factorised(series: Any) -> tuple[np.ndarray, Any]:
     return codes.astype(np.int64, copy=False), np.asarray(uniques, dtype=object)
 
 
-def _plain_csv(path: Path) -> _Columns | None:
-    """A plain CSV file read with numpy (:mod:`bayesprog.learning.plain_csv`); None for
-    another file, which the csv module reads."""
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".txt", ".tsv"):
+def _plain_csv(source: Path | ReadAhead) -> _Columns | None:
+    """A plain CSV file read with numpy (:mod:`bayesprog.learning.plain_csv`), or read ahead
+    on a thread; None for another file, which the csv module reads."""
+    plain = source.result() if isinstance(source, ReadAhead) else read_file(source)
+    if plain is None:
         return None
-    try:
-        raw = path.read_bytes()
-    except OSError:
-        return None
-    table = read_plain_csv(raw, "\t" if suffix == ".tsv" else ",")
-    if table is None:
-        return None
-    workers = min(os.cpu_count() or 1, MAX_THREADS, len(table.names))
-    if workers > 1 and table.rows * len(table.names) >= THREADED_FIELDS:
-        # numpy lets go of the interpreter while it gathers and sorts a column, and hashlib
-        # while it hashes: the columns are coded side by side, each as it would be alone
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(workers) as pool:
-            digest = pool.submit(lambda: hashlib.sha256(raw).hexdigest())
-            columns = list(pool.map(table.column, range(len(table.names))))
-            sha256 = digest.result()
-    else:
-        columns = [table.column(i) for i in range(len(table.names))]
-        sha256 = hashlib.sha256(raw).hexdigest()
-    if any(c is None for c in columns):
-        return None
-    return _Columns(str(path), sha256, table.rows, True, table.names,
-                    columns.__getitem__)  # type: ignore[arg-type]
-
-
-#: a plain CSV file of this many fields or more has its columns coded on several threads (at
-#: most this many)
-THREADED_FIELDS = 100_000
-MAX_THREADS = 4
+    path = source.path if isinstance(source, ReadAhead) else source
+    return _Columns(str(path), plain.sha256, plain.rows, True, plain.names,
+                    plain.columns.__getitem__)
 
 
 def _missing(value: Any) -> bool:

@@ -328,9 +328,10 @@ class _Em:
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
             if bar is not None:
                 bar.update(1)
-            # one pass needs no starting values: rows are not checked against them
-            ll, stats = self.e_step(params, strict=self.iterative)
-            objective = ll + self.log_prior(params)
+            # one pass needs no starting values: rows are not checked against them, nor its
+            # log-likelihood (the one at the fitted values is taken below)
+            ll, stats = self.e_step(params, strict=self.iterative, likelihood=self.iterative)
+            objective = ll + self.log_prior(params) if self.iterative else 0.0
             params = self.m_step(params, stats)
             if not self.iterative:
                 break
@@ -370,8 +371,11 @@ class _Em:
         return out
 
     # the E-step ---------------------------------------------------------------------------------
-    def e_step(self, params: dict[str, Params], strict: bool = True
+    def e_step(self, params: dict[str, Params], strict: bool = True, likelihood: bool = True
                ) -> tuple[float, dict[str, Stats]]:
+        """(log-likelihood of the rows at ``params``, each learned term's statistics);
+        ``likelihood`` False, with ``strict`` False, where only the statistics of rows that
+        need no inference are wanted: the log-likelihood is then 0."""
         total = 0.0
         stats: dict[str, Stats] = {}
         for g, group in enumerate(self.groups):
@@ -379,7 +383,8 @@ class _Em:
             step = max(1, JOINT_LIMIT // size)
             for start in range(0, len(group.rows), step):
                 rows = group.rows[start:start + step]
-                total += self._chunk(rows, group, params, stats, strict, (g, start))
+                total += self._chunk(rows, group, params, stats, strict, (g, start),
+                                     likelihood)
         return total, stats
 
     def _row_width(self, params: dict[str, Params], hidden: bool = True) -> int:
@@ -400,12 +405,17 @@ class _Em:
 
     def _chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
                stats: dict[str, Stats], strict: bool = True,
-               key: tuple[int, int] | None = None) -> float:
+               key: tuple[int, int] | None = None, likelihood: bool = True) -> float:
         if not group.hidden and key is not None:
-            total = self._complete_chunk(rows, group, params, stats, key)
+            total = self._complete_chunk(rows, group, params, stats, key, likelihood)
             if total is not None:
                 return total
         n, hidden, cards = len(rows), group.hidden, group.cards
+        if not (strict or hidden or likelihood):  # each row counts for what it shows
+            post = np.ones((n,) + cards)
+            for item in self.todo:
+                self._accumulate(item, rows, post, hidden, cards, params, stats)
+            return 0.0
         joint = np.zeros((n,) + cards)
         for term in group.terms:
             joint = joint + self._gather(self._log_table(term, rows, params[term.label]),
@@ -435,14 +445,15 @@ class _Em:
         return float(row_ll.sum())
 
     def _complete_chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
-                        stats: dict[str, Stats], key: tuple[int, int]) -> float | None:
+                        stats: dict[str, Stats], key: tuple[int, int],
+                        likelihood: bool = True) -> float | None:
         """Rows that miss no variable the fit needs: a table the same for every row adds its
         log values times the counts of its cells, and a learned table's statistics are its
         family's counts (a row's posterior is the row itself). None, with nothing added, when
         a row has probability zero: the general E-step says which, or leaves it out."""
         total = 0.0
         per_row = None
-        for term in group.terms:
+        for term in group.terms if likelihood else ():
             table = self._log_table(term, rows, params[term.label])
             if table.shape[0] == 1:
                 counts = self._family_counts(key, term.axes, rows)
