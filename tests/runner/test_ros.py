@@ -786,7 +786,8 @@ def test_the_physics_robot_drives_the_explorer_and_publishes_its_fingertip():
         client.spin(lambda: robot.poll() is not None, timeout=120)
         out, err = robot.communicate()
         assert robot.returncode == 0, err
-        client.spin(lambda: len(poses) >= 10, timeout=10)
+        # (a bound on a hang, like the waits above: the ten poses come as soon as DDS delivers)
+        client.spin(lambda: len(poses) >= 10, timeout=60)
     finally:
         client.close()
         stop(explorer)
