@@ -173,12 +173,17 @@ class _Columns:
 
 
 def _read_columns(source: Any) -> _Columns:
-    if isinstance(source, (str, os.PathLike, ReadAhead)):
-        fast = _plain_csv(source if isinstance(source, ReadAhead) else Path(source))
-        if fast is not None:
-            return fast
-        if isinstance(source, ReadAhead):
-            source = source.path
+    """A plain CSV file (or one read ahead) by :mod:`bayesprog.learning.plain_csv`, anything
+    else through a data frame (:func:`read_frame`)."""
+    plain = None
+    if isinstance(source, ReadAhead):
+        plain, source = source.result(), source.path
+    elif isinstance(source, (str, os.PathLike)):
+        source = Path(source)
+        plain = read_file(source)
+    if plain is not None:
+        return _Columns(str(source), plain.sha256, plain.rows, True, plain.names,
+                        plain.columns.__getitem__)
     frame, name, digest, csv = read_frame(source)
     return _Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
                     lambda i: _factorised(frame.iloc[:, i]))
@@ -198,17 +203,6 @@ def _factorised(series: Any) -> tuple[np.ndarray, Any]:
         return np.arange(len(series)), series.to_numpy(dtype=object)
     codes, uniques = pd.factorize(series)
     return codes.astype(np.int64, copy=False), np.asarray(uniques, dtype=object)
-
-
-def _plain_csv(source: Path | ReadAhead) -> _Columns | None:
-    """A plain CSV file read with numpy (:mod:`bayesprog.learning.plain_csv`), or read ahead
-    on a thread; None for another file, which the csv module reads."""
-    plain = source.result() if isinstance(source, ReadAhead) else read_file(source)
-    if plain is None:
-        return None
-    path = source.path if isinstance(source, ReadAhead) else source
-    return _Columns(str(path), plain.sha256, plain.rows, True, plain.names,
-                    plain.columns.__getitem__)
 
 
 def _missing(value: Any) -> bool:

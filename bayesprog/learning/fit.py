@@ -330,7 +330,7 @@ class _Em:
                 bar.update(1)
             # one pass needs no starting values: rows are not checked against them, nor its
             # log-likelihood (the one at the fitted values is taken below)
-            ll, stats = self.e_step(params, strict=self.iterative, likelihood=self.iterative)
+            ll, stats = self.e_step(params, strict=self.iterative)
             objective = ll + self.log_prior(params) if self.iterative else 0.0
             params = self.m_step(params, stats)
             if not self.iterative:
@@ -371,11 +371,12 @@ class _Em:
         return out
 
     # the E-step ---------------------------------------------------------------------------------
-    def e_step(self, params: dict[str, Params], strict: bool = True, likelihood: bool = True
+    def e_step(self, params: dict[str, Params], strict: bool = True
                ) -> tuple[float, dict[str, Stats]]:
         """(log-likelihood of the rows at ``params``, each learned term's statistics);
-        ``likelihood`` False, with ``strict`` False, where only the statistics of rows that
-        need no inference are wanted: the log-likelihood is then 0."""
+        ``strict`` False for one pass over rows that need no inference: each row counts for
+        what it shows, checked against no parameters, and the log-likelihood is not taken
+        (0)."""
         total = 0.0
         stats: dict[str, Stats] = {}
         for g, group in enumerate(self.groups):
@@ -383,8 +384,7 @@ class _Em:
             step = max(1, JOINT_LIMIT // size)
             for start in range(0, len(group.rows), step):
                 rows = group.rows[start:start + step]
-                total += self._chunk(rows, group, params, stats, strict, (g, start),
-                                     likelihood)
+                total += self._chunk(rows, group, params, stats, strict, (g, start))
         return total, stats
 
     def _row_width(self, params: dict[str, Params], hidden: bool = True) -> int:
@@ -405,13 +405,13 @@ class _Em:
 
     def _chunk(self, rows: np.ndarray, group: _Group, params: dict[str, Params],
                stats: dict[str, Stats], strict: bool = True,
-               key: tuple[int, int] | None = None, likelihood: bool = True) -> float:
+               key: tuple[int, int] | None = None) -> float:
         if not group.hidden and key is not None:
-            total = self._complete_chunk(rows, group, params, stats, key, likelihood)
+            total = self._complete_chunk(rows, group, params, stats, key, likelihood=strict)
             if total is not None:
                 return total
         n, hidden, cards = len(rows), group.hidden, group.cards
-        if not (strict or hidden or likelihood):  # each row counts for what it shows
+        if not (strict or hidden):  # nothing to infer: each row counts for what it shows
             post = np.ones((n,) + cards)
             for item in self.todo:
                 self._accumulate(item, rows, post, hidden, cards, params, stats)
@@ -426,12 +426,6 @@ class _Em:
             row_ll = (np.log(np.exp(joint - top).sum(axis=axes, keepdims=True)) + top) if axes \
                 else joint
         impossible = ~np.isfinite(row_ll.reshape(n))
-        if not strict and not hidden:
-            # nothing to infer: each row counts for what it shows, whatever the parameters
-            post = np.ones_like(joint)
-            for item in self.todo:
-                self._accumulate(item, rows, post, hidden, cards, params, stats)
-            return float(np.where(impossible, 0.0, row_ll.reshape(n)).sum())
         if np.any(impossible):
             row = int(self.used[rows[np.argmax(impossible)]])
             line = f" (line {row + 2})" if self.data.csv else ""
@@ -450,7 +444,8 @@ class _Em:
         """Rows that miss no variable the fit needs: a table the same for every row adds its
         log values times the counts of its cells, and a learned table's statistics are its
         family's counts (a row's posterior is the row itself). None, with nothing added, when
-        a row has probability zero: the general E-step says which, or leaves it out."""
+        a row has probability zero: the general E-step says which. ``likelihood`` False: the
+        statistics only (0 added)."""
         total = 0.0
         per_row = None
         for term in group.terms if likelihood else ():
