@@ -13,10 +13,10 @@ points to the registered outline: 0 for a perfect match, 1/2 at ``d = error_scal
 ``method="chamfer"`` registers without pairing points: the mean distance of the path points to
 the outline (the chamfer distance, computed exactly against the polygon) is scored at every pose
 of a grid (24 rotations x 7 x 7 offsets around the path's centroid, spanning the template's
-radius), and the best pose refined by a pattern search (27 neighbouring poses per round, the
-steps halved every other round). ICP descends from each of its starts to the nearest minimum
-of the same distance; the chamfer search looks at every pose of its grid, so it cannot be
-trapped by a start, but it is only as fine as its refinement.
+radius), and its best eight poses each refined by a pattern search (27 neighbouring poses per
+round, the steps halved every other round), the best refined pose kept. ICP descends from each
+of its starts to the nearest minimum of the same distance; the chamfer search looks at every
+pose of its grid, so it cannot be trapped by a start, but it is only as fine as its refinement.
 """
 
 from __future__ import annotations
@@ -38,8 +38,12 @@ METHODS = ("icp", "chamfer")
 SEARCH_GROWTH_3D = 1.5
 #: the chamfer search's grid: rotations, and offsets per axis across [-radius, radius]
 CHAMFER_ROTATIONS, CHAMFER_OFFSETS = 24, 7
-#: its refinement: rounds of 27 neighbouring poses (angle and both offsets -1, 0, +1 step)
-CHAMFER_ROUNDS = 8
+#: its refinement: the best poses of the grid, each by rounds of 27 neighbouring poses (angle
+#: and both offsets -1, 0, +1 step); a few, since the grid's best can lie in another basin than
+#: the true pose's, a grid step away and a fraction of a millimetre worse
+CHAMFER_REFINED, CHAMFER_ROUNDS = 8, 8
+#: the first rounds refine all of them, the others the best one
+CHAMFER_WIDE_ROUNDS = 2
 _NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)],
                        float)
 
@@ -174,30 +178,39 @@ def _chamfer_search(path: np.ndarray, counts: np.ndarray, outlines: np.ndarray,
                     nverts: np.ndarray, radius: np.ndarray, centroid: np.ndarray, search: bool,
                     warm: tuple[np.ndarray, np.ndarray] | None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The chamfer search (see the module): the best pose of a grid (with ``search``; the warm
-    pose otherwise), refined by rounds of neighbouring poses."""
+    """The chamfer search (see the module): the best poses of a grid (with ``search``; the warm
+    pose otherwise), each refined by rounds of neighbouring poses, the best refined pose
+    kept."""
     if search:
         grid = np.linspace(-1.0, 1.0, CHAMFER_OFFSETS)
         offsets = np.stack(np.meshgrid(grid, grid, indexing="ij"), -1).reshape(-1, 2)
         angle, shift = _poses(CHAMFER_ROTATIONS, offsets, radius, centroid, warm)
-        angle, shift, _ = _best(chamfer(path, counts, outlines, nverts, angle, shift),
-                                angle, shift)
+        dist = chamfer(path, counts, outlines, nverts, angle, shift)
+        keep = np.argsort(dist, axis=-1, kind="stable")[..., :CHAMFER_REFINED]
+        angle = np.take_along_axis(angle, keep, -1)  # [runs, T, N]
+        shift = np.take_along_axis(shift, keep[..., None], 2)  # [runs, T, N, 2]
         turn, step = np.pi / CHAMFER_ROTATIONS, radius / (CHAMFER_OFFSETS - 1)
     else:
         assert warm is not None
-        angle, shift = warm[0].astype(float), warm[1].astype(float)
+        angle, shift = warm[0].astype(float)[..., None], warm[1].astype(float)[:, :, None]
         turn, step = np.pi / (4 * CHAMFER_ROTATIONS), radius / (4 * (CHAMFER_OFFSETS - 1))
     for round_ in range(CHAMFER_ROUNDS):  # the centre is among the neighbours: never worse
+        runs, n_t, n = angle.shape
         scale = 0.5 ** (round_ // 2)
-        candidates_angle = np.ascontiguousarray(angle[..., None]
-                                                + _NEIGHBOURS[:, 0] * turn * scale)
-        candidates_shift = np.ascontiguousarray(shift[:, :, None, :]
-                                                + _NEIGHBOURS[None, None, :, 1:]
-                                                * (step * scale)[None, :, None, None])
-        angle, shift, distance = _best(chamfer(path, counts, outlines, nverts, candidates_angle,
-                                               candidates_shift),
-                                       candidates_angle, candidates_shift)
-    return angle, shift, distance
+        candidates_angle = angle[..., None] + _NEIGHBOURS[:, 0] * turn * scale  # [r, T, N, 27]
+        candidates_shift = (shift[:, :, :, None, :] + _NEIGHBOURS[:, 1:]
+                            * (step * scale)[None, :, None, None, None])
+        dist = chamfer(path, counts, outlines, nverts,
+                       np.ascontiguousarray(candidates_angle.reshape(runs, n_t, -1)),
+                       np.ascontiguousarray(candidates_shift.reshape(runs, n_t, -1, 2)))
+        dist = dist.reshape(runs, n_t, n, len(_NEIGHBOURS))
+        best = dist.argmin(-1)[..., None]  # each pose's best neighbour
+        angle = np.take_along_axis(candidates_angle, best, -1)[..., 0]
+        shift = np.take_along_axis(candidates_shift, best[..., None], 3)[:, :, :, 0]
+        distance = np.take_along_axis(dist, best, -1)[..., 0]
+        if round_ + 1 == CHAMFER_WIDE_ROUNDS:  # the basins told apart: the best one goes on
+            angle, shift, distance = (a[:, :, None] for a in _best(distance, angle, shift))
+    return _best(distance, angle, shift)
 
 
 def match3d(

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
@@ -292,6 +292,9 @@ def test_the_chamfer_search_recovers_a_whole_outline(t):
 
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(m=st.integers(35, K), sigma=st.floats(0.0, 0.001), **poses)
+# the grid's best pose lies a step from the true pose's basin, in a basin 4.9 mm worse: refining
+# only that pose stopped there
+@example(angle=1.75, x=0.125, y=0.5, start=8, m=37, sigma=0.0, seed=0)
 def test_the_chamfer_search_never_fits_worse_than_the_true_pose_by_much(angle, x, y, start, m,
                                                                           sigma, seed):
     _, polys, outlines, points = templates()
