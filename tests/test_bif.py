@@ -157,6 +157,24 @@ def test_a_construct_the_reader_does_not_know_is_read_by_pgmpy(tmp_path):
     assert _written(path, tmp_path) == _pgmpy_text(path, "other")
 
 
+
+def test_pgmpys_reader_with_its_grammar_built_once_reads_as_pgmpys_own(tmp_path):
+    from pgmpy.readwrite import BIFReader
+
+    def model(name: str):
+        path = tmp_path / f"{name}.bif"
+        path.write_bytes(gzip.decompress((EXAMPLES / f"{name}.bif.gz").read_bytes()))
+        return path, read_with_pgmpy(path)
+
+    def same(a, b) -> bool:
+        return (sorted(a.edges()) == sorted(b.edges())
+                and {c.variable: c for c in a.get_cpds()} == {c.variable: c for c in b.get_cpds()})
+
+    _, first = model("cancer")
+    path, second = model("asia")  # the grammar built for the first file
+    assert same(second, BIFReader(str(path)).get_model())
+    assert same(model("cancer")[1], first) and not same(first, second)
+
 @pytest.mark.parametrize("content, where", [
     ("variable A { type discrete [ 2 ] { a, b }; }\nprobability ( A ) { table 0.5, x.5; }\n",
      "bad.bif:2:32: cannot parse as BIF: table: expected a number, found 'x.5'"),

@@ -10,6 +10,7 @@ back. pgmpy is imported lazily (importing it is slow).
 
 from __future__ import annotations
 
+import functools
 import graphlib
 import gzip
 import re
@@ -87,13 +88,13 @@ def _pgmpy_model(raw: str, fmt: str, path: Path) -> Any:
         from bayesprog.io.bif import check_sizes_as_pgmpy_reads
 
         check_sizes_as_pgmpy_reads(raw, str(path))
-    from pgmpy.readwrite import BIFReader, UAIReader, XMLBIFReader
+    from pgmpy.readwrite import UAIReader, XMLBIFReader
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if fmt == "bif":
-                model = BIFReader(string=raw).get_model()
+                model = _bif_reader()(string=raw).get_model()
             elif fmt == "xmlbif":
                 model = XMLBIFReader(string=raw).get_model()
             else:
@@ -105,6 +106,31 @@ def _pgmpy_model(raw: str, fmt: str, path: Path) -> Any:
         raise NetworkError(f"{path}: a Markov network (factors without direction) is not "
                            "supported: expected a Bayesian network")
     return model
+
+
+@functools.cache
+def _bif_reader() -> type:
+    """pgmpy's ``BIFReader`` with its grammar built once in a process, not for every file:
+    its words span every Unicode letter, and building them takes about two seconds. The
+    grammar does not depend on the file, and reading with it is pgmpy's own."""
+    from pgmpy.readwrite import BIFReader
+
+    class Reader(BIFReader):
+        grammars: tuple[Any, Any] | None = None
+
+        def get_variable_grammar(self) -> Any:
+            return self._grammars()[0]
+
+        def get_probability_grammar(self) -> Any:
+            return self._grammars()[1]
+
+        def _grammars(self) -> tuple[Any, Any]:
+            if Reader.grammars is None:
+                Reader.grammars = (super().get_variable_grammar(),
+                                   super().get_probability_grammar())
+            return Reader.grammars
+
+    return Reader
 
 
 def _read_bif(path: Path) -> Any:
