@@ -8,7 +8,8 @@ evidence puts the probability, so unlikely evidence does not starve it. The erro
 probability is estimated from batch means (the kept sweeps cut into 20 consecutive batches), as
 is an effective sample size. Only asked for by name (``method="gibbs"``): the evidence's
 probability is not estimated (``log_evidence`` is NaN, and the answer says so), and a chain
-cannot leave states that deterministic terms wall off."""
+cannot leave states that deterministic terms wall off. The sweeps run compiled
+(:mod:`bayesprog.inference.methods._gibbs_kernel`)."""
 
 from __future__ import annotations
 
@@ -64,45 +65,21 @@ class GibbsSampling(Method):
         cards = [plan.card(v) for v in unknown]
         gens = generators(plan.options.get("rng"), rows)
         state, possible = _start(program, plan, bound, unknown, gens)
-        # each variable's factors, and where in each it stands
-        # (the factor's log with the variable's axis last, the positions of its other axes,
-        # whether it has the rows' axis)
-        home: dict[str, list[tuple[np.ndarray, list[int], bool]]] = {v: [] for v in unknown}
-        for f in factors:
-            for k, a in enumerate(f.axes):
-                moved = np.moveaxis(f.log, k + (1 if f.batched else 0), -1)
-                others = [position[b] for q, b in enumerate(f.axes) if q != k]
-                home[a].append((moved, others, f.batched))
-        row = np.arange(rows)
+        from bayesprog.inference.methods._gibbs_kernel import flatten, sweep
+
+        flat = flatten(factors, position, len(unknown))
         searched_cards = tuple(plan.card(v) for v in searched)
-        keep = np.zeros((samples, rows), dtype=np.intp)
+        searched_at = np.asarray([position[v] for v in searched], np.int64)
+        keep = np.zeros((samples, rows), dtype=np.int64)
         kept = 0
         total = burn_in + samples * thin
         done = 0
-        while done < total:
+        while done < total:  # the rows' draws a block at a time, from each row's generator
             block = min(BLOCK, total - done)
             uniforms = np.stack([g.random((block, len(unknown))) for g in gens], axis=1)
-            for b in range(block):
-                for j, v in enumerate(unknown):
-                    log = np.zeros((rows, cards[j]))
-                    for moved, others, batched in home[v]:
-                        index: list[Any] = [row] if batched else []
-                        index += [state[:, o] for o in others]
-                        log += moved[tuple(index)] if index else moved
-                    top = log.max(axis=1, keepdims=True)
-                    with np.errstate(invalid="ignore"):
-                        p = np.exp(log - top)
-                    cumulative = np.cumsum(p, axis=1)
-                    norm = cumulative[:, -1:]
-                    ok = np.isfinite(top[:, 0]) & (norm[:, 0] > 0)
-                    choice = (cumulative < uniforms[b, :, j, None] * norm).sum(axis=1)
-                    state[:, j] = np.where(ok, np.minimum(choice, cards[j] - 1), state[:, j])
-                step = done + b
-                if step >= burn_in and (step - burn_in) % thin == 0 and kept < samples:
-                    cells = [state[:, position[v]] for v in searched]
-                    keep[kept] = np.ravel_multi_index(cells, searched_cards) if searched \
-                        else 0
-                    kept += 1
+            kept = sweep(state, np.asarray(cards, np.int64), uniforms.reshape(block, rows, -1),
+                         *flat, done, burn_in, thin, kept, keep, searched_at,
+                         np.asarray(searched_cards, np.int64))
             done += block
         size = int(np.prod(searched_cards))
         probs = _frequencies(keep, size)
