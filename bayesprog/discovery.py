@@ -11,17 +11,19 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import time
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog.learning.data import DataError, _missing, read_frame
+from bayesprog.learning.data import Columns, DataError, _missing, read_frame
+from bayesprog.learning.plain_csv import read_file
 from bayesprog.learning.structure import (
     MAX_FAMILY_CELLS,
     SCORES,
@@ -115,6 +117,24 @@ def _named(codes: np.ndarray, states: list[str]) -> Any:
     return np.array([*states, None], dtype=object)[codes]
 
 
+def _columns(data: Any) -> tuple[str, str, list[str], int,
+                                  Callable[[int], tuple[list[Any], np.ndarray]]]:
+    """``data``'s name, the SHA-256 of its bytes (or of its values), its columns' names, its
+    number of rows, and each column as its distinct values and each row's index among them: a
+    plain CSV file by :mod:`bayesprog.learning.plain_csv`, anything else as a data frame."""
+    if isinstance(data, (str, os.PathLike)):
+        plain = read_file(Path(data))
+        if plain is not None:
+            def distinct_of(j: int) -> tuple[list[Any], np.ndarray]:
+                which, values = plain.columns[j]
+                return list(values), which
+
+            return str(data), plain.sha256, list(plain.names), plain.rows, distinct_of
+    frame, source, digest, _ = read_frame(data)
+    return (source, digest, [str(c) for c in frame.columns], int(len(frame)),
+            lambda j: _distinct(frame.iloc[:, j]))
+
+
 def code_data(data: Any, *, discretise: int | None = None,
               columns: Mapping[str, str] | None = None) -> Coded:
     """Read ``data`` (a CSV or Parquet file, a DataFrame, a mapping of columns) and code every
@@ -124,17 +144,16 @@ def code_data(data: Any, *, discretise: int | None = None,
     language's discretised variables). A column that cannot be a variable is refused, named."""
     import pandas as pd
 
-    frame, source, digest, _ = read_frame(data)
+    source, digest, written, rows, distinct_of = _columns(data)
     if columns:
-        missing = [c for c in columns if c not in frame.columns]
+        missing = [c for c in columns if c not in written]
         if missing:
             raise DataError(f"{source}: no column {missing[0]!r} to rename (columns: "
-                            f"{', '.join(map(str, frame.columns))})")
-        frame = frame.rename(columns=dict(columns))
-    names = [str(c) for c in frame.columns]
+                            f"{', '.join(written)})")
+    names = [columns.get(c, c) for c in written] if columns else written
     if not names:
         raise DataError(f"{source}: no column: expected one column per variable")
-    if len(frame) == 0:
+    if rows == 0:
         raise DataError(f"{source}: no row: expected one row per observation")
     if len(set(names)) != len(names):
         dup = next(c for c in names if names.count(c) > 1)
@@ -143,7 +162,7 @@ def code_data(data: Any, *, discretise: int | None = None,
             discretise, (int, np.integer)) or discretise < 2):
         raise DataError(f"discretise: expected a number of bins >= 2, found {discretise!r}")
     states: list[list[str]] = []
-    codes = np.full((len(frame), len(names)), -1, dtype=np.int64, order="F")
+    codes = np.full((rows, len(names)), -1, dtype=np.int64, order="F")
     named = {}
     bins: dict[str, list[float]] = {}
     for j, column in enumerate(names):
@@ -151,7 +170,7 @@ def code_data(data: Any, *, discretise: int | None = None,
             raise DataError(f"{source}: column {j + 1} {column!r} cannot name a variable: "
                             "expected a letter or _ then letters, digits, _ . - (rename it, or "
                             "--column)")
-        distinct, which = _distinct(frame[column])
+        distinct, which = distinct_of(j)
         # each distinct value's text (None when missing), read once
         absent = np.array([_missing(v) for v in distinct], dtype=bool)
         text_of = np.array([None if a else _name_of(v) for v, a in zip(distinct, absent,
@@ -474,7 +493,10 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     text = _program_text(coded, parents, title, method, prior,
                          k2=method == "hc" and score == "k2")
     skeleton_program = loads(text, f"<{title}>")
-    fit = skeleton_program.fit(coded.frame, max_iter=max_iter, tol=tol)
+    # the columns as coded (their states' names, -1 missing): not read or hashed again
+    data = Columns(coded.source, coded.sha256, len(coded.codes), False, names,
+                   lambda j: (coded.codes[:, j], coded.states[j]))
+    fit = skeleton_program.fit(data, max_iter=max_iter, tol=tol)
     from bayesprog.records import StructureRecord
 
     record = fit.record.replace(data=coded.source, sha256=coded.sha256,

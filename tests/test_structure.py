@@ -4,6 +4,7 @@ program as a file, and the evidence of a program against brute-force integration
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import re
@@ -223,7 +224,6 @@ def test_a_discovered_program_validates_answers_and_is_relearned(tmp_path, asia,
     assert record.structure is not None and record.structure.method == "hc"
     assert record.structure.score == "bic" and record.structure.iterations > 0
     assert record.structure.missing == "none"
-    import hashlib
 
     assert record.sha256 == hashlib.sha256((tmp_path / "asia.csv").read_bytes()).hexdigest()
     assert "structure:" in text
@@ -293,6 +293,25 @@ def test_missing_values_are_used_per_family_and_said(asia):
     assert str((holed.isna().any(axis=1)).sum()) in found.record.structure.missing
     assert found.record.method.startswith("EM")
 
+
+
+@pytest.mark.parametrize("text", [
+    "A,B,C\nyes,1.50,x\nno,2,\nyes, 1.50,y\n,2,x\nno,10,y\n",  # blanks, numbers as written
+    "A,B\n\"a,1\",u\nb,v\n\"a,1\",v\nb,u\n",  # quoted: read by the csv module
+    "A\tB\nx\t1\ny\t2\nx\t2\n",  # tab-separated
+])
+def test_a_csv_file_is_coded_as_its_rows_read_by_the_csv_module(tmp_path, text):
+    from bayesprog.learning.data import read_frame
+
+    path = tmp_path / ("d.tsv" if "\t" in text else "d.csv")
+    path.write_text(text)
+    coded, frame = code_data(path, columns={"A": "first"}), read_frame(path)[0]
+    expected = code_data(frame, columns={"A": "first"})  # the cells as the csv module reads them
+    assert coded.names == expected.names == ["first", *frame.columns[1:]]
+    assert coded.states == expected.states
+    np.testing.assert_array_equal(coded.codes, expected.codes)
+    assert coded.sha256 == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert coded.source == str(path)
 
 def _random_dag(n: int, arcs: int, rng: np.random.Generator) -> list[list[int]]:
     order = rng.permutation(n)

@@ -160,9 +160,10 @@ def load_data(source: Any, variables: Mapping[str, Variable],
 
 
 @dataclass
-class _Columns:
+class Columns:
     """A data set's columns, each as codes into its distinct values (-1: a null) by
-    ``column(i)``: the values as read, looked up once each."""
+    ``column(i)``: the values as read, looked up once each. Learning takes one as its data
+    (``discover`` gives the columns it coded, so that they are not read or hashed again)."""
 
     source: str
     sha256: str
@@ -172,9 +173,11 @@ class _Columns:
     column: Callable[[int], tuple[np.ndarray, Sequence[Any]]]
 
 
-def _read_columns(source: Any) -> _Columns:
-    """A plain CSV file (or one read ahead) by :mod:`bayesprog.learning.plain_csv`, anything
-    else through a data frame (:func:`read_frame`)."""
+def _read_columns(source: Any) -> Columns:
+    """A plain CSV file (or one read ahead) by :mod:`bayesprog.learning.plain_csv`, columns
+    already coded as they are, anything else through a data frame (:func:`read_frame`)."""
+    if isinstance(source, Columns):
+        return source
     plain = None
     if isinstance(source, ReadAhead):
         plain, source = source.result(), source.path
@@ -182,10 +185,10 @@ def _read_columns(source: Any) -> _Columns:
         source = Path(source)
         plain = read_file(source)
     if plain is not None:
-        return _Columns(str(source), plain.sha256, plain.rows, True, plain.names,
+        return Columns(str(source), plain.sha256, plain.rows, True, plain.names,
                         plain.columns.__getitem__)
     frame, name, digest, csv = read_frame(source)
-    return _Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
+    return Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
                     lambda i: _factorised(frame.iloc[:, i]))
 
 
