@@ -11,19 +11,17 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog.learning.data import Columns, DataError, _missing, read_frame
-from bayesprog.learning.plain_csv import read_file
+from bayesprog.learning.data import Columns, DataError, _missing, read_columns
 from bayesprog.learning.structure import (
     MAX_FAMILY_CELLS,
     SCORES,
@@ -94,17 +92,18 @@ def _number(text: str) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _distinct(values: pd.Series) -> tuple[list[Any], np.ndarray]:
-    """A column's distinct values and each row's index among them. A column of Python objects
-    other than strings is read value by value: pandas takes ``True``, ``1`` and ``1.0`` for
-    one value, which are three states as written."""
+def _distinct(values: pd.Series) -> tuple[np.ndarray, list[Any]]:
+    """Each row's index among a column's distinct values (a missing value one of them), and
+    those values. A column of Python objects other than strings is read value by value:
+    pandas takes ``True``, ``1`` and ``1.0`` for one value, which are three states as
+    written."""
     import pandas as pd
 
     which, uniques = pd.factorize(values, use_na_sentinel=False)
     distinct = list(uniques)
     if values.dtype == object and not all(isinstance(v, str) or _missing(v) for v in distinct):
-        return list(values.to_numpy(dtype=object)), np.arange(len(values))
-    return distinct, np.asarray(which, dtype=np.int64)
+        return np.arange(len(values)), list(values.to_numpy(dtype=object))
+    return np.asarray(which, dtype=np.int64), distinct
 
 
 def _named(codes: np.ndarray, states: list[str]) -> Any:
@@ -117,24 +116,6 @@ def _named(codes: np.ndarray, states: list[str]) -> Any:
     return np.array([*states, None], dtype=object)[codes]
 
 
-def _columns(data: Any) -> tuple[str, str, list[str], int,
-                                  Callable[[int], tuple[list[Any], np.ndarray]]]:
-    """``data``'s name, the SHA-256 of its bytes (or of its values), its columns' names, its
-    number of rows, and each column as its distinct values and each row's index among them: a
-    plain CSV file by :mod:`bayesprog.learning.plain_csv`, anything else as a data frame."""
-    if isinstance(data, (str, os.PathLike)):
-        plain = read_file(Path(data))
-        if plain is not None:
-            def distinct_of(j: int) -> tuple[list[Any], np.ndarray]:
-                which, values = plain.columns[j]
-                return list(values), which
-
-            return str(data), plain.sha256, list(plain.names), plain.rows, distinct_of
-    frame, source, digest, _ = read_frame(data)
-    return (source, digest, [str(c) for c in frame.columns], int(len(frame)),
-            lambda j: _distinct(frame.iloc[:, j]))
-
-
 def code_data(data: Any, *, discretise: int | None = None,
               columns: Mapping[str, str] | None = None) -> Coded:
     """Read ``data`` (a CSV or Parquet file, a DataFrame, a mapping of columns) and code every
@@ -144,7 +125,8 @@ def code_data(data: Any, *, discretise: int | None = None,
     language's discretised variables). A column that cannot be a variable is refused, named."""
     import pandas as pd
 
-    source, digest, written, rows, distinct_of = _columns(data)
+    read = read_columns(data, factorised=_distinct)  # a plain CSV file by the learner's reader
+    source, digest, written, rows = read.source, read.sha256, read.names, read.rows
     if columns:
         missing = [c for c in columns if c not in written]
         if missing:
@@ -170,7 +152,8 @@ def code_data(data: Any, *, discretise: int | None = None,
             raise DataError(f"{source}: column {j + 1} {column!r} cannot name a variable: "
                             "expected a letter or _ then letters, digits, _ . - (rename it, or "
                             "--column)")
-        distinct, which = distinct_of(j)
+        which, values = read.column(j)
+        distinct = list(values)
         # each distinct value's text (None when missing), read once
         absent = np.array([_missing(v) for v in distinct], dtype=bool)
         text_of = np.array([None if a else _name_of(v) for v, a in zip(distinct, absent,

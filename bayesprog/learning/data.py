@@ -121,7 +121,7 @@ def load_data(source: Any, variables: Mapping[str, Variable],
 
     Each column is coded through its distinct values: a value is looked up once, however many
     rows hold it, and the rows take its code by indexing."""
-    read = _read_columns(source)
+    read = read_columns(source)
     name = read.source
     columns = list(read.names)
     if rename:
@@ -173,9 +173,11 @@ class Columns:
     column: Callable[[int], tuple[np.ndarray, Sequence[Any]]]
 
 
-def _read_columns(source: Any) -> Columns:
+def read_columns(source: Any, factorised: Callable[[Any], tuple[np.ndarray, Sequence[Any]]]
+                 | None = None) -> Columns:
     """A plain CSV file (or one read ahead) by :mod:`bayesprog.learning.plain_csv`, columns
-    already coded as they are, anything else through a data frame (:func:`read_frame`)."""
+    already coded as they are, anything else through a data frame (:func:`read_frame`), each
+    of its columns coded by ``factorised`` (by default nulls coded -1)."""
     if isinstance(source, Columns):
         return source
     plain = None
@@ -186,10 +188,11 @@ def _read_columns(source: Any) -> Columns:
         plain = read_file(source)
     if plain is not None:
         return Columns(str(source), plain.sha256, plain.rows, True, plain.names,
-                        plain.columns.__getitem__)
+                       plain.columns.__getitem__)
     frame, name, digest, csv = read_frame(source)
+    code = factorised or _factorised
     return Columns(name, digest, int(len(frame)), csv, [str(c) for c in frame.columns],
-                    lambda i: _factorised(frame.iloc[:, i]))
+                   lambda i: code(frame.iloc[:, i]))
 
 
 def _factorised(series: Any) -> tuple[np.ndarray, Any]:
