@@ -955,6 +955,25 @@ decomposition:
     assert ours.term("P(S | M)").params["table"].array[2].tolist() != [0.9, 0.1]
 
 
+def test_numbers_are_written_one_by_one_as_a_single_number_is():
+    """The writer of many numbers at once (a table's, a statistic's rows) writes each as
+    ``number`` does, the values that are not finite and the shortest round trips included."""
+    from bayesprog.learning.inplace import _flow, _rows, number, numbers
+
+    rng = np.random.default_rng(3)
+    values = np.concatenate([rng.random(50), rng.normal(size=20) * 10.0 ** rng.integers(
+        -30, 30, size=20), [0.0, -0.0, 1.0, 0.1, 1e16, 1e-5, 1 / 3, np.nan, np.inf, -np.inf]])
+    one_by_one = [number(float(x)) for x in values]
+    assert numbers(values) == one_by_one
+    assert numbers(values.reshape(8, 10).tolist()) == one_by_one
+    assert numbers(values[:50]) == [repr(float(x)) for x in values[:50]]
+    assert _flow(values.tolist()) == "[" + ", ".join(one_by_one) + "]"
+    assert _flow([1, 2.5, None]) == "[1, 2.5, null]"  # not all floats: item by item
+    rows = values.reshape(2, 4, 10)
+    written = _rows(rows.tolist(), 3, 0).replace("\n", "").replace(" ", "")
+    assert written == _flow(rows.tolist()).replace(" ", "")
+
+
 def test_tables_written_in_place_equal_the_round_trip_and_keep_the_file(tmp_path, monkeypatch):
     """A file of nested lists gets its numbers replaced where they stand (a comment inside a
     table stays); the values, and the record appended then continued, equal ruamel's round

@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -86,14 +86,13 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
         if label is None or label not in values:
             continue
         for name, array in values[label].items():
-            spans = _spans(fields.get(name), np.shape(array), blocks, offset)
-            if spans is None:
+            edited = _edits(fields.get(name), array, blocks, offset)
+            if edited is None:
                 return None
-            for (start, end), x in zip(spans, np.ravel(np.asarray(array, dtype=float)).tolist(),
-                                       strict=True):
+            for start, edit in edited:
                 if start in edits:  # an alias: one text for two values
                     return None
-                edits[start] = (end, number(x))
+                edits[start] = edit
         done.add(label)
     if set(values) - done:
         return None
@@ -116,19 +115,27 @@ def splice(text: str, values: Mapping[str, Mapping[str, np.ndarray]],
     return out + prefix + "".join(line + "\n" for line in entry)
 
 
-def _spans(node: Any, shape: tuple[int, ...], blocks: Mapping[str, tuple[Any, str, int]],
-           offset: Callable[[Any], int]) -> list[tuple[int, int]] | None:
-    """Where the numbers of ``node`` stand in the text, in row-major order, if it is nested
-    lists of ``shape``: a table read as a block (its numbers found in its text), or nodes."""
+def _edits(node: Any, array: Any, blocks: Mapping[str, tuple[Any, str, int]],
+           offset: Callable[[Any], int]) -> list[tuple[int, tuple[int, str]]] | None:
+    """The edits that write ``array`` over the numbers of ``node`` (start: end, new text), if
+    it is nested lists of the array's shape: a table read as a block is written again whole,
+    its numbers replaced in its text (what stands between them kept); the numbers of nodes one
+    by one."""
+    shape = np.shape(array)
+    texts = numbers(array)
     if isinstance(node, yaml.ScalarNode) and not node.style and node.value in blocks:
-        array, written, start = blocks[node.value]
-        if array.shape != shape:
+        read, written, start = blocks[node.value]
+        between = _BLOCK_NUMBER.split(written)  # the text around the numbers, in order
+        if read.shape != shape or len(between) != len(texts) + 1:
             return None
-        return [(start + m.start(), start + m.end()) for m in _BLOCK_NUMBER.finditer(written)]
+        pieces = [""] * (2 * len(texts) + 1)
+        pieces[0::2], pieces[1::2] = between, texts
+        return [(start, (start + len(written), "".join(pieces)))]
     leaves = _leaves(node, shape)
     if leaves is None:
         return None
-    return [(offset(leaf.start_mark), offset(leaf.end_mark)) for leaf in leaves]
+    return [(offset(leaf.start_mark), (offset(leaf.end_mark), text))
+            for leaf, text in zip(leaves, texts, strict=True)]
 
 
 def _leaves(node: Any, shape: tuple[int, ...]) -> list[yaml.ScalarNode] | None:
@@ -216,8 +223,8 @@ def _array(value: Any, lead: str) -> list[str] | None:
 def _rows(values: list, ndim: int, column: int) -> str:
     """Nested lists of numbers whose ``[`` stands at ``column``, each innermost list on its
     own line under the one above."""
-    if ndim == 1:
-        return "[" + ", ".join(number(float(x)) for x in values) + "]"
+    if ndim == 1:  # (the floats of an array's tolist)
+        return "[" + ", ".join(_texts(values)) + "]"
     inner = (",\n" + " " * (column + 1)).join(_rows(v, ndim - 1, column + 1) for v in values)
     return "[" + inner + "]"
 
@@ -235,6 +242,8 @@ def _flow(value: Any) -> str | None:
     if isinstance(value, str):
         return scalar(value, flow=True)
     if isinstance(value, (list, tuple)):
+        if all(type(v) is float for v in value):  # a row of numbers (a statistic's)
+            return "[" + ", ".join(_texts(value)) + "]"
         items = [_flow(v) for v in value]
         return None if None in items else "[" + ", ".join(items) + "]"  # type: ignore[arg-type]
     if isinstance(value, Mapping):
@@ -243,6 +252,19 @@ def _flow(value: Any) -> str | None:
             return None
         return "{" + ", ".join(f"{k}: {v}" for k, v in pairs) + "}"
     return None
+
+
+def numbers(values: Any) -> list[str]:
+    """The numbers of ``values`` (an array, or nested lists of numbers) in row-major order, each
+    as :func:`number` writes it."""
+    return _texts(np.ravel(np.asarray(values, dtype=float)).tolist())
+
+
+def _texts(row: Sequence[float]) -> list[str]:
+    """Each float of ``row`` as :func:`number` writes it."""
+    if all(map(math.isfinite, row)):
+        return list(map(repr, row))
+    return [number(x) for x in row]
 
 
 def number(x: float) -> str:

@@ -96,17 +96,21 @@ def rounded(array: np.ndarray, digits: int, simplex: bool = False) -> np.ndarray
     (its last axis) still sums to one: its largest entry is one minus the others, computed in
     decimal, so that the written numbers add up exactly."""
     array = np.asarray(array, float)
-    out = np.vectorize(lambda x: float(f"{x:.{digits}g}"), otypes=[float])(array) \
-        if array.size else array.copy()
+    # each number through its text, as a float is printed (numpy's rounding is to decimal
+    # places, not significant digits, and not always to the nearest)
+    text = f"{{:.{digits}g}}".format
+    out = np.fromiter(map(float, map(text, array.ravel().tolist())), float,
+                      array.size).reshape(array.shape)
     if simplex and out.ndim and out.size:
         from decimal import Decimal  # (a rounded file's, not every file's)
 
-        rows, source = out.reshape(-1, out.shape[-1]), array.reshape(-1, array.shape[-1])
-        for r in range(rows.shape[0]):
-            k = int(np.argmax(source[r]))
-            others = sum((Decimal(repr(float(v))) for j, v in enumerate(rows[r]) if j != k),
-                         Decimal(0))
-            rows[r, k] = float(Decimal(1) - others)
+        width = array.shape[-1]
+        rows, source = out.reshape(-1, width), array.reshape(-1, width)
+        zero, one = Decimal(0), Decimal(1)
+        largest = source.argmax(axis=1).tolist()  # the first of equal largest entries
+        for r, (row, k) in enumerate(zip(rows.tolist(), largest, strict=True)):
+            others = sum(map(Decimal, map(repr, row[:k] + row[k + 1:])), zero)
+            rows[r, k] = float(one - others)
         out = rows.reshape(array.shape)
     return out
 
