@@ -38,32 +38,43 @@ FAST_LOADER = _Untagged
 MAX_TABLE_NUMBERS = 20_000_000
 #: a table shorter than this (in characters) is read as YAML, like everything else
 BLOCK_MIN_CHARS = 10
-#: ``table:`` followed by a nested list made only of numbers, brackets, commas and spaces
-_BLOCK_START = re.compile(r"(?:^|[\s{,])table[ \t]*:[ \t]*(?=\[)")
+#: the characters of a table's text looked at a time for its closing bracket
+SCAN_CHARS = 1 << 16
+#: ``table:`` followed by a nested list made only of numbers, brackets, commas and spaces (the
+#: key found first, then what stands before it: a pattern that starts with a word is looked for
+#: by the word, one that starts with a choice is tried at every character)
+_TABLE_KEY = re.compile(r"table[ \t]*:[ \t]*(?=\[)")
 _BLOCK_BODY = re.compile(r"[\[\]0-9.,eE+\- \t\r\n]*")
-#: the fits' records, and in them each one's sufficient statistics (a key per statistic)
-_LEARNED = re.compile(r"^learned[ \t]*:", re.MULTILINE)
-_STATISTICS = re.compile(r"^([ \t]*(?:-[ \t]+)?)statistics[ \t]*:[ \t]*(?:#[^\n]*)?$",
-                         re.MULTILINE)
+#: the fits' records (``learned:`` at the start of a line), and in them each one's sufficient
+#: statistics (a key per statistic), ``statistics:`` after its line's indentation and dash
+_LEARNED = re.compile(r"learned[ \t]*:")
+_STATISTICS = re.compile(r"statistics[ \t]*:[ \t]*(?:#[^\n]*)?$", re.MULTILINE)
+_STATISTICS_INDENT = re.compile(r"[ \t]*(?:-[ \t]+)?")
 _LIST_VALUE = re.compile(r":[ \t]*(?=\[)")
-_TOP_LEVEL = re.compile(r"^(?=[^ \t\r\n#-])", re.MULTILINE)
+#: the line break before a line that starts a top-level key
+_TOP_LEVEL = re.compile(r"\n(?=[^ \t\r\n#-])")
 
 
 def _block_starts(text: str) -> list[int]:
     """Where each list that may be read as an array starts: a table's, and each statistic's
     in the ``statistics:`` of a fit's record (under the top-level ``learned:``)."""
-    starts = [m.end() for m in _BLOCK_START.finditer(text)]
-    learned = _LEARNED.search(text)
+    starts = [m.end() for m in _TABLE_KEY.finditer(text)
+              if m.start() == 0 or text[m.start() - 1].isspace() or text[m.start() - 1] in "{,"]
+    learned = next((m for m in _LEARNED.finditer(text)
+                    if m.start() == 0 or text[m.start() - 1] == "\n"), None)
     if learned is not None:
         # up to the next top-level key (a record's dash may stand in the first column)
         following = _TOP_LEVEL.search(text, learned.end())
-        records_end = following.start() if following is not None else len(text)
+        records_end = following.start() + 1 if following is not None else len(text)
         for found in _STATISTICS.finditer(text, learned.end(), records_end):
+            line = text.rfind("\n", 0, found.start()) + 1
+            indent = _STATISTICS_INDENT.fullmatch(text, line, found.start())
+            if line < learned.end() or indent is None:
+                continue  # not the key of a line
             # the statistics' lines: those indented past the key, up to the next that is not
-            column = len(found.group(1))
-            after = re.compile(rf"^[ ]{{0,{column}}}(?=[^ \t\r\n#])", re.MULTILINE).search(
-                text, found.end() + 1)
-            stop = after.start() if after is not None else len(text)
+            column = indent.end() - line
+            after = re.compile(rf"\n[ ]{{0,{column}}}(?=[^ \t\r\n#])").search(text, found.end())
+            stop = after.start() + 1 if after is not None else len(text)
             starts += [m.end() for m in _LIST_VALUE.finditer(text, found.end(), stop)]
     return sorted(set(starts))
 
@@ -120,10 +131,16 @@ def number_blocks(text: str) -> tuple[str, dict[str, tuple[Any, str, int]], int]
 
 def _closing(text: str, start: int, stop: int) -> int:
     """Where the bracket opened at ``start`` closes (one past it), looking no further than
-    ``stop``; ``start`` when it does not close there."""
+    ``stop``; ``start`` when it does not close there. (The text up to ``stop`` is a table's
+    body: numbers, brackets, commas and spaces; it is read a block at a time.)"""
     depth = 0
-    for match in re.finditer(r"[\[\]]", text[start:stop]):
-        depth += 1 if match.group() == "[" else -1
-        if depth == 0:
-            return start + match.end()
+    for low in range(start, stop, SCAN_CHARS):
+        codes = np.frombuffer(text[low:min(low + SCAN_CHARS, stop)].encode("ascii", "replace"),
+                              dtype=np.uint8)
+        steps = (codes == ord("[")).astype(np.int64) - (codes == ord("]"))
+        depths = depth + np.cumsum(steps)
+        closed = np.flatnonzero((depths == 0) & (steps != 0))  # back outside, at a bracket
+        if closed.size:
+            return low + int(closed[0]) + 1
+        depth = int(depths[-1])
     return start

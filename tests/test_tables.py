@@ -221,3 +221,28 @@ def test_only_the_statistics_of_the_fits_records_are_read_as_arrays():
             "inputs:\n  statistics:\n    shape: [100000, 3, 7]\n")
     taken = [written for _, written, _ in yamltext.number_blocks(text)[1].values()]
     assert taken == ["[137.0, 163.0, 100.0]"]
+
+
+def test_the_lists_read_as_arrays_are_found_where_a_key_stands_not_inside_words():
+    """A table's key after the start, a blank, ``{`` or ``,`` (any blank a YAML reader knows);
+    the statistics of records under a ``learned:`` that starts its line, their lines up to the
+    first indented no further than the key."""
+    text = ("a: {table: [0.5, 0.5]}\nxtable: [0.1, 0.9]\nb: {c: 1,table: [0.2, 0.8]}\n"
+            "\u2028table: [0.3, 0.7]\n# learned:\n  statistics:\n    P(A): {counts: [9.0, 1.0]}\n"
+            "learned :\n- data: d.csv\n  statistics: # the counts\n    P(A):\n"
+            "      counts: [1.0, 2.0]\n    P(B | A): {counts: [[1.0, 2.0], [3.0, 4.0]]}\n"
+            "  rows: [10, 20]\n-  statistics:\n    P(A): {counts: [3.0, 4.0]}\nother: [5.0, 6.0]\n")
+    starts = yamltext._block_starts(text)
+    assert [text[s:yamltext._closing(text, s, len(text))] for s in starts] == [
+        "[0.5, 0.5]", "[0.2, 0.8]", "[0.3, 0.7]", "[1.0, 2.0]", "[[1.0, 2.0], [3.0, 4.0]]",
+        "[3.0, 4.0]"]
+
+
+@pytest.mark.parametrize("scan", [1, 5, 1 << 16])
+def test_a_tables_closing_bracket_is_found_whatever_the_block_read_at_a_time(monkeypatch, scan):
+    monkeypatch.setattr(yamltext, "SCAN_CHARS", scan)
+    text = "table: [[0.25, 0.75],\n        [1.0, 0.0]]\n- [0.5]"
+    start = text.index("[")
+    assert yamltext._closing(text, start, len(text)) == text.index("]]") + 2
+    assert yamltext._closing(text, start, text.index("]]")) == start  # not closed before
+    assert yamltext._closing("[1, [2]]]", 0, 9) == 8

@@ -98,19 +98,22 @@ def rounded(array: np.ndarray, digits: int, simplex: bool = False) -> np.ndarray
     array = np.asarray(array, float)
     # each number through its text, as a float is printed (numpy's rounding is to decimal
     # places, not significant digits, and not always to the nearest)
-    text = f"{{:.{digits}g}}".format
-    out = np.fromiter(map(float, map(text, array.ravel().tolist())), float,
-                      array.size).reshape(array.shape)
+    texts = list(map(f"{{:.{digits}g}}".format, array.ravel().tolist()))
+    out = np.fromiter(map(float, texts), float, array.size).reshape(array.shape)
     if simplex and out.ndim and out.size:
         from decimal import Decimal  # (a rounded file's, not every file's)
 
+        # a number's text of at most 15 digits is the only one of so few that reads as its
+        # double: its value is the decimal the file shows (of more digits, the shortest is)
+        if digits > FULL:
+            texts = list(map(repr, out.ravel().tolist()))
         width = array.shape[-1]
-        rows, source = out.reshape(-1, width), array.reshape(-1, width)
+        rows = out.reshape(-1, width)
         zero, one = Decimal(0), Decimal(1)
-        largest = source.argmax(axis=1).tolist()  # the first of equal largest entries
-        for r, (row, k) in enumerate(zip(rows.tolist(), largest, strict=True)):
-            others = sum(map(Decimal, map(repr, row[:k] + row[k + 1:])), zero)
-            rows[r, k] = float(one - others)
+        largest = array.reshape(-1, width).argmax(axis=1).tolist()  # the first of equal ones
+        for r, k in enumerate(largest):
+            row = texts[r * width:(r + 1) * width]
+            rows[r, k] = float(one - sum(map(Decimal, row[:k] + row[k + 1:]), zero))
         out = rows.reshape(array.shape)
     return out
 
