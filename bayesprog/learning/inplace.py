@@ -122,11 +122,13 @@ def _edits(node: Any, array: Any, blocks: Mapping[str, tuple[Any, str, int]],
     its numbers replaced in its text (what stands between them kept); the numbers of nodes one
     by one."""
     shape = np.shape(array)
-    texts = numbers(array)
     if isinstance(node, yaml.ScalarNode) and not node.style and node.value in blocks:
         read, written, start = blocks[node.value]
+        if read.shape != shape:
+            return None
         between = _BLOCK_NUMBER.split(written)  # the text around the numbers, in order
-        if read.shape != shape or len(between) != len(texts) + 1:
+        texts = numbers(array)
+        if len(between) != len(texts) + 1:
             return None
         pieces = [""] * (2 * len(texts) + 1)
         pieces[0::2], pieces[1::2] = between, texts
@@ -135,7 +137,7 @@ def _edits(node: Any, array: Any, blocks: Mapping[str, tuple[Any, str, int]],
     if leaves is None:
         return None
     return [(offset(leaf.start_mark), (offset(leaf.end_mark), text))
-            for leaf, text in zip(leaves, texts, strict=True)]
+            for leaf, text in zip(leaves, numbers(array), strict=True)]
 
 
 def _leaves(node: Any, shape: tuple[int, ...]) -> list[yaml.ScalarNode] | None:
