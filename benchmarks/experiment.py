@@ -62,6 +62,7 @@ from runner.attention.cues import inhibition, uncertainty
 from runner.attention.explorer import CONFIGURATIONS, Explorer
 from runner.attention.shape import MIN_POINTS, match
 from runner.experiments.experiment import load_experiment, make_sensor, run_experiment, simulate
+from runner.robot.session import probe_line
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "models" / "experiments" / "paper.yaml"
@@ -476,17 +477,15 @@ def session(probes: int = 4000, block: int = 1000, task: str = "T2") -> dict:
     random cells, readings from the scenario's simulated sensor), and probes per second."""
     experiment = load_experiment(PAPER)
     scenario = experiment.scenario
-    explorer = Explorer(scenario, task, runs=1)
     rng = np.random.default_rng(0)
     cells = rng.integers(scenario.centres.shape[0], size=probes)
-    sensor = make_sensor(scenario, explorer.perception, [(0, 0, 1)])
+    sensor = make_sensor(scenario, [(0, 0, 1)])
     ny = scenario.shape[1]
     lines = []
     for cell in cells:
-        texture, compliance = sensor.probe(np.array([cell]))
-        lines.append(json.dumps({"cell": [int(cell) // ny, int(cell) % ny],
-                                 "texture": float(texture[0]),
-                                 "compliance": float(compliance[0])}) + "\n")
+        readings = sensor.probe(np.array([cell]))
+        lines.append(json.dumps(probe_line([int(cell) // ny, int(cell) % ny], readings))
+                     + "\n")
     command = [sys.executable, "-m", "bayesprog.cli", "explore", str(scenario.path),
                "--stdio", "--task", task]
     seconds = []

@@ -94,16 +94,16 @@ def breakdown() -> dict[str, float]:
     loaded = time.perf_counter()
     explorer = Explorer(scenario, "T2")
     explorer.reset(start_cell(scenario.shape, 0, 0)[None], seed=[decision_seed(0, 0)])
-    sensor = make_sensor(scenario, scenario.perception, [reading_seed(0, 0)])
+    sensor = make_sensor(scenario, [reading_seed(0, 0)])
     scenario.physics_scene().model  # noqa: B018
     built = time.perf_counter()
     probing = deciding = 0.0
     cells = explorer.expected
     for _ in range(100):
         t0 = time.perf_counter()
-        texture, compliance = sensor.probe(cells)
+        readings = sensor.probe(cells)
         t1 = time.perf_counter()
-        cells = explorer.step(cells, texture, compliance)
+        cells = explorer.step(cells, readings)
         probing += t1 - t0
         deciding += time.perf_counter() - t1
     return {"load_scenario_s": loaded - start, "explorer_and_scene_s": built - loaded,

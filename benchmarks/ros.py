@@ -47,14 +47,14 @@ class Robot:
         from runner.world.scenario import load_scenario
 
         self.scenario = load_scenario(scenario_path)
-        self.sensor = make_sensor(self.scenario, self.scenario.perception, [reading_seed(0, 0)])
+        self.sensor = make_sensor(self.scenario, [reading_seed(0, 0)])
         self.cell = [int(i) for i in start_cell(self.scenario.shape, 0, 0)]
 
     def line(self) -> str:
+        from runner.robot.session import probe_line
+
         flat = np.ravel_multi_index(tuple(self.cell), self.scenario.shape)
-        texture, compliance = self.sensor.probe(np.array([flat]))
-        return json.dumps({"cell": self.cell, "texture": float(texture[0]),
-                           "compliance": float(compliance[0])})
+        return json.dumps(probe_line(self.cell, self.sensor.probe(np.array([flat]))))
 
 
 def summary(times: list[float]) -> dict:

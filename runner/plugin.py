@@ -62,6 +62,8 @@ class ExploreOptions:
     ros: bool = False
     namespace: str = "/bayesprog"
     frame: str = "workspace"
+    #: every probe written to this CSV or Parquet file
+    log: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -269,17 +271,24 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
         except BayesprogError as exc:
             raise BayesprogError(f"--ablate {term!r}: {exc}") from None
     explorer = Explorer(scenario, task, ablate=options.ablate)
-    if options.ros:
-        from runner.robot.ros.run import explore as explore_ros
-        from runner.robot.session import Session
+    from runner.robot.log import SessionLog
 
-        return explore_ros(Session(explorer, seed=options.seed, frame=options.frame),
-                           namespace=options.namespace,
-                           frame=options.frame)
-    from runner.robot.stdio import serve
+    log = SessionLog(options.log) if options.log is not None else None
+    try:
+        if options.ros:
+            from runner.robot.ros.run import explore as explore_ros
+            from runner.robot.session import Session
 
-    serve(explorer, sys.stdin, sys.stdout, seed=options.seed)
-    return 0
+            return explore_ros(Session(explorer, seed=options.seed, frame=options.frame,
+                                       log=log),
+                               namespace=options.namespace, frame=options.frame)
+        from runner.robot.stdio import serve
+
+        serve(explorer, sys.stdin, sys.stdout, seed=options.seed, log=log)
+        return 0
+    finally:
+        if log is not None:
+            log.close()
 
 
 def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
@@ -430,7 +439,8 @@ def _cmd_explore(args: argparse.Namespace) -> int:
     _at_least("--seed", args.seed, 0)
     return explore(Path(args.target), ExploreOptions(
         task=args.task, seed=args.seed, ablate=tuple(args.ablate), ros=args.ros,
-        namespace=args.namespace, frame=args.frame))
+        namespace=args.namespace, frame=args.frame,
+        log=Path(args.log) if args.log else None))
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
@@ -565,6 +575,10 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    help="with --ros: the node's namespace (default: %(default)s)")
     p.add_argument("--frame", default="workspace", metavar="ID",
                    help="with --ros: the frame of what it publishes (default: %(default)s)")
+    p.add_argument("--log", metavar="FILE.csv|.parquet", default=None,
+                   help="write every probe (cell, readings, missing readings, warnings, the "
+                   "material decided, the next cell, timings) to this file, a recordings file "
+                   "`bayesprog learn` reads; what the session explored beside it (FILE.json)")
     p.set_defaults(func=_cmd_explore)
 
     p = commands.add_parser("robot", help="a simulated robot that drives `explore --ros` over "

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +27,7 @@ from runner.attention.shape import (
     ShapeTracker,
     pad_outlines,
 )
+from runner.world.readings import Perception, Readings
 from runner.world.scenario import Scenario
 
 #: The five configurations of the paper's ablation study (Fig. 9, 10): the term made uniform.
@@ -72,7 +73,7 @@ class Explorer:
     >>> scenario = load_scenario("models/scenarios/paper.yaml")
     >>> explorer = Explorer(scenario, task="T2")
     >>> explorer.reset(start=(5, 7), seed=1)
-    >>> nxt = explorer.observe((5, 7), texture=0.52, compliance=0.08)
+    >>> nxt = explorer.observe((5, 7), {"texture": 0.52, "compliance": 0.08})
     >>> len(nxt), all(0 <= i < n for i, n in zip(nxt, scenario.shape))
     (2, True)
     """
@@ -95,7 +96,11 @@ class Explorer:
         self.task = task
         self.runs = runs
         programs = programs or {}
-        self.perception = programs.get("perception") or scenario.perception
+        #: how the probed cell's readings are perceived (pi_per and the readings it reads)
+        self.readings: Perception = scenario.readings
+        if programs.get("perception") is not None:
+            self.readings = scenario.readings.with_program(programs["perception"])
+        self.perception = self.readings.program
         target = programs.get("target") or scenario.target
         self.target = target.ablate(*ablate) if ablate else target
         self.ablated = tuple(ablate)
@@ -103,7 +108,7 @@ class Explorer:
         self.shape_names = names
         self.outlines = pad_outlines([scenario.templates[n][0] for n in names])
         self.template_points = np.stack([scenario.templates[n][1] for n in names])
-        self.materials = self.perception.variables["M"].card  # type: ignore[union-attr]
+        self.materials = len(self.readings.materials)
         self.target_material = scenario.task_material(task)
         #: the other side of the task's discontinuity: the remaining materials of the workspace
         self.counter_materials = scenario.counter_materials(task)
@@ -195,18 +200,17 @@ class Explorer:
         return np.stack(np.unravel_index(np.asarray(flat), self.scenario.shape), axis=-1)
 
     # the loop -----------------------------------------------------------------------------------
-    def perceive(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> None:
-        """Update the perceptual map at the probed cells (one per run): recursive Bayes by pi_per."""
+    def perceive(self, cells: np.ndarray, readings: Readings) -> None:
+        """Update the perceptual map at the probed cells (one per run) from their readings:
+        recursive Bayes by pi_per, each run's missing readings summed out."""
         start = time.perf_counter()
         rows = np.arange(self.runs)
         prior = self.posterior[rows, cells]
-        answer = self.perception.ask("P(M | E, C)", {"E": texture, "C": compliance},
-                                     soft={"M": prior})
-        assert isinstance(answer, bayesprog.Posterior)
-        self.posterior[rows, cells] = answer.probabilities
-        self.uncertainty[rows, cells] = uncertainty(answer.probabilities)
-        target = answer.probabilities[:, self.target_material] >= 0.5
-        other = answer.probabilities[:, self.counter_materials].sum(axis=-1) >= 0.5
+        probabilities = self.readings.posterior(readings, prior)
+        self.posterior[rows, cells] = probabilities
+        self.uncertainty[rows, cells] = uncertainty(probabilities)
+        target = probabilities[:, self.target_material] >= 0.5
+        other = probabilities[:, self.counter_materials].sum(axis=-1) >= 0.5
         self._target[rows, cells] = target
         self._perceived[rows, cells] = target | other
         self._changed.append(np.asarray(cells, dtype=np.int64))
@@ -355,19 +359,22 @@ class Explorer:
         self.timings["decision"] += time.perf_counter() - ask_start
         return nxt
 
-    def step(self, cells: np.ndarray, texture: np.ndarray, compliance: np.ndarray) -> np.ndarray:
-        """Perceive then decide, batched: flat cells [runs] -> next flat cells [runs]."""
-        self.perceive(np.asarray(cells), np.asarray(texture, float), np.asarray(compliance, float))
+    def step(self, cells: np.ndarray, readings: Readings) -> np.ndarray:
+        """Perceive then decide, batched: flat cells [runs] and their readings -> next flat
+        cells [runs]."""
+        self.perceive(np.asarray(cells), readings)
         nxt = self.decide()
         self.expected = nxt
         return nxt
 
-    def observe(self, cell: Sequence[int], texture: float, compliance: float
+    def observe(self, cell: Sequence[int], readings: Readings | Mapping[str, object]
                 ) -> tuple[int, ...]:
-        """One run, one probe: the cell (ix, iy(, iz)) just probed and its readings -> next
-        cell."""
+        """One run, one probe: the cell (ix, iy(, iz)) just probed and its readings (by name;
+        one left out, None or NaN is missing) -> next cell."""
         if self.runs != 1:
             raise bayesprog.QuestionError("observe() drives one run; use step() for batches")
+        if not isinstance(readings, Readings):
+            readings = self.readings.readings_of(readings)
         flat = self.flat(np.asarray(cell).reshape(1, -1))
-        nxt = self.step(flat, np.array([texture]), np.array([compliance]))
+        nxt = self.step(flat, readings)
         return tuple(int(i) for i in self.cell(nxt)[0])

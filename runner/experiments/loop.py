@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesprog import Program
 from runner.attention.explorer import Explorer
 from runner.world.physics import PhysicsSensor, ProbeSpec
+from runner.world.readings import Perception, Readings
 from runner.world.scenario import Scenario
-from runner.world.sensor import HapticSensor, ProgramNormals, SimulatedSensor
+from runner.world.sensor import HapticSensor, SimulatedSensor
 
 
 def _replicated(key: list[int], replication: int) -> list[int]:
@@ -60,16 +60,17 @@ def start_cells(shape: tuple[int, ...], runs: int, seed: int, replication: int =
                      for r in range(runs)]).reshape(runs, len(shape))
 
 
-def make_sensor(scenario: Scenario, perception: Program, seeds: list,
-                physics: ProbeSpec | None = None) -> HapticSensor:
+def make_sensor(scenario: Scenario, seeds: list, physics: ProbeSpec | None = None,
+                perception: Perception | None = None) -> HapticSensor:
     """The simulated sensor of a scenario, one seed per run: the physics probes when its
     sensor is ``physics:`` or ``physics`` is given (a probe is seeded by its run's seed and its
-    step), its sensor model when it names one (so perception is misspecified, as on a robot),
-    else the perception program's own Normals."""
+    step), its sensor model or its recordings when it names them (so perception is
+    misspecified, as on a robot), else draws from the perception program (``perception``,
+    by default the scenario's) given each cell's material."""
     if physics is not None or scenario.spec.sensor.physics is not None:
         return PhysicsSensor(scenario.physics_scene(physics), seeds)
     noise = scenario.spec.sensor.extra_noise
-    model = ProgramNormals(perception) if scenario.sensor_model is None else scenario.sensor_model
+    model = scenario.sensor_model or scenario.program_sensor(perception)
     return SimulatedSensor(scenario.material_map, model, seeds, noise)
 
 
@@ -79,8 +80,9 @@ def start_runs(explorer: Explorer, starts: np.ndarray, seed: int,
     ``starts`` [runs, dims]: the explorer reset with their decisions' seeds, and the simulated
     sensor with their readings'."""
     explorer.reset(starts, seed=[decision_seed(seed, int(r), replication) for r in run_ids])
-    return make_sensor(explorer.scenario, explorer.perception,
-                       [reading_seed(seed, int(r), replication) for r in run_ids])
+    return make_sensor(explorer.scenario,
+                       [reading_seed(seed, int(r), replication) for r in run_ids],
+                       perception=explorer.readings)
 
 
 @dataclass
@@ -90,8 +92,7 @@ class Step:
 
     k: int
     cells: np.ndarray
-    texture: np.ndarray
-    compliance: np.ndarray
+    readings: Readings
     next: np.ndarray | None
 
 
@@ -102,12 +103,12 @@ def steps(explorer: Explorer, sensor: HapticSensor, iterations: int,
     held (``explorer.decision``)."""
     cells = explorer.expected
     for k in range(iterations):
-        texture, compliance = sensor.probe(cells)
+        readings = sensor.probe(cells)
         if k + 1 < iterations or decide_last:
-            nxt: np.ndarray | None = explorer.step(cells, texture, compliance)
+            nxt: np.ndarray | None = explorer.step(cells, readings)
         else:
-            explorer.perceive(cells, texture, compliance)
+            explorer.perceive(cells, readings)
             nxt = None
-        yield Step(k, cells, texture, compliance, nxt)
+        yield Step(k, cells, readings, nxt)
         if nxt is not None:
             cells = nxt

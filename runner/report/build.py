@@ -40,8 +40,9 @@ from runner.report.verdicts import (  # noqa: F401  (the report's statistics, re
     pooled,
     statistics_table,
 )
+from runner.world.physics import PhysicsSensor
 from runner.world.scenario import Scenario
-from runner.world.sensor import SensorModel, confusion
+from runner.world.sensor import Pooled, ProgramNormals, SensorModel, confusion
 
 
 def plot_gamma_tasks(results: dict, spec: ExperimentSpec, out: Path, band: float = 1.0,
@@ -366,6 +367,16 @@ HELD_OUT, HELD_OUT_SEED = 2000, 7
 HELD_OUT_PRESSES = 200
 
 
+def held_out_model(scenario: Scenario) -> SensorModel | ProgramNormals | Pooled:
+    """What the report's held-out probes are drawn from when the scenario names no sensor:
+    the perception program's Normals (the paper's, as a sensor model of its two readings, the
+    draws its reports have always shown), else draws of the program given each material."""
+    model = scenario.program_sensor()
+    if isinstance(model, ProgramNormals) and set(model.names) == {"texture", "compliance"}:
+        return SensorModel.from_program(scenario.readings)
+    return model
+
+
 def physics_confusion(scenario: Scenario, per_material: int, seed: int) -> np.ndarray:
     """Single-press confusion of the scenario's perception program on fresh presses of the
     simulated fingertip at random cells of each material of the layout (seeded by ``seed``,
@@ -378,11 +389,10 @@ def physics_confusion(scenario: Scenario, per_material: int, seed: int) -> np.nd
     k = len(scenario.materials)
     out = np.zeros((k, k))
     for m, cells in press_cells(scenario.material_map, per_material, seed):
-        probes = [scene.probe(int(c), np.random.default_rng([seed, m, i]))
-                  for i, c in enumerate(cells)]
-        post = scenario.perception.posterior("P(M | E, C)", {
-            "E": np.array([p.texture for p in probes]),
-            "C": np.array([p.compliance for p in probes])}).probabilities
+        sensor = PhysicsSensor(scene, [])
+        readings = sensor.readings([scene.probe(int(c), np.random.default_rng([seed, m, i]))
+                                    for i, c in enumerate(cells)])
+        post = scenario.readings.posterior(readings)
         np.add.at(out[m], post.argmax(-1), 1.0 / per_material)
     return out
 
@@ -399,10 +409,12 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
                   "materials' properties from models/physics/materials.yaml and the scenario's "
                   "physics:)")
     else:
-        model = scenario.sensor_model or SensorModel.from_program(scenario.perception)
-        matrix = confusion(scenario.perception, model, held_out, HELD_OUT_SEED, noise)
+        model = scenario.sensor_model or held_out_model(scenario)
+        matrix = confusion(scenario.readings, model, held_out, HELD_OUT_SEED, noise)
         source = "Probes are simulated from " + (
-            f"the sensor model `{model.spec.name}`" if scenario.sensor_model is not None
+            f"the sensor model `{model.spec.name}`" if isinstance(scenario.sensor_model,
+                                                                 SensorModel)
+            else f"the {model.source}" if isinstance(model, Pooled)
             else "the perception program's own Normals")
     names = list(scenario.materials)
     learned = scenario.perception.learned

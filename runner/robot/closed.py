@@ -5,7 +5,7 @@ The robot is run R of an experiment of seed S: its start cell, the seeds of its 
 the explorer's decisions are that run's (:mod:`runner.experiments.loop`). The outcome:
 ``gamma_m`` (eq. 16 at the end, metres), ``border_cells``, ``path_m`` (the distance between
 the probed cells' centres), ``steps`` and ``probes``, one per step with its ``cell``, its
-``texture`` and ``compliance`` and the ``material`` truly there.
+``readings`` by name (null where one is missing) and the ``material`` truly there.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed, make_sensor, reading_seed, start_cell, steps
 from runner.experiments.metrics import BorderDistance, moves
 from runner.world.physics import ProbeSpec
+from runner.world.readings import shown
 from runner.world.scenario import Scenario
 
 
@@ -27,7 +28,7 @@ def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: i
     explorer = Explorer(scenario, task, ablate=list(ablate))
     start = start_cell(scenario.shape, seed, run)
     explorer.reset(start[None], seed=[decision_seed(seed, run)])
-    sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)], physics)
+    sensor = make_sensor(scenario, [reading_seed(seed, run)], physics)
     gamma = BorderDistance(scenario.centres, scenario.border(task), 1)
     truth = scenario.material_map.ravel()
     probes, cells = [], []
@@ -36,8 +37,7 @@ def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: i
         gamma.probe(step.cells)
         cells.append(cell)
         probes.append({"cell": [int(i) for i in np.unravel_index(cell, scenario.shape)],
-                       "texture": float(step.texture[0]),
-                       "compliance": float(step.compliance[0]),
+                       "readings": shown(explorer.readings, step.readings),
                        "material": scenario.materials[int(truth[cell])]})
     path = float(moves(np.asarray(cells)[None], scenario.centres).sum()) if cells else 0.0
     return {"gamma_m": float(gamma.gamma()[0]),

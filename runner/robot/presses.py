@@ -1,9 +1,9 @@
 """``bayesprog record SCENARIO --presses N --seed S -o FILE.csv``: labelled presses, as a lab
 records them to learn pi_per: N presses at random cells of each material of the scenario's
-layout, one row each, ``material,texture,compliance`` first (the columns a scenario's
-``programs: perception: {recordings: FILE.csv}`` reads), then the cell and, with physics probes,
-the raw figures (normal force in N, depth in m, friction ratio, the tangential force's
-fluctuation in N). With ``--traces FILE.npz`` the per-step force and height traces too.
+layout, one row each, ``material`` and the readings by name first (the columns a scenario's
+``programs: perception: {recordings: FILE.csv}`` reads: for the paper's program
+``material,texture,compliance``), then the cell and, with physics probes, the raw figures
+(normal force in N, depth in m, friction ratio, the tangential force's fluctuation in N). With ``--traces FILE.npz`` the per-step force and height traces too.
 
 Press i of material m is seeded by (S, m, i): its cell, its positioning error and its noise, so
 a file is the same whatever else is recorded.
@@ -37,19 +37,20 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
     presses done after each material."""
     if not 1 <= presses <= MAX_PRESSES:
         raise BayesprogError(f"--presses: expected 1 to {MAX_PRESSES:,}, found {presses}")
-    table: dict[str, list] = {"material": [], "texture": [], "compliance": [], "ix": [],
-                              "iy": []}
+    names = scenario.readings.names
+    table: dict[str, list] = {"material": [], **{n: [] for n in names}, "ix": [], "iy": []}
     traces: dict[str, list] = {}
     done = 0
     for m, cells in press_cells(scenario.material_map, presses, seed):
         seeds = [(seed, m, i) for i in range(presses)]
-        sensor = make_sensor(scenario, scenario.perception, seeds, physics)
-        texture, compliance = sensor.probe(cells)
+        sensor = make_sensor(scenario, seeds, physics)
+        readings = sensor.probe(cells)
         probes: list[Probe] = getattr(sensor, "last", [])
         index = np.unravel_index(cells, scenario.shape)
         table["material"] += [scenario.materials[m]] * presses
-        table["texture"] += [float(f"{v:.6g}") for v in texture]
-        table["compliance"] += [float(f"{v:.6g}") for v in compliance]
+        for reading in scenario.readings.readings:
+            table[reading.name] += [_written(reading.shown(float(v)))
+                                    for v in readings[reading.name]]
         table["ix"] += [int(i) for i in index[0]]
         table["iy"] += [int(i) for i in index[1]]
         for probe in probes:
@@ -61,6 +62,12 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         if progress is not None:
             progress(done)
     return table, {key: np.stack(rows) for key, rows in traces.items()}
+
+
+def _written(value: float | str | None) -> float | str | None:
+    """A reading as a recordings file holds it: six significant digits, a state by its name,
+    empty where missing."""
+    return float(f"{value:.6g}") if isinstance(value, float) else value
 
 
 def write(table: dict[str, list], out: Path, traces: dict[str, np.ndarray] | None = None,

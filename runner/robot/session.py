@@ -4,12 +4,16 @@ The step interfaces, JSON lines over standard input and output (:mod:`runner.rob
 ROS 2 node (:mod:`runner.robot.ros`), hand each input line to :meth:`Session.answer` and send back
 what it returns, so the same lines get the same replies whichever way they travel.
 
-A probe reports the cell just probed and its readings, ``{"cell": [ix, iy], "texture": e,
-"compliance": c}`` (add ``"maps": true`` for the full maps; in a volume of cells,
-``[ix, iy, iz]``, and the maps nest [ix][iy][iz]); the reply is the cell to probe next, with
-what stood behind the choice::
+A probe reports the cell just probed and its readings by the names the scenario's perception
+program gives them, ``{"cell": [ix, iy], "readings": {"pdc": 17.2, "tdc": -1.3, ...}}`` (the
+paper's ``{"cell": [ix, iy], "texture": e, "compliance": c}``, its readings beside the cell, is
+read the same way; add ``"maps": true`` for the full maps; in a volume of cells,
+``[ix, iy, iz]``, and the maps nest [ix][iy][iz]). A reading given as null, as NaN or left out
+is missing: it is summed out of the question, and the reply names it in ``"missing"`` (a probe
+without any reading is refused: nothing to perceive). A discrete reading is its state's name
+(or index). The reply is the cell to probe next, with what stood behind the choice::
 
-    {"k": k, "next": [ix, iy],
+    {"k": k, "next": [ix, iy], "missing": [names] (only when some are missing),
      "probed": {"cell": [ix, iy], "material": name, "probability": p, "task_material": p},
      "chosen": {"inhibition": i, "saliency": s or null, "uncertainty": u, "probability": p},
      "shape": {"in_force": bool, "posterior": {"rectangle": p, "triangle": p} or null},
@@ -18,9 +22,10 @@ what stood behind the choice::
 
 Beside ``next``, ``"position"`` is the centre of that cell in metres, in the workspace's frame:
 its origin at the grid's corner (the outer corner of cell [0, 0]), x along ix, y along iy (z
-along iz), cells of the scenario's size. A reading far from every material the perception
-program knows (more than :data:`FAR` of its standard deviations from each material's mean, in
-texture or in compliance) is still decided on, and the reply says so in ``"warning"``.
+along iz), cells of the scenario's size. A reading outside the range the perception program
+declares or observed when it was learned, or far from every material it knows (per reading,
+in its own units: :meth:`runner.world.readings.Perception.far_warning`), is still decided on,
+and the reply says so in ``"warning"``.
 
 ``{"maps": true}`` alone answers the maps of the last decision. ``{"reset": {...}}`` starts a
 new exploration, with any of: ``"task"`` (a task of the scenario, by its name), ``"seed"``,
@@ -34,6 +39,8 @@ from __future__ import annotations
 
 import json
 import math
+import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,27 +48,13 @@ import bayesprog
 from bayesprog import BayesprogError, short_repr
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed
+from runner.world.readings import Readings, shown
+
+if TYPE_CHECKING:
+    from runner.robot.log import SessionLog
 
 #: The longest line read (characters); a longer one is answered with an error.
 MAX_LINE = 1 << 20
-#: A reading farther than this many standard deviations from every material's mean, in the
-#: perception program's Normals, gets a warning (a sensor reporting on another scale, a fault)
-FAR = 6.0
-
-
-def _reading(obj: dict, key: str) -> float:
-    value = obj.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"expected a finite number for {key!r}, found {value!r}")
-    try:
-        number = float(value)
-    except OverflowError:
-        number = math.inf
-    if not math.isfinite(number):
-        raise ValueError(f"expected a finite number for {key!r}, found {_short(value)}")
-    return number
-
-
 def _short(value: object) -> str:
     return short_repr(value, 40)
 
@@ -72,8 +65,8 @@ def _natural(value: object, what: str) -> int:
     return value
 
 
-#: the keys a probe line may hold, and a reset's options
-PROBE_KEYS = frozenset({"cell", "texture", "compliance", "maps", "k", "session"})
+#: the keys a probe line may hold beside the readings, and a reset's options
+PROBE_KEYS = frozenset({"cell", "readings", "maps", "k", "session"})
 RESET_KEYS = frozenset({"seed", "run", "task", "start", "session"})
 
 
@@ -107,25 +100,6 @@ def _grid(values: np.ndarray, shape: tuple[int, ...]) -> list:
     return out
 
 
-def declared_range(program: bayesprog.Program, name: str) -> tuple[float, float]:
-    """The range a program declares for a real variable: its support where it is bounded, else
-    the range its description states as ``(LOW ... .. HIGH ...)`` (``"texture (0 smooth .. 1
-    rough)"``), else the whole line."""
-    import re
-
-    variable = program.variables.get(name)
-    if variable is None:
-        return -math.inf, math.inf
-    low, high = float(getattr(variable, "low", -math.inf)), float(getattr(variable, "high", math.inf))
-    if math.isfinite(low) or math.isfinite(high):
-        return low, high
-    found = re.search(r"\(\s*([-+]?\d+(?:\.\d*)?)\b[^()]*?\.\.\s*([-+]?\d+(?:\.\d*)?)\b",
-                      getattr(variable, "description", "") or "")
-    if found:
-        return float(found.group(1)), float(found.group(2))
-    return -math.inf, math.inf
-
-
 class Session:
     """One exploration of ``explorer`` (one run) answered line by line.
 
@@ -134,25 +108,28 @@ class Session:
 
     >>> from runner.world.scenario import load_scenario
     >>> session = Session(Explorer(load_scenario("models/scenarios/paper.yaml"), "T2"))
-    >>> reply = session.answer('{"cell": [5, 7], "texture": 0.52, "compliance": 0.08}')
+    >>> reply = session.answer('{"cell": [5, 7], "readings": {"texture": 0.52, "compliance": 0.08}}')
     >>> reply["k"], reply["probed"]["material"], session.stepped
     (0, 'wood', True)
+    >>> session.answer('{"cell": [5, 8], "texture": 0.5, "compliance": null}')["missing"]
+    ['compliance']
     >>> session.answer("not json")
     {'error': 'line 2: Expecting value: line 1 column 1 (char 0)'}
     >>> session.answer("   ") is None
     True
     """
 
-    def __init__(self, explorer: Explorer, seed: int = 0, frame: str = "workspace"):
+    def __init__(self, explorer: Explorer, seed: int = 0, frame: str = "workspace",
+                 log: SessionLog | None = None):
         self.explorer = explorer
+        #: where every probe is written, when asked (``--log``)
+        self.log = log
         #: the frame the workspace's positions are given in (a reset's reply names it)
         self.frame = frame
         #: the session that holds the explorer (a reset claimed it), or None
         self.holder: str | int | None = None
         #: the cell the last reply asked to probe next (None before any)
         self.expected: list[int] | None = None
-        #: the range pi_per declares for each cue (the scenario's, whatever the task)
-        self.ranges = {v: declared_range(explorer.perception, v) for v in ("E", "C")}
         #: the explorers of the tasks a reset has named (built once each)
         self._by_task = {explorer.task: explorer}
         self.seed = seed
@@ -228,37 +205,18 @@ class Session:
         size = self.explorer.scenario.spec.grid.cell
         return [round((int(i) + 0.5) * size, 12) for i in cell]
 
-    def warning(self, texture: float, compliance: float) -> str | None:
-        """Why a reading is far from anything the perception program knows, or None."""
-        program = self.explorer.perception
-        far = []
-        for variable, value, what in (("E", texture, "texture"), ("C", compliance, "compliance")):
-            try:
-                params = program.term(f"P({variable} | M)").params
-                mean = np.asarray(params["mean"].array, float)  # type: ignore[union-attr]
-                sd = np.asarray(params["sigma"].array, float)  # type: ignore[union-attr]
-            except (BayesprogError, KeyError, AttributeError):
-                continue  # not the Normals of pi_per: nothing to measure against
-            z = np.abs(value - mean) / np.broadcast_to(sd, mean.shape)
-            if float(np.min(z)) > FAR:
-                nearest = self.explorer.scenario.materials[int(np.argmin(z))]
-                far.append(f"{what} {value:g} is {float(np.min(z)):.0f} standard deviations from "
-                           f"the nearest material's mean ({nearest}, {float(mean[np.argmin(z)]):.3g})")
-        if not far:
-            return None
-        return ("; ".join(far) + ": outside what the perception program was built for (a "
-                "sensor on another scale?); the decision is made all the same")
+    def material_at(self, cell: list[int]) -> str:
+        """The material the scenario's layout has at ``cell``."""
+        e = self.explorer
+        return e.scenario.materials[int(e.scenario.material_map.ravel()[
+            int(e.flat(np.asarray(cell).reshape(1, -1))[0])])]
 
-    def support_warnings(self, texture: float, compliance: float) -> list[str]:
-        """A reading outside the range the perception program declares for its cue: its
-        variable's support, or the range its description gives (``(0 smooth .. 1 rough)``)."""
-        out = []
-        for variable, value, what in (("E", texture, "texture"), ("C", compliance, "compliance")):
-            low, high = self.ranges[variable]
-            if not low <= value <= high:
-                out.append(f"{what} {value:g} is outside [{low:g}, {high:g}], the range the "
-                           f"perception program declares for it ({variable})")
-        return out
+    def _describe(self) -> None:
+        """What the session explores, beside its log."""
+        assert self.log is not None
+        e = self.explorer
+        self.log.start(e.readings, e.dims, {"scenario": str(e.scenario.path.resolve()), "task": e.task,
+                                            "seed": self.seed, "ablate": list(e.ablated)})
 
     # one line --------------------------------------------------------------------------------
     def answer(self, line: str) -> dict | None:
@@ -339,6 +297,8 @@ class Session:
         self.holder = claim
         self.k, self._started, self.expected = 0, False, None
         self.explorer.last = None  # the maps of the last session are not this one's
+        if self.log is not None:
+            self._describe()
         if start is not None:
             reply["next"], reply["position"] = start, self.position(start)
             self.expected = start
@@ -365,27 +325,55 @@ class Session:
                              f"{' x '.join(map(str, shape))} grid")
         return list(cell)
 
+    def _readings(self, obj: dict) -> Readings:
+        """The probe's readings: under ``"readings"``, or beside the cell as the paper's lines
+        give them; every other key is refused, a misspelt reading named."""
+        perception = self.explorer.readings
+        names = perception.names
+        beside = {k: v for k, v in obj.items() if k in names}
+        extra = sorted(set(obj) - PROBE_KEYS - set(beside))
+        if extra:  # named first: a misspelt key is why a reading is missing
+            known = frozenset(PROBE_KEYS | set(names))
+            given = beside if "readings" not in obj or not isinstance(obj["readings"], dict) \
+                else obj["readings"]
+            lacking = [n for n in names if n not in given]
+            raise ValueError(f"unknown key(s) {', '.join(map(repr, extra))}"
+                             + _did_you_mean(extra, known)
+                             + (f" (missing {', '.join(lacking)})" if lacking else "")
+                             + f": expected cell, readings ({', '.join(names)}) and maybe k, "
+                             "maps, session")
+        if "readings" in obj:
+            sent = obj["readings"]
+            if beside:
+                raise ValueError(f"readings both under 'readings' and beside the cell "
+                                 f"({', '.join(sorted(beside))}): expected one of the two")
+            if not isinstance(sent, dict):
+                raise ValueError(f"expected 'readings' as an object of name: value, found "
+                                 f"{_short(sent)}")
+        else:
+            sent = beside
+        if "cell" not in obj:
+            raise ValueError(f"missing cell: expected "
+                             f'{{"cell": [{", ".join(self._axes())}], "readings": {{...}}}}')
+        readings = perception.readings_of(sent)
+        if readings.missing.all():
+            raise ValueError(f"nothing to perceive: the probe gives none of the readings "
+                             f"{', '.join(names)} (null, NaN and left out are missing)")
+        return readings
+
+    def _axes(self) -> tuple[str, ...]:
+        return ("ix", "iy", "iz")[:len(self.explorer.scenario.shape)]
+
     def _probe(self, obj: dict) -> dict:
         explorer = self.explorer
-        shape = explorer.scenario.shape
-        axes = ("ix", "iy", "iz")[:len(shape)]
-        extra = sorted(set(obj) - PROBE_KEYS)
-        missing = [key for key in ("cell", "texture", "compliance") if key not in obj]
-        if extra:  # named first: a misspelt key is why a required one is missing
-            raise ValueError(f"unknown key(s) {', '.join(map(repr, extra))}"
-                             + _did_you_mean(extra, PROBE_KEYS)
-                             + (f" (missing {', '.join(missing)})" if missing else "")
-                             + ": expected cell, texture, compliance and maybe k, maps, session")
-        if missing:
-            raise ValueError(f"missing {', '.join(missing)}: expected "
-                             f'{{"cell": [{", ".join(axes)}], "texture": e, "compliance": c}}')
+        started = time.perf_counter()
+        readings = self._readings(obj)
         if "k" in obj:
             k = _natural(obj["k"], "k (the step the probe answers)")
             if k != self.k:
                 raise ValueError(f"stale probe: it answers step {k}, the explorer waits for "
                                  f"step {self.k} (nothing changed)")
         cell = self._cell(obj["cell"], "cell")
-        texture, compliance = _reading(obj, "texture"), _reading(obj, "compliance")
         if "maps" in obj and obj["maps"] is not True and obj["maps"] is not False:
             raise ValueError(f"expected 'maps' true or false, found {_short(obj['maps'])}")
         if not self._started:
@@ -395,13 +383,18 @@ class Session:
         if self.expected is not None and cell != self.expected:
             warnings.append(f"probed {cell}, not the cell asked for, {self.expected} (a missed "
                             "target?): the reading is taken where it was made")
-        nxt = explorer.observe(cell, texture, compliance)
+        before = dict(explorer.timings)
+        nxt = explorer.observe(cell, readings)
+        missing = readings.missing_names()
         reply = {"k": self.k, "next": list(nxt), "position": self.position(nxt),
                  "probed": self.probed(cell), "chosen": self.chosen(), "shape": self.shape()}
+        if missing:  # named only when there are: a full probe's reply is as it always was
+            reply["missing"] = missing
         if self.holder is not None:
             reply["session"] = self.holder
-        warnings += self.support_warnings(texture, compliance)
-        far = self.warning(texture, compliance)
+        perception = explorer.readings
+        warnings += perception.range_warnings(readings)
+        far = perception.far_warning(readings)
         if far:
             warnings.append(far)
         if warnings:
@@ -409,6 +402,25 @@ class Session:
         self.expected = list(nxt)
         if obj.get("maps"):
             reply["maps"] = self.maps()
+        if self.log is not None:
+            if self.log.columns is None:
+                self._describe()
+            self.log.write(self.k, cell, self.position(cell), shown(perception, readings),
+                           missing, warnings, self.material_at(cell),
+                           reply["probed"]["material"], reply["probed"]["probability"],
+                           list(nxt), {key: explorer.timings[key] - before.get(key, 0.0)
+                                       for key in explorer.timings},
+                           time.perf_counter() - started)
         self.k += 1
         self.stepped = True
         return reply
+
+
+def probe_line(cell: list[int], readings: Readings, run: int = 0, k: int | None = None) -> dict:
+    """The probe line a driver sends for one run's readings (missing ones as null)."""
+    values = {n: (None if math.isnan(v) else float(v))
+              for n, v in zip(readings.names, readings.values[run], strict=True)}
+    line: dict = {"cell": cell, "readings": values}
+    if k is not None:
+        line["k"] = k
+    return line

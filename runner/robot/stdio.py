@@ -11,6 +11,7 @@ from collections.abc import Iterable, Iterator
 from typing import IO
 
 from runner.attention.explorer import Explorer
+from runner.robot.log import SessionLog
 from runner.robot.session import MAX_LINE, Session
 
 
@@ -32,9 +33,11 @@ def _lines(stdin: IO[str] | Iterable[str]) -> Iterator[str]:
         yield line
 
 
-def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], seed: int = 0) -> int:
-    """Answer probes until end of input. Returns the number of probes answered."""
-    session = Session(explorer, seed)
+def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], seed: int = 0,
+          log: SessionLog | None = None) -> int:
+    """Answer probes until end of input, each written to ``log`` when given. Returns the
+    number of probes answered."""
+    session = Session(explorer, seed, log=log)
     answered = 0
     for line in _lines(stdin):
         reply = session.answer(line)

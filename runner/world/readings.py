@@ -178,7 +178,7 @@ class Perception:
     def __post_init__(self) -> None:
         problems = perception_problems(self.program, self.material, self.named)
         if problems:
-            raise ReadingError("; ".join(problems))
+            raise ReadingError("; ".join(message for _, message in problems))
         variables = self.program.variables
         pairs = reading_pairs(self.program, self.material, self.named)
         out = []
@@ -195,6 +195,11 @@ class Perception:
         self._normals = {r.name: _normal_of(self.program, r.variable, self.material)
                          for r in self.readings if not r.discrete}
 
+    def with_program(self, program: Program) -> Perception:
+        """The same readings perceived through another program (a learned or ablated
+        pi_per)."""
+        return Perception(program, self.material, self.named)
+
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(r.name for r in self.readings)
@@ -205,6 +210,19 @@ class Perception:
 
     def reading(self, name: str) -> Reading:
         return self._by_name[name]
+
+    def normal(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """Mean and standard deviation per material of the reading ``name`` when its term is a
+        Normal given the material alone, of literal parameters; else None."""
+        return self._normals.get(name)
+
+    @property
+    def naive_normals(self) -> bool:
+        """Whether the program is the paper's kind: every reading a Normal given the material
+        alone, the readings independent given it (what :class:`ProgramNormals` draws from)."""
+        return all(self._normals.get(r.name) is not None
+                   and [p.name for p in self.program.term_of(r.variable).parents]
+                   == [self.material] for r in self.readings)
 
     # the question --------------------------------------------------------------------------
     def question(self, missing: Sequence[bool] | np.ndarray | None = None) -> str:
@@ -340,39 +358,42 @@ def reading_pairs(program: Program, material: str,
 
 
 def perception_problems(program: Program, material: str,
-                        named: Sequence[str] | Mapping[str, str] | None) -> list[str]:
+                        named: Sequence[str] | Mapping[str, str] | None
+                        ) -> list[tuple[str, str]]:
     """What keeps ``program`` from perceiving the readings ``named``: an undeclared material
-    or reading variable, a material that is not discrete, a field, a name given twice."""
+    or reading variable, a material that is not discrete, a field, a name given twice; each
+    as (``"material"`` or ``"readings"``: what it is about, the message)."""
     from bayesprog.errors import did_you_mean
 
     variables = program.variables
-    problems = []
+    problems: list[tuple[str, str]] = []
     if material not in variables:
-        problems.append(f"{program.name} declares no material variable {material!r}"
+        problems.append(("material", f"{program.name} declares no material variable {material!r}"
                         + did_you_mean(material, variables)
-                        + f" (its variables: {', '.join(variables)})")
+                        + f" (its variables: {', '.join(variables)})"))
     elif not variables[material].is_discrete:
-        problems.append(f"the material {material!r} of {program.name} is real: expected a "
-                        "discrete variable, one state per material")
+        problems.append(("material", f"the material {material!r} of {program.name} is real: "
+                         "expected a discrete variable, one state per material"))
     pairs = reading_pairs(program, material, named)
     if not pairs:
-        problems.append(f"{program.name} declares no reading: expected variables beside the "
-                        f"material {material!r}")
+        problems.append(("readings", f"{program.name} declares no reading: expected "
+                         f"variables beside the material {material!r}"))
     seen: set[str] = set()
     for name, variable in pairs:
         if name in seen:
-            problems.append(f"reading {name!r} is named twice")
+            problems.append(("readings", f"reading {name!r} is named twice"))
         seen.add(name)
         if variable == material:
-            problems.append(f"reading {name!r} is the material {material!r} itself")
+            problems.append(("readings", f"reading {name!r} is the material {material!r} "
+                             "itself"))
         elif variable not in variables:
-            problems.append(f"{program.name} declares no variable {variable!r} for the reading "
-                            f"{name!r}" + did_you_mean(variable, [v for v in variables
-                                                                   if v != material])
-                            + f" (its variables: {', '.join(variables)})")
+            problems.append(("readings", f"{program.name} declares no variable {variable!r} "
+                             f"for the reading {name!r}"
+                             + did_you_mean(variable, [v for v in variables if v != material])
+                             + f" (its variables: {', '.join(variables)})"))
         elif getattr(variables[variable], "index", None) is not None:
-            problems.append(f"reading {name!r}: {variable} is a field (indexed by "
-                            f"{variables[variable].index}), not one value per probe")  # type: ignore[union-attr]
+            problems.append(("readings", f"reading {name!r}: {variable} is a field (indexed "
+                             f"by {variables[variable].index}), not one value per probe"))  # type: ignore[union-attr]
     return problems
 
 
@@ -421,3 +442,21 @@ def _normal_of(program: Program, variable: str, material: str
             return None
         values.append(np.broadcast_to(np.asarray(array, float), (card,)).copy())
     return values[0], values[1]
+
+
+def shown(perception: Perception, readings: Readings, run: int = 0
+          ) -> dict[str, float | str | None]:
+    """One run's readings as they are written out (JSON, a log's row): by name, a discrete
+    reading by its state's name, None where missing."""
+    values = perception._ordered(readings)[run]
+    return {r.name: r.shown(float(v)) for r, v in zip(perception.readings, values, strict=True)}
+
+
+def paper_readings(texture: Any, compliance: Any) -> Readings:
+    """The paper's two readings of one probe per run (arrays or numbers).
+
+    >>> paper_readings([0.52], [0.08]).names
+    ('texture', 'compliance')
+    """
+    return Readings.of(("texture", "compliance"), {"texture": np.atleast_1d(texture),
+                                                   "compliance": np.atleast_1d(compliance)})

@@ -6,7 +6,7 @@ A scenario is a YAML file (see ``models/scenarios/paper.yaml``): users describe 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -34,7 +34,14 @@ from runner.world.physics import (
     default_materials,
     merged,
 )
-from runner.world.sensor import SensorModel, load_sensor_model
+from runner.world.readings import Perception, ReadingError, perception_problems, reading_pairs
+from runner.world.sensor import (
+    MODEL_READINGS,
+    Pooled,
+    ProgramNormals,
+    SensorModel,
+    load_sensor_model,
+)
 from runner.world.solids import (
     SOLID_KEYS,
     SolidSpec,
@@ -137,8 +144,15 @@ class ObjectSpec(_Strict):
         return self
 
 
-#: the columns of a lab's recordings, by default: the probed material and the two features
-RECORDING_COLUMNS = {"material": "M", "texture": "E", "compliance": "C"}
+#: the column of a lab's recordings that holds the material pressed, when no column is named as
+#: the material variable itself
+MATERIAL_COLUMN = "material"
+
+#: what a scenario's ``readings:`` may be: the variables read, or reading names and the
+#: variable each observes
+ReadingNames = list[str] | dict[str, str]
+
+
 def perception_template() -> Path:
     """The perception program whose forms a lab's recordings are learned into, by default: the
     bundled ``pi_per``."""
@@ -147,23 +161,50 @@ def perception_template() -> Path:
     return bundled_root() / "pi_per.yaml"
 
 
+class PerceptionSpec(_Strict):
+    """The perception program, the material it perceives and the readings it reads."""
+
+    program: str = Field(description="the perception program (relative to the scenario)")
+    material: str = Field("M", description="its variable of the probed cell's material")
+    readings: ReadingNames | None = Field(
+        None, description="the readings: a list of its variables, or {name: variable} to name "
+        "a reading otherwise on the lines and in the columns; by default every variable but "
+        "the material, named by its variable (the paper's E and C: texture and compliance)")
+
+
 class RecordingsSpec(_Strict):
     """A perception program learned from a lab's recordings, at load."""
 
     recordings: str = Field(description="a CSV or Parquet file of probes (relative to the "
-                            "scenario): one row per probe, its material and its two readings")
+                            "scenario): one row per probe, its material and its readings")
     program: str | None = Field(None, description="the program whose forms are learned (by "
                                 "default the runner's pi_per.yaml: a Normal per material and "
                                 "feature)")
-    columns: dict[str, str] = Field(default_factory=lambda: dict(RECORDING_COLUMNS),
-                                    description="the variable each column holds (columns "
-                                    "named M, E, C need none)")
+    material: str = Field("M", description="the program's variable of the material")
+    readings: ReadingNames | None = Field(None, description="as for a perception program")
+    columns: dict[str, str] = Field(default_factory=dict, description="the variable a column "
+                                    "holds, for a column named neither as its reading nor as "
+                                    "its variable (the material's column may be named "
+                                    "'material')")
 
 
 class ProgramsSpec(_Strict):
-    perception: str | RecordingsSpec
+    perception: str | PerceptionSpec | RecordingsSpec
     shape: str
     target: str
+
+    @property
+    def perceived(self) -> PerceptionSpec | RecordingsSpec | None:
+        """The perception's entry when it is a mapping (None: a program's file alone)."""
+        return None if isinstance(self.perception, str) else self.perception
+
+    @property
+    def material(self) -> str:
+        return self.perceived.material if self.perceived is not None else "M"
+
+    @property
+    def readings(self) -> ReadingNames | None:
+        return self.perceived.readings if self.perceived is not None else None
 
 
 class SensorSpec(_Strict):
@@ -172,7 +213,11 @@ class SensorSpec(_Strict):
                               "perception program's own Normals")
     recordings: str | None = Field(None, description="draw the simulated probes from a sensor "
                                    "model fitted to these recordings (per material, a "
-                                   "skew-normal per feature and their correlation)")
+                                   "skew-normal per feature and their correlation; the paper's "
+                                   "two readings, texture and compliance)")
+    resample: str | None = Field(None, description="draw each simulated probe from these "
+                                 "recordings: a row of the probed cell's material, chosen by "
+                                 "the run's random stream (any readings, missing ones kept)")
     physics: ProbeSpec | None = Field(None, description="every reading from a simulated "
                                       "fingertip pressing and stroking the surface (MuJoCo, "
                                       "the physics extra): how it probes, its noise, how its "
@@ -186,7 +231,7 @@ class SensorSpec(_Strict):
 
     @model_validator(mode="after")
     def _one_source(self) -> SensorSpec:
-        given = [name for name in ("model", "recordings", "physics")
+        given = [name for name in ("model", "recordings", "resample", "physics")
                  if getattr(self, name) is not None]
         if len(given) > 1:
             raise ValueError(f"expected one source of readings, found {' and '.join(given)}")
@@ -236,16 +281,32 @@ class Scenario:
     #: pi_per and pi_tar as used on this workspace (pi_tar's grid O set by the scenario's grid)
     perception: bayesprog.Program
     target: bayesprog.Program
-    #: the model simulated probes are drawn from (None: the perception program's Normals)
-    sensor_model: SensorModel | None = None
+    #: the readings and how they are perceived (pi_per's material and readings)
+    readings: Perception = field(default=None)  # type: ignore[assignment]
+    #: the model simulated probes are drawn from (None: the perception program)
+    sensor_model: SensorModel | Pooled | None = None
     #: what the scenario does that is allowed but may not be meant (an object clipped by the
     #: grid's edge), at its place in the file: the commands print them
     warnings: list = field(default_factory=list)
     _scenes: dict[str, Scene] = field(default_factory=dict, repr=False)
+    _pools: dict[str, Pooled] = field(default_factory=dict, repr=False)
 
     @property
     def name(self) -> str:
         return self.spec.name
+
+    def program_sensor(self, perception: Perception | None = None) -> ProgramNormals | Pooled:
+        """Simulated probes drawn from a perception program (by default the scenario's) given
+        the cell's material: its own Normals when every reading is a Normal given the
+        material alone (the paper's), else draws of the program per material (made once per
+        program, from the physics seed of the scenario)."""
+        perception = perception or self.readings
+        if perception.naive_normals:
+            return ProgramNormals(perception)
+        key = f"pool:{id(perception.program)}"
+        if key not in self._pools:
+            self._pools[key] = Pooled.from_program(perception)
+        return self._pools[key]
 
     @cached_property
     def physics(self) -> dict[str, MaterialPhysics]:
@@ -373,6 +434,8 @@ class Scenario:
         if isinstance(named, RecordingsSpec):  # the program its recordings are learned into
             return ((self.path.parent / named.program).resolve() if named.program
                     else perception_template())
+        if isinstance(named, PerceptionSpec):
+            return (self.path.parent / named.program).resolve()
         return (self.path.parent / named).resolve()
 
     def recordings_paths(self) -> dict[str, Path]:
@@ -381,8 +444,10 @@ class Scenario:
         if isinstance(self.spec.programs.perception, RecordingsSpec):
             out["perception_recordings"] = (self.path.parent
                                             / self.spec.programs.perception.recordings).resolve()
-        if self.spec.sensor.recordings is not None:
-            out["sensor_recordings"] = (self.path.parent / self.spec.sensor.recordings).resolve()
+        for key in ("recordings", "resample"):
+            if getattr(self.spec.sensor, key) is not None:
+                out[f"sensor_{'recordings' if key == 'recordings' else 'resampled'}"] = (
+                    self.path.parent / getattr(self.spec.sensor, key)).resolve()
         return out
 
     def load_target(self, terms: Mapping[str, Mapping[str, Any]] | None = None
@@ -428,20 +493,25 @@ def load_scenario(path: str | Path) -> Scenario:
     files = {"shape": spec.programs.shape, "target": spec.programs.target}
     recordings = spec.programs.perception if isinstance(spec.programs.perception,
                                                         RecordingsSpec) else None
+    perceived = spec.programs.perceived
     if isinstance(spec.programs.perception, str):
         files["perception"] = spec.programs.perception
-    elif recordings is not None and recordings.program is not None:
-        files["perception"] = recordings.program
-    unread = [located.diagnostic(("programs", which), f"{which} program {name!r}: {problem}")
+    elif isinstance(perceived, PerceptionSpec) or (recordings is not None
+                                                   and recordings.program is not None):
+        files["perception"] = perceived.program  # type: ignore[union-attr,assignment]
+    unread = [located.diagnostic(_program_key(spec, which), f"{which} program {name!r}: "
+                                 f"{problem}")
               for which, name in files.items()
               if (problem := reference_problem((path.parent / name).resolve(), "program", name))]
     if unread:
         raise SpecError(unread)
     if recordings is None:
         perception = bayesprog.load((path.parent / files["perception"]).resolve())
+        _check_perception(perception, spec, located)
     else:
         perception = _learned_perception(path, recordings, located)
-    materials = perception.variables["M"].states  # type: ignore[union-attr]
+    readings = Perception(perception, spec.programs.material, spec.programs.readings)
+    materials = readings.materials
     target = _load_target((path.parent / spec.programs.target).resolve(), spec)
     diags = []
     laid = {spec.background, *(o.material for o in spec.objects)}
@@ -484,21 +554,24 @@ def load_scenario(path: str | Path) -> Scenario:
             diags.append(located.diagnostic(("objects", i, "template"), f"unknown template "
                                             f"{obj.template!r}: expected one of "
                                             f"{', '.join(spec.templates)}"))
-    sensor_model = None
-    if spec.sensor.recordings is not None:
+    sensor_model: SensorModel | Pooled | None = None
+    diags += _sensor_problems(spec, located, readings)
+    if spec.sensor.recordings is not None and not diags:
         sensor_model = _fitted_sensor(path, spec, located, materials)
+    if spec.sensor.resample is not None and not diags:
+        sensor_model = _resampled_sensor(path, spec, located, readings)
     if spec.sensor.model is not None:
         model_path = (path.parent / spec.sensor.model).resolve()
         problem = reference_problem(model_path, "sensor model", spec.sensor.model)
         if problem:
             diags.append(located.diagnostic(("sensor", "model"), f"sensor model "
                                             f"{spec.sensor.model!r}: {problem}"))
-        else:
+        elif not diags:
             sensor_model = load_sensor_model(model_path, materials)
-    diags += _physics_problems(spec, located, materials)
+    diags += _physics_problems(spec, located, materials, readings)
     if diags:
         raise SpecError(diags)
-    scenario = Scenario(spec, path, materials, perception, target, sensor_model)
+    scenario = Scenario(spec, path, materials, perception, target, readings, sensor_model)
     try:  # built once, here, where a problem can say where its template is written
         scenario.templates  # noqa: B018
     except _TemplateProblem as problem:
@@ -541,11 +614,40 @@ def _clipped(scenario: Scenario, located: Any) -> list:
     return out
 
 
-def _recordings_frame(path: Path, name: str, columns: Mapping[str, str], located: Any,
-                      where: tuple) -> tuple[Path, Any, dict[str, str]]:
-    """The recordings ``name`` (relative to the scenario at ``path``): the file, a DataFrame of
-    its columns M, E, C, and the columns it reads under another name; a problem at ``where``."""
+def _program_key(spec: ScenarioSpec, which: str) -> tuple:
+    """Where a scenario names its ``which`` program's file."""
+    if which == "perception" and spec.programs.perceived is not None:
+        return ("programs", "perception", "program")
+    return ("programs", which)
+
+
+def _check_perception(program: bayesprog.Program, spec: ScenarioSpec, located: Any,
+                      where: tuple = ("programs", "perception")) -> None:
+    """The perception program declares the material and every reading, each problem at the
+    scenario's key that names it."""
+    perceived = spec.programs.perceived
+    diags = []
+    for key, message in perception_problems(program, spec.programs.material,
+                                            spec.programs.readings):
+        at = where
+        if perceived is not None and key in perceived.model_fields_set:
+            at = ("programs", "perception", key)
+        diags.append(located.diagnostic(at, f"perception program {program.name!r}: {message}"))
+    if diags:
+        raise SpecError(diags)
+
+
+def _recordings_frame(path: Path, name: str, columns: Mapping[str, str],
+                      needed: Sequence[tuple[str, str]], located: Any, where: tuple
+                      ) -> tuple[Path, Any, dict[str, str]]:
+    """The recordings ``name`` (relative to the scenario at ``path``) as a DataFrame whose
+    columns are named as the variables ``needed`` (pairs of a reading or the material's
+    column name and its variable), and the columns it read under another name; a problem at
+    ``where``. A column is found by the name ``columns`` gives it, else by its reading's name
+    (the material's: 'material'), else by its variable's."""
     import pandas as pd
+
+    from bayesprog.errors import did_you_mean
 
     file = (path.parent / name).resolve()
     problem = reference_problem(file, "recordings", name) if not file.is_file() else None
@@ -557,41 +659,86 @@ def _recordings_frame(path: Path, name: str, columns: Mapping[str, str], located
     except (OSError, ValueError, UnicodeDecodeError, ImportError) as exc:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: cannot read it as "
                                             f"CSV or Parquet: {exc}")]) from None
+    frame.columns = [str(c) for c in frame.columns]
     rename = {c: v for c, v in columns.items() if c in frame.columns and c != v}
+    for column, variable in needed:
+        if variable not in frame.columns and variable not in rename.values() \
+                and column in frame.columns and column != variable:
+            rename[column] = variable
     frame = frame.rename(columns=rename)
-    missing = [v for v in ("M", "E", "C") if v not in frame.columns]
+    missing = [(c, v) for c, v in needed if v not in frame.columns]
     if missing:
-        raise SpecError([located.diagnostic(where, f"recordings {name!r}: no column for "
-                                            f"{', '.join(missing)} (columns: "
+        spare = [c for c in frame.columns if c not in {v for _, v in needed}]
+        told = [f"{c!r}" + (f" (for {v})" if v != c else "") + did_you_mean(c, spare).replace(
+            ": did you mean", ", did you mean") for c, v in missing]
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: no column "
+                                            f"{', '.join(told)} (columns: "
                                             f"{', '.join(map(str, frame.columns))}; name the "
                                             "columns with columns: {COLUMN: VARIABLE})")])
     return file, frame, rename
 
 
+def _needed_columns(material: str, pairs: Sequence[tuple[str, str]]) -> list[tuple[str, str]]:
+    """The recordings' columns a perception reads: (column name, variable), the material's
+    first."""
+    return [(MATERIAL_COLUMN, material), *pairs]
+
+
 def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayesprog.Program:
     """The perception program learned from a lab's recordings: the template's forms, the
-    materials of the recordings (as written), a Normal per material and feature fitted by
-    maximum likelihood (as ``bayesprog learn --states-from-data M`` does)."""
+    materials of the recordings (as written), its terms fitted by maximum likelihood (as
+    ``bayesprog learn --states-from-data M`` does)."""
     where = ("programs", "perception", "recordings")
-    file, frame, rename = _recordings_frame(path, spec.recordings, spec.columns, located, where)
-    template = (path.parent / spec.program).resolve() if spec.program else perception_template()
-    # columns beyond the three (a recording's cell, its raw figures) are not the program's
-    data: Any = str(file) if set(frame.columns) <= {"M", "E", "C"} else frame[["M", "E", "C"]]
+    template_path = ((path.parent / spec.program).resolve() if spec.program
+                     else perception_template())
+    template = bayesprog.load(template_path)
+    problems = perception_problems(template, spec.material, spec.readings)
+    if problems:
+        raise SpecError([located.diagnostic(
+            ("programs", "perception", key) if key in spec.model_fields_set else where,
+            f"perception program {template.name!r}: {message}") for key, message in problems])
+    pairs = reading_pairs(template, spec.material, spec.readings)
+    needed = _needed_columns(spec.material, pairs)
+    file, frame, rename = _recordings_frame(path, spec.recordings, spec.columns, needed,
+                                            located, where)
+    variables = [v for _, v in needed]
+    # columns beyond the readings (a recording's cell, its raw figures) are not the program's
+    data: Any = str(file) if set(frame.columns) <= set(variables) else frame[variables]
     try:
-        return bayesprog.load(template).fit(data, columns=(rename or None) if isinstance(
-            data, str) else None, states_from_data=["M"]).program
+        return template.fit(data, columns=(rename or None) if isinstance(data, str) else None,
+                            states_from_data=[spec.material]).program
     except bayesprog.BayesprogError as exc:
         raise SpecError([located.diagnostic(where, f"recordings {spec.recordings!r}: "
                                             f"{exc}")]) from None
+
+
+def _sensor_columns(spec: ScenarioSpec) -> dict[str, str]:
+    perceived = spec.programs.perceived
+    return perceived.columns if isinstance(perceived, RecordingsSpec) else {}
+
+
+def _sensor_problems(spec: ScenarioSpec, located: Any, readings: Perception) -> list:
+    """A sensor that cannot give the readings the perception program reads: a sensor model or
+    recordings fitted as one give the paper's texture and compliance only."""
+    out = []
+    for key, what in (("model", "a sensor model"), ("recordings", "a sensor model fitted to "
+                                                    "recordings")):
+        if getattr(spec.sensor, key) is not None and set(readings.names) != set(MODEL_READINGS):
+            out.append(located.diagnostic(
+                ("sensor", key), f"{what} gives the readings {', '.join(MODEL_READINGS)} (the "
+                f"paper's), but the perception program reads {', '.join(readings.names)}: "
+                "resample the lab's recordings (sensor: {resample: FILE}), or leave sensor: "
+                "out to draw the probes from the perception program"))
+    return out
 
 
 def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
                    materials: tuple[str, ...]) -> SensorModel:
     where = ("sensor", "recordings")
     assert spec.sensor.recordings is not None
-    columns = (spec.programs.perception.columns
-               if isinstance(spec.programs.perception, RecordingsSpec) else RECORDING_COLUMNS)
-    file, frame, _ = _recordings_frame(path, spec.sensor.recordings, columns, located, where)
+    needed = [(MATERIAL_COLUMN, "M"), ("texture", "E"), ("compliance", "C")]
+    file, frame, _ = _recordings_frame(path, spec.sensor.recordings, _sensor_columns(spec),
+                                       needed, located, where)
     found = sorted({str(m) for m in frame["M"]})
     lacking = [m for m in materials if m not in found]
     if lacking:
@@ -606,7 +753,31 @@ def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
                                             f"{exc}")]) from None
 
 
-def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ...]) -> list:
+def _resampled_sensor(path: Path, spec: ScenarioSpec, located: Any, readings: Perception
+                      ) -> Pooled:
+    """Probes resampled per material from the recordings the sensor names."""
+    where = ("sensor", "resample")
+    name = spec.sensor.resample
+    assert name is not None
+    needed = _needed_columns(readings.material, [(r.name, r.variable)
+                                                 for r in readings.readings])
+    file, frame, _ = _recordings_frame(path, name, _sensor_columns(spec), needed, located, where)
+    laid = {spec.background, *(o.material for o in spec.objects)}
+    found = {str(m) for m in frame[readings.material]}
+    lacking = [m for m in readings.materials if m in laid and m not in found]
+    if lacking:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r} hold no probe of "
+                                            f"{', '.join(lacking)}: the simulated sensor "
+                                            "resamples each material the layout lays")])
+    try:
+        return Pooled.from_recordings(frame, readings, readings.material, f"recordings {name}",
+                                      file)
+    except (ValueError, ReadingError) as exc:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}")]) from None
+
+
+def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ...],
+                      readings: Perception) -> list:
     """A physics entry for a material the perception program does not know, one that lacks
     properties, and (with physics probes) a laid material that has none, or a volume."""
     diags = [located.diagnostic(("physics", name), f"unknown material {name!r}: expected one "

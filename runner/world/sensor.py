@@ -1,5 +1,6 @@
-"""Haptic sensors: the interface the explorer reads, and the simulated sensor: one class,
-drawing from a sensor model or from the perception program's own Normals."""
+"""Haptic sensors: the interface the explorer reads, and the simulated sensors: a sensor model of
+the paper's two readings, the perception program's own Normals, draws from any perception
+program given the material, or a lab's recordings resampled per material."""
 
 from __future__ import annotations
 
@@ -11,17 +12,21 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from bayesprog import ParamValue, Program, SpecError, load_document
+from runner.world.readings import Perception, Readings
+
+#: the readings a sensor model of the paper's kind gives (models/sensors/*.yaml)
+MODEL_READINGS = ("texture", "compliance")
 
 
 class HapticSensor(Protocol):
-    """What the explorer needs from a sensor: texture and compliance of probed cells.
+    """What the explorer needs from a sensor: the readings of the probed cells.
 
     A real robot implements ``probe`` by moving the hand to each cell (one per run) and
-    extracting the two haptic features; the simulator draws them from the true material.
+    extracting its features; the simulator draws them from the true material.
     """
 
-    def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``cells`` [runs] flat cell indices -> (texture [runs], compliance [runs])."""
+    def probe(self, cells: np.ndarray) -> Readings:
+        """``cells`` [runs] flat cell indices -> the readings of each run's probe."""
         ...
 
 
@@ -89,12 +94,23 @@ class SensorModel:
     #: standard normals a simulated probe draws: four for the features, two for the noise
     normals_per_probe = 6
 
-    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """``materials`` [n], ``z`` [n, 6] -> (texture [n], compliance [n]), white noise of sd
+    #: the readings it gives
+    names = MODEL_READINGS
+
+    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float) -> Readings:
+        """``materials`` [n], ``z`` [n, 6] -> texture and compliance [n], white noise of sd
         ``extra_noise`` added from ``z[:, 4:]``."""
         texture, compliance = self.draw(materials, z[:, :4])
-        return texture + extra_noise * z[:, 4], compliance + extra_noise * z[:, 5]
+        return Readings(self.names, np.stack([texture + extra_noise * z[:, 4],
+                                              compliance + extra_noise * z[:, 5]], axis=1))
+
+    def held_out(self, per_material: int, seed: int, extra_noise: float = 0.0
+                 ) -> tuple[np.ndarray, Readings]:
+        """``per_material`` probes of each material (see :meth:`record`): the materials'
+        indices [n] and their readings."""
+        data = self.record(per_material, seed, extra_noise)
+        truth = np.repeat(np.arange(len(self.materials)), per_material)
+        return truth, Readings.of(self.names, {"texture": data["E"], "compliance": data["C"]})
 
     def draw(self, materials: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``materials`` [n] indices, ``z`` [n, 4] standard normals -> (texture, compliance)."""
@@ -106,16 +122,20 @@ class SensorModel:
         return x[:, 0], x[:, 1]
 
     @classmethod
-    def from_program(cls, perception: Program) -> SensorModel:
-        """The perception program's own Normals as a sensor model (no skew, no correlation)."""
-        normals = material_normals(perception)
-        materials = perception.variables["M"].states  # type: ignore[union-attr]
-        spec = SensorModelSpec(name=f"{perception.name} Normals", materials={
-            m: MaterialSpec(texture=FeatureSpec(loc=normals["E"][0][i], scale=normals["E"][1][i]),
-                            compliance=FeatureSpec(loc=normals["C"][0][i],
-                                                   scale=normals["C"][1][i]))
-            for i, m in enumerate(materials)})
-        return cls(spec, materials)
+    def from_program(cls, perception: Perception) -> SensorModel:
+        """The perception program's own Normals of the paper's two readings as a sensor model
+        (no skew, no correlation)."""
+        normals = {name: perception.normal(name) for name in MODEL_READINGS}
+        if any(n is None for n in normals.values()):
+            raise ValueError("a sensor model of the perception program needs its texture and "
+                             "compliance each a Normal given the material")
+        texture, compliance = normals["texture"], normals["compliance"]
+        assert texture is not None and compliance is not None
+        spec = SensorModelSpec(name=f"{perception.program.name} Normals", materials={
+            m: MaterialSpec(texture=FeatureSpec(loc=texture[0][i], scale=texture[1][i]),
+                            compliance=FeatureSpec(loc=compliance[0][i], scale=compliance[1][i]))
+            for i, m in enumerate(perception.materials)})
+        return cls(spec, perception.materials)
 
     @classmethod
     def from_recordings(cls, frame: Any, materials: Sequence[str],
@@ -194,33 +214,141 @@ def load_sensor_model(path: str | Path, materials: Sequence[str] | None = None) 
 
 
 class ProgramNormals:
-    """The perception program's own Normals, as a simulated sensor draws from them: per probe
-    four standard normals, ``[z_E, noise_E, z_C, noise_C]`` (the draw order of the paper's
-    experiments, kept so that they repeat)."""
+    """The perception program's own Normals, as a simulated sensor draws from them, for a
+    program whose readings are each a Normal given the material alone: per probe two standard
+    normals per reading, ``[z, noise]`` in the readings' order (for the paper's program
+    ``[z_E, noise_E, z_C, noise_C]``, the draw order of its experiments, kept so that they
+    repeat)."""
 
-    normals_per_probe = 4
+    def __init__(self, perception: Perception):
+        self.names = perception.names
+        self.normals = [perception.normal(name) for name in self.names]
+        if any(n is None for n in self.normals):
+            raise ValueError("ProgramNormals needs every reading a Normal given the material")
+        self.normals_per_probe = 2 * len(self.names)
+        self.materials = perception.materials
 
-    def __init__(self, perception: Program):
-        self.normals = material_normals(perception)
+    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float) -> Readings:
+        """``materials`` [n], ``z`` [n, 2 x readings] -> the readings [n]."""
+        out = np.empty((len(materials), len(self.names)))
+        for i, normal in enumerate(self.normals):
+            assert normal is not None
+            mean, sigma = normal
+            out[:, i] = (mean[materials] + sigma[materials] * z[:, 2 * i]
+                         + z[:, 2 * i + 1] * extra_noise)
+        return Readings(self.names, out)
 
-    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """``materials`` [n], ``z`` [n, 4] -> (texture [n], compliance [n])."""
-        out = []
-        for feature, column in (("E", 0), ("C", 2)):
-            mean, sigma = self.normals[feature]
-            noise = z[:, column + 1] * extra_noise
-            out.append(mean[materials] + sigma[materials] * z[:, column] + noise)
-        return out[0], out[1]
+    def held_out(self, per_material: int, seed: int, extra_noise: float = 0.0
+                 ) -> tuple[np.ndarray, Readings]:
+        """``per_material`` probes of each material, each material from its own seeded
+        stream: the materials' indices [n] and their readings."""
+        return _held_out(self, per_material, seed, extra_noise)
+
+
+#: draws per material a program's pool holds (see :class:`Pooled`)
+POOL = 20_000
+
+
+class Pooled:
+    """Readings resampled per material from a pool of probes: a lab's recordings (its rows of
+    each material, missing readings kept missing), or draws of the perception program given
+    each material (any structure: features that depend on each other, mixtures, discrete
+    readings), :data:`POOL` per material, drawn once from the scenario's seed. A probe of
+    material m takes one row of m's pool, chosen by one standard normal of its run's stream
+    (through the normal CDF), plus white noise on its real readings."""
+
+    def __init__(self, names: Sequence[str], pools: Sequence[np.ndarray],
+                 discrete: Sequence[bool], materials: Sequence[str], source: str):
+        self.names = tuple(names)
+        self.pools = [np.asarray(p, float).reshape(-1, len(self.names)) for p in pools]
+        self.real = ~np.asarray(discrete, bool)
+        self.source = source
+        #: the file the pool was read from, if any (kept with an experiment's files)
+        self.path: Path | None = None
+        self.normals_per_probe = 1 + len(self.names)
+        self.materials = tuple(materials)
+
+    @classmethod
+    def from_program(cls, perception: Perception, seed: int = 0, size: int = POOL) -> Pooled:
+        """Draws of the perception program's readings given each material (forward draws kept
+        where they are of that material: the material's prior only sets how many are drawn)."""
+        program, material = perception.program, perception.material
+        pools = []
+        for i, name in enumerate(perception.materials):
+            draws = program.sample(size, {material: name}, rng=np.random.default_rng(
+                [seed, 0x5A3, i]), method="rejection")
+            columns = []
+            for r in perception.readings:
+                column = draws[r.variable]
+                columns.append(np.array([r.states.index(str(v)) for v in column], float)
+                               if r.states is not None else np.asarray(column, float))
+            pools.append(np.stack(columns, axis=1))
+        return cls(perception.names, pools, [r.discrete for r in perception.readings],
+                   perception.materials, f"draws of {program.name} given each material")
+
+    @classmethod
+    def from_recordings(cls, frame: Any, perception: Perception, material_column: str,
+                        source: str, path: Path | None = None) -> Pooled:
+        """The rows of each material of a recordings frame (its columns named as the
+        readings' variables); a material without rows draws nothing (it must not be laid)."""
+        pools = []
+        for name in perception.materials:
+            rows = frame[frame[material_column].astype(str) == name]
+            columns = [np.array([r.value(_plain(v)) for v in rows[r.variable]], float)
+                       for r in perception.readings]
+            pools.append(np.stack(columns, axis=1) if len(rows)
+                         else np.full((1, len(columns)), np.nan))
+        pooled = cls(perception.names, pools, [r.discrete for r in perception.readings],
+                     perception.materials, source)
+        pooled.path = path
+        return pooled
+
+    def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float) -> Readings:
+        from scipy.special import ndtr
+
+        materials = np.asarray(materials)
+        out = np.empty((len(materials), len(self.names)))
+        u = ndtr(z[:, 0])
+        for m in np.unique(materials):
+            rows = np.flatnonzero(materials == m)
+            pool = self.pools[int(m)]
+            pick = np.minimum((u[rows] * len(pool)).astype(np.int64), len(pool) - 1)
+            out[rows] = pool[pick]
+        out[:, self.real] += extra_noise * z[:, 1:][:, self.real]
+        return Readings(self.names, out)
+
+    def held_out(self, per_material: int, seed: int, extra_noise: float = 0.0
+                 ) -> tuple[np.ndarray, Readings]:
+        return _held_out(self, per_material, seed, extra_noise)
+
+
+def _plain(value: Any) -> Any:
+    """A frame's cell as a reading is sent: NaN and None missing, numpy scalars as Python's."""
+    if value is None or (isinstance(value, float) and np.isnan(value)):
+        return None
+    return value.item() if hasattr(value, "item") else value
+
+
+def _held_out(model: Any, per_material: int, seed: int, extra_noise: float
+              ) -> tuple[np.ndarray, Readings]:
+    """``per_material`` probes of each material of ``model`` (its readings from standard
+    normals), each material from its own seeded stream."""
+    parts, truth = [], []
+    for i in range(len(model.materials)):
+        rng = np.random.default_rng([seed, i])
+        z = rng.standard_normal((per_material, model.normals_per_probe))
+        parts.append(model.readings(np.full(per_material, i), z, extra_noise))
+        truth.append(np.full(per_material, i))
+    return np.concatenate(truth), Readings.stack(parts)
 
 
 class SimulatedSensor:
-    """Simulated probes: (texture, compliance) of the true material of each probed cell, drawn
-    from ``model`` (a :class:`SensorModel`, or the perception program's :class:`ProgramNormals`),
-    plus optional white noise. Each run has its own generator, so a run's readings do not
-    depend on the other runs."""
+    """Simulated probes: the readings of the true material of each probed cell, drawn from
+    ``model`` (a :class:`SensorModel`, the perception program's :class:`ProgramNormals`, or a
+    :class:`Pooled` program or recordings), plus optional white noise. Each run has its own
+    generator, so a run's readings do not depend on the other runs."""
 
-    def __init__(self, material_map: np.ndarray, model: SensorModel | ProgramNormals,
+    def __init__(self, material_map: np.ndarray, model: SensorModel | ProgramNormals | Pooled,
                  seeds: Sequence[int | tuple[int, ...] | np.random.SeedSequence],
                  extra_noise: float = 0.0):
         self.materials = material_map.ravel()
@@ -228,20 +356,21 @@ class SimulatedSensor:
         self.extra_noise = extra_noise
         self.rngs = [np.random.default_rng(s) for s in seeds]
 
-    def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def probe(self, cells: np.ndarray) -> Readings:
         z = np.array([rng.standard_normal(self.model.normals_per_probe) for rng in self.rngs])
         return self.model.readings(self.materials[np.asarray(cells)], z, self.extra_noise)
 
 
-def confusion(perception: Program, model: SensorModel, per_material: int, seed: int,
-              extra_noise: float = 0.0) -> np.ndarray:
-    """Single-probe confusion of ``perception`` on held-out probes of ``model``: row = true
-    material, column = the MAP material, each row sums to one."""
-    data = model.record(per_material, seed, extra_noise)
-    post = perception.posterior("P(M | E, C)", {"E": np.asarray(data["E"]),
-                                                "C": np.asarray(data["C"])}).probabilities
-    truth = np.repeat(np.arange(len(model.materials)), per_material)
-    k = len(model.materials)
+def confusion(perception: Perception | Program, model: SensorModel | ProgramNormals | Pooled,
+              per_material: int, seed: int, extra_noise: float = 0.0) -> np.ndarray:
+    """Single-probe confusion of ``perception`` (a program: through its default readings) on
+    held-out probes of ``model``: row = true material, column = the MAP material, each row
+    sums to one."""
+    if isinstance(perception, Program):
+        perception = Perception(perception)
+    truth, readings = model.held_out(per_material, seed, extra_noise)
+    post = perception.posterior(readings)
+    k = len(perception.materials)
     out = np.zeros((k, k))
     np.add.at(out, (truth, post.argmax(-1)), 1.0)
     return out / per_material

@@ -16,6 +16,7 @@ import bayesprog
 from runner.attention.explorer import Explorer
 from runner.experiments.experiment import simulate
 from runner.experiments.metrics import behaviour
+from runner.world.readings import paper_readings
 from runner.world.scenario import load_scenario
 
 MODELS = (Path(__file__).parents[2] / "models").resolve()
@@ -82,7 +83,7 @@ def test_pi_tar_takes_the_scenarios_tasks_whatever_their_names(tmp_path):
     assert scenario.target.variables["T"].states == ("T2", "T4")
     explorer = Explorer(scenario, "T4")
     explorer.reset(start=[1, 1], seed=0)
-    assert len(explorer.observe([1, 1], 0.5, 0.08)) == 2
+    assert len(explorer.observe([1, 1], {"texture": 0.5, "compliance": 0.08})) == 2
 
 
 def test_the_scenario_templates_are_the_shapes_of_pi_tar_and_pi_obj(tmp_path):
@@ -145,8 +146,8 @@ def test_a_saliency_that_vetoes_every_cell_is_left_out(tmp_path):
         for ix in range(4):
             for iy in range(4):
                 texture, compliance = readings["silicone" if (ix, iy) == odd else "wood"]
-                explorer.perceive(explorer.flat(np.array([[ix, iy]])), np.array([texture]),
-                                  np.array([compliance]))
+                explorer.perceive(explorer.flat(np.array([[ix, iy]])),
+                                  paper_readings(texture, compliance))
         fields.append(explorer.cue_fields()[1][0])
     assert np.isnan(fields[0]).all()
     assert not np.isnan(fields[1]).all() and np.nanmax(fields[1]) > 0.5
@@ -167,15 +168,15 @@ def test_a_misperceived_cell_of_a_material_absent_from_the_workspace_is_no_disco
     wood, copper, plush = (0.52, 0.08), (0.30, 0.04), (0.66, 0.62)
     row = [(2, y) for y in range(2, 9)]
     for (x, y), (e, c) in zip(row, [wood, wood, wood, copper, wood, wood, wood], strict=True):
-        ex.perceive(np.array([x * ny + y]), np.array([e]), np.array([c]))
+        ex.perceive(np.array([x * ny + y]), paper_readings(np.array([e]), np.array([c])))
     target, perceived = ex.percept()
     assert perceived[0, 2, 5] == False  # noqa: E712 - probed, but neither side of the task
     assert target[0, 2, 4] and perceived[0, 2, 4]
     _, saliency, _ = ex.cue_fields()
     around = saliency[0].reshape(scenario.shape)[1:4, 4:7]
     assert not np.any(around > 0.5)  # no edge where the copper reading was
-    ex.perceive(np.array([2 * ny + 5]), np.array([plush[0]]), np.array([plush[1]]))
-    ex.perceive(np.array([2 * ny + 5]), np.array([plush[0]]), np.array([plush[1]]))
+    ex.perceive(np.array([2 * ny + 5]), paper_readings(plush[0], plush[1]))
+    ex.perceive(np.array([2 * ny + 5]), paper_readings(plush[0], plush[1]))
     target, perceived = ex.percept()
     assert perceived[0, 2, 5] and not target[0, 2, 5]
     _, saliency, _ = ex.cue_fields()

@@ -12,6 +12,7 @@ import bayesprog
 from runner.attention.cues import saliency
 from runner.attention.explorer import CONFIGURATIONS, Explorer
 from runner.experiments.experiment import simulate
+from runner.world.readings import paper_readings
 from runner.world.scenario import load_scenario
 from runner.world.sensor import material_normals
 
@@ -39,7 +40,7 @@ def test_runner_choice_is_pi_tar_map_on_the_same_fields(scenario):
         # readings of silicone or wood, so that the runs meet perceived borders
         texture = np.where(rng.random(3) < 0.5, 0.12, 0.52) + 0.01 * rng.standard_normal(3)
         compliance = np.where(texture < 0.3, 0.35, 0.08) + 0.01 * rng.standard_normal(3)
-        cells = explorer.step(cells, texture, compliance)
+        cells = explorer.step(cells, paper_readings(texture, compliance))
         d = explorer.last
         for run in range(3):
             inputs = {"errors": np.full(2, 0.5)}
@@ -139,7 +140,7 @@ def test_perception_is_recursive_bayes(scenario):
     flat = explorer.flat(np.array([[4, 4]]))
     readings = [(0.5, 0.1), (0.55, 0.05)]
     for e, c in readings:
-        explorer.perceive(flat, np.array([e]), np.array([c]))
+        explorer.perceive(flat, paper_readings(np.array([e]), np.array([c])))
     normals = material_normals(explorer.perception)
     like = np.ones(10)
     for e, c in readings:
@@ -152,7 +153,7 @@ def test_explorer_rejects_cells_outside_the_grid(scenario):
     explorer = Explorer(scenario, "T1")
     explorer.reset((0, 0))
     with pytest.raises(bayesprog.QuestionError, match="outside the 30 x 60 grid"):
-        explorer.observe((30, 2), 0.5, 0.5)
+        explorer.observe((30, 2), {"texture": 0.5, "compliance": 0.5})
 
 
 def test_the_perceived_stimulus_kept_per_probe_is_the_one_read_from_the_map():
@@ -173,7 +174,7 @@ def test_the_perceived_stimulus_kept_per_probe_is_the_one_read_from_the_map():
         # a reading of that material, with noise: some probes flip a cell's percept
         texture = normals["E"][0][material] + rng.normal(0, 2, 3) * normals["E"][1][material]
         compliance = normals["C"][0][material] + rng.normal(0, 2, 3) * normals["C"][1][material]
-        explorer.perceive(cells, texture, compliance)
+        explorer.perceive(cells, paper_readings(texture, compliance))
         target, perceived = explorer.percept()
         p = explorer.posterior
         want_target = p[..., explorer.target_material] >= 0.5

@@ -77,14 +77,15 @@ def test_the_simulator_draws_from_the_sensor_model_never_from_pi_per():
     seeds = [(1, r, 1) for r in range(5)]
     cells = np.arange(5) * 300
     hand = bayesprog.load(MODELS / "pi_per.yaml")
-    a = make_sensor(scenario, scenario.perception, seeds)
-    b = make_sensor(scenario, hand, seeds)
+    a = make_sensor(scenario, seeds)
+    b = make_sensor(scenario, seeds, perception=scenario.readings.with_program(hand))
     assert isinstance(a, SimulatedSensor) and isinstance(a.model, SensorModel)
-    np.testing.assert_array_equal(a.probe(cells), b.probe(cells))
+    np.testing.assert_array_equal(a.probe(cells).values, b.probe(cells).values)
     model = load_sensor_model(MODELS / "sensors" / "biotac_proxy.yaml", MATERIALS)
     z = np.array([np.random.default_rng(s).standard_normal(6) for s in seeds])
     expected = model.draw(scenario.material_map.ravel()[cells], z[:, :4])
-    np.testing.assert_allclose(make_sensor(scenario, hand, seeds).probe(cells), expected)
+    drawn = make_sensor(scenario, seeds, perception=scenario.readings.with_program(hand))
+    np.testing.assert_allclose(drawn.probe(cells).values, np.stack(expected, axis=1))
 
 
 def test_wood_is_the_hardest_of_the_scenario_materials_for_the_identified_pi_per():

@@ -54,7 +54,7 @@ def test_a_scenario_names_its_tasks_and_as_many_as_it_needs(tmp_path):
     assert scenario.target.variables["T"].states == tuple(names)
     explorer = Explorer(scenario, "follow_silicone")
     explorer.reset(start=[2, 2], seed=0)
-    nxt = explorer.observe([2, 2], 0.13, 0.35)  # a silicone-like reading
+    nxt = explorer.observe([2, 2], {"texture": 0.13, "compliance": 0.35})  # a silicone-like reading
     assert len(nxt) == 2 and explorer.task == "follow_silicone"
 
 
@@ -245,8 +245,8 @@ def test_a_sensor_model_is_recovered_from_its_own_recordings():
     (("perception: {recordings: recordings.csv}", "perception: {recordings: none.csv}"),
      "recorded.yaml:4:28: recordings 'none.csv': no such file"),
     (("perception: {recordings: recordings.csv}",
-      "perception: {recordings: recordings.csv, columns: {mat: M}}"),
-     "recorded.yaml:4:28: recordings 'recordings.csv': no column for M"),
+      "perception: {recordings: recordings.csv, readings: {texture: E, roughness: C}}"),
+     "recorded.yaml:4:28: recordings 'recordings.csv': no column 'roughness' (for C)"),
     (("background: cork", "background: oak"), "unknown material 'oak': expected one of cork, "
                                               "felt, steel"),
 ])

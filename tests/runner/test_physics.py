@@ -199,9 +199,9 @@ def test_the_closed_loop_with_a_simulated_fingertip(capsys, paper_physics):
     nearest = np.linalg.norm(border[:, None] - paper_physics.centres[probed][None], axis=-1)
     assert outcome["gamma_m"] == pytest.approx(nearest.min(axis=1).sum())
     # the first reading is the physics sensor's for that run's first probe
-    sensor = make_sensor(paper_physics, paper_physics.perception, [reading_seed(0, 0)])
+    sensor = make_sensor(paper_physics, [reading_seed(0, 0)])
     first = sensor.probe(probed[:1])
-    assert outcome["probes"][0]["texture"] == first[0][0]
+    assert outcome["probes"][0]["readings"]["texture"] == first["texture"][0]
 
 
 @pytest.mark.parametrize("command", [

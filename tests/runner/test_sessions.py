@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from runner.attention.explorer import Explorer
-from runner.robot.session import Session, declared_range
+from runner.robot.session import Session
 from runner.world.scenario import load_scenario
 
 ROOT = Path(__file__).parents[2]
@@ -124,24 +124,28 @@ def test_a_probe_away_from_the_target_is_answered_and_flagged():
     assert "warning" not in on_target[1]
 
 
-def test_a_reading_outside_the_declared_range_is_warned(paper):
-    assert declared_range(paper.perception, "E") == (0.0, 1.0)  # "texture (0 smooth .. 1 rough)"
-    replies = stdio([probe([5, 7], texture=1.3, compliance=0.1), probe([6, 7], 0.5, -0.2)])
-    assert "texture 1.3 is outside [0, 1]" in replies[0]["warning"]
-    assert "compliance -0.2 is outside [0, 1]" in replies[1]["warning"]
-    assert "k" in replies[0] and "k" in replies[1]  # decided on all the same
+def test_a_description_is_not_a_range_but_a_reading_far_from_every_material_is_warned(paper):
+    # pi_per describes texture as "(0 smooth .. 1 rough)": a text, not a range
+    replies = stdio([probe([5, 7], texture=1.05, compliance=0.1), probe([6, 7], 0.5, -0.05)])
+    assert "warning" not in replies[0] and "warning" not in replies[1]
     far = stdio([probe([5, 7], texture=9.0)])[0]["warning"]
-    assert "outside [0, 1]" in far and "standard deviations" in far  # both, joined
+    assert "texture 9 is 101 standard deviations" in far and "outside [" not in far
+    assert "k" in stdio([probe([5, 7], texture=9.0)])[0]  # decided on all the same
 
 
-def test_a_bounded_support_is_the_declared_range(paper):
-    import bayesprog
-
+def test_a_reading_outside_a_bounded_support_is_refused_and_one_inside_is_not_warned(tmp_path):
     text = (ROOT / "models" / "pi_per.yaml").read_text().replace(
         'E: {continuous: [-.inf, .inf]', 'E: {continuous: [-1, 2]')
-    program = bayesprog.loads(text)
-    assert declared_range(program, "E") == (-1.0, 2.0)
-    assert declared_range(program, "nothing") == (float("-inf"), float("inf"))
+    (tmp_path / "pi_per.yaml").write_text(text)
+    scenario = (ROOT / "models" / "scenarios" / "paper.yaml").read_text()
+    for name in ("pi_per", "pi_obj", "pi_tar"):
+        scenario = scenario.replace(f"../{name}.yaml", str(tmp_path / f"{name}.yaml")
+                                    if name == "pi_per" else str(ROOT / "models" / f"{name}.yaml"))
+    (tmp_path / "paper.yaml").write_text(scenario)
+    session = Session(Explorer(load_scenario(tmp_path / "paper.yaml"), "T2"))
+    reply = session.answer(json.dumps(probe([5, 7], texture=2.5)))
+    assert reply == {"error": "line 1: evidence E=2.5 is outside its support [-1, 2]"}
+    assert "warning" not in session.answer(json.dumps(probe([5, 8], texture=1.0)))
 
 
 @pytest.mark.parametrize("line, expected", [

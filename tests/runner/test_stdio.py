@@ -98,11 +98,13 @@ def test_following_the_suggestions_like_a_robot():
 
 BAD_LINES = {
     "not json": "this is not JSON",
-    "missing texture": json.dumps({"cell": [3, 4], "compliance": 0.1}),
+    "no reading": json.dumps({"cell": [3, 4]}),
+    "every reading null": json.dumps({"cell": [3, 4], "texture": None, "compliance": None}),
+    "a reading misspelt": json.dumps({"cell": [3, 4], "readings": {"textur": 0.5}}),
     "outside the grid": json.dumps({"cell": [30, 4], "texture": 0.5, "compliance": 0.1}),
     "negative cell": json.dumps({"cell": [-1, 4], "texture": 0.5, "compliance": 0.1}),
     "texture not a number": json.dumps({"cell": [3, 4], "texture": "rough", "compliance": 0.1}),
-    "texture NaN": '{"cell": [3, 4], "texture": NaN, "compliance": 0.1}',
+    "texture infinite": '{"cell": [3, 4], "texture": Infinity, "compliance": 0.1}',
     "cell not integers": json.dumps({"cell": [3.0, 4], "texture": 0.5, "compliance": 0.1}),
     "not an object": "[1, 2, 3]",
 }
@@ -229,7 +231,9 @@ def test_reset_sets_the_task_the_seed_and_the_start_cell():
     # decided for T1 (plush), as an explorer of T1 with that seed decides
     alone = Explorer(scenario(), "T1")
     alone.reset(start=[3, 40], seed=4)
-    assert replies[1]["next"] == list(alone.observe([3, 40], *READINGS["wood"]))
+    texture, compliance = READINGS["wood"]
+    wood = {"texture": texture, "compliance": compliance}
+    assert replies[1]["next"] == list(alone.observe([3, 40], wood))
     assert "unknown task 'T9': expected one of T1, T2, T3" in replies[2]["error"]
     assert "outside the 30 x 60 grid" in replies[3]["error"]
 
@@ -301,3 +305,22 @@ def test_maps_after_a_reset_and_malformed_maps_requests_get_errors():
     assert "'maps' true or false" in replies[3]["error"]
     assert "alone" in replies[4]["error"]
     assert replies[5]["k"] == 0
+
+
+@pytest.mark.parametrize("line", [
+    '{"cell": [3, 4], "compliance": 0.1}',
+    '{"cell": [3, 4], "texture": NaN, "compliance": 0.1}',
+    '{"cell": [3, 4], "texture": null, "compliance": 0.1}',
+    '{"cell": [3, 4], "readings": {"compliance": 0.1}}',
+])
+def test_a_missing_reading_is_summed_out_and_named(line):
+    import bayesprog
+
+    out = io.StringIO()
+    serve(explorer(), io.StringIO(line + "\n"), out)
+    reply = json.loads(out.getvalue())
+    assert reply["missing"] == ["texture"] and reply["k"] == 0
+    # the cell's material is then P(M | C) alone, the texture summed out (pi_per's Normals)
+    program = bayesprog.load(ROOT / "models" / "pi_per.yaml")
+    alone = program.ask("P(M | C)", {"C": 0.1}).probabilities
+    assert reply["probed"]["probability"] == pytest.approx(alone.max(), rel=1e-12)

@@ -19,6 +19,7 @@ from runner.attention.explorer import Explorer
 from runner.attention.shape import _kabsch, match3d
 from runner.experiments.experiment import load_experiment, run_experiment, simulate, start_cells
 from runner.report.build import build_report
+from runner.world.readings import paper_readings
 from runner.world.scenario import load_scenario
 from runner.world.sensor import material_normals
 from runner.world.solids import SolidSpec, farthest_points
@@ -234,7 +235,7 @@ def test_explorer_cues_in_a_volume(volume):
     for step in range(8):  # plush then wood: a perceived change of material
         m = plush if step < 4 else wood
         reading = [np.full(2, means[f][0][m]) for f in ("E", "C")]
-        cells = explorer.step(cells, *reading)
+        cells = explorer.step(cells, paper_readings(*reading))
     d = explorer.last
     last = explorer.centres[explorer.path[-1]]
     np.testing.assert_allclose(d.inhibition, inhibition(explorer.centres, last,

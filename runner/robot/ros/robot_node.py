@@ -24,6 +24,7 @@ from std_msgs.msg import String
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
 from runner.robot.ros.explorer_node import LATCHED, PROBES, STREAM
+from runner.robot.session import probe_line
 from runner.world.physics import ProbeSpec
 from runner.world.scenario import Scenario
 
@@ -66,8 +67,7 @@ class RobotNode(Node):
         super().__init__("bayesprog_robot", namespace=namespace)
         self.scenario, self.options = scenario, options
         seed, run = options.seed, options.run
-        self.sensor = make_sensor(scenario, scenario.perception, [reading_seed(seed, run)],
-                                  options.physics)
+        self.sensor = make_sensor(scenario, [reading_seed(seed, run)], options.physics)
         # the fingertip's pose, where a TF broadcaster would put it: frame ``fingertip`` in
         # the workspace frame (tf2's messages are not among the extra's wheels)
         # transient-local, as the explorer's path: a late viewer gets the last ten poses
@@ -177,15 +177,14 @@ class RobotNode(Node):
 
     def probe_cell(self, cell: np.ndarray) -> None:
         flat = int(np.ravel_multi_index(tuple(int(i) for i in cell), self.scenario.shape))
-        texture, compliance = self.sensor.probe(np.array([flat]))
+        readings = self.sensor.probe(np.array([flat]))
         self.publish_fingertip()
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
         self._answered = False
         # the step it answers: a late or repeated message is refused, never taken as another
-        self.send(json.dumps({"cell": [int(i) for i in cell], "texture": float(texture[0]),
-                              "compliance": float(compliance[0]),
-                              "k": len(self.outcome.cells) - 1}))
+        self.send(json.dumps(probe_line([int(i) for i in cell], readings,
+                                        k=len(self.outcome.cells) - 1)))
         self._waiting_since = time.monotonic()
 
     def publish_fingertip(self) -> None:
