@@ -90,6 +90,10 @@ class FitRecord:
                                                    "statistics", default_factory=dict)
     structure: StructureRecord | None = _field("when the decomposition itself was discovered "
                                                "from the data: how", None)
+    ranges: dict[str, dict[str, list[float]]] = _field(
+        "per real variable of a learned term, the least and greatest value its rows held: over "
+        "every row ('*') and per state of each discrete parent ('M=steel'); what a value far "
+        "outside is measured against", default_factory=dict)
 
     def __post_init__(self) -> None:
         # a statistic the loader read as an array (as it reads tables) is kept as lists, as
@@ -104,6 +108,8 @@ class FitRecord:
         structure's fields that say something); its statistics as they are, not copied (read
         them, do not change them)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if not self.ranges:  # a record of before ranges were kept reads as it was written
+            del out["ranges"]
         if self.structure is not None:
             out["structure"] = self.structure.as_data()
         return out

@@ -78,6 +78,8 @@ class RobotCommand:
     #: readings from the simulated fingertip (MuJoCo); without ``ros``, the loop in one process
     physics: bool = False
     ros: bool = True
+    #: every probe written to this CSV or Parquet file
+    log: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,10 @@ class RecordOptions:
     #: where the per-step traces of physics probes go (a compressed .npz)
     traces: Path | None = None
     quiet: bool = False
+    #: record a lab's own sensor: presses sent as JSON lines on standard input, or over ROS 2
+    stdio: bool = False
+    ros: bool = False
+    namespace: str = "/bayesprog"
 
 
 def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
@@ -312,13 +318,21 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
     task = _task(scenario, options.task)
+    from runner.robot.log import SessionLog
     from runner.robot.ros.robot_node import RobotOptions
     from runner.robot.ros.run import robot as run_robot
 
+    log = SessionLog(options.log) if options.log is not None else None
     robot_options = RobotOptions(task=task, steps=options.steps, seed=options.seed,
                                  run=options.run, timeout=options.timeout,
-                                 physics=_probe_spec(scenario) if options.physics else None)
-    return run_robot(scenario, robot_options, namespace=options.namespace, as_json=options.json)
+                                 physics=_probe_spec(scenario) if options.physics else None,
+                                 log=log)
+    try:
+        return run_robot(scenario, robot_options, namespace=options.namespace,
+                         as_json=options.json)
+    finally:
+        if log is not None:
+            log.close()
 
 
 def _probe_spec(scenario: Scenario) -> ProbeSpec:
@@ -344,8 +358,15 @@ def _closed_loop(target: Path, options: RobotCommand) -> int:
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
     task = _task(scenario, options.task)
-    outcome = closed_loop(scenario, task, options.steps, seed=options.seed, run=options.run,
-                          physics=_probe_spec(scenario))
+    from runner.robot.log import SessionLog
+
+    log = SessionLog(options.log) if options.log is not None else None
+    try:
+        outcome = closed_loop(scenario, task, options.steps, seed=options.seed,
+                              run=options.run, physics=_probe_spec(scenario), log=log)
+    finally:
+        if log is not None:
+            log.close()
     if options.json:
         print(json.dumps(outcome))
     else:
@@ -368,6 +389,8 @@ def record(target: Path, out: Path, options: RecordOptions = RecordOptions()) ->
 
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
+    if options.stdio or options.ros:
+        return _record_driven(scenario, out, options)
     physics = _probe_spec(scenario) if options.physics else None
     kinds = len({int(m) for m in scenario.material_map.ravel()})
     bar = progress_bar(kinds * options.presses, "record", unit="press",
@@ -382,6 +405,23 @@ def record(target: Path, out: Path, options: RecordOptions = RecordOptions()) ->
     source = "physics probes" if physics or scenario.spec.sensor.physics else "the sensor"
     print(f"{out}: {options.presses} presses of each of {kinds} materials ({source}, seed "
           f"{options.seed})" + (f"; traces in {options.traces}" if options.traces else ""))
+    return 0
+
+
+def _record_driven(scenario: Scenario, out: Path, options: RecordOptions) -> int:
+    """``record --stdio`` or ``--ros``: the presses a lab's driver sends, as recordings."""
+    from runner.robot.recording import Recorder, serve
+
+    recorder = Recorder(scenario, out)
+    try:
+        if options.ros:
+            from runner.robot.ros.run import record as record_ros
+
+            return record_ros(recorder, options.namespace)
+        serve(recorder, sys.stdin, sys.stdout)
+    finally:
+        recorder.close()
+    print(recorder.summary(), file=sys.stderr)
     return 0
 
 
@@ -457,16 +497,30 @@ def _cmd_robot(args: argparse.Namespace) -> int:
     return robot(Path(args.target), RobotCommand(
         task=args.task, steps=args.steps, seed=args.seed, run=args.run,
         namespace=args.namespace, timeout=args.timeout, json=args.json, physics=args.physics,
-        ros=args.ros))
+        ros=args.ros, log=Path(args.log) if args.log else None))
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
     presses = _whole_number("--presses", args.presses, 1)
     seed = _whole_number("--seed", args.seed, 0)
+    if args.stdio and args.ros:
+        raise BayesprogError("record takes one of --stdio and --ros, not both")
+    driven = args.stdio or args.ros
+    simulated = [flag for flag, given in (("--physics", args.physics), ("--traces", args.traces),
+                                          ("--presses", presses is not None),
+                                          ("--seed", seed is not None)) if given]
+    if driven and simulated:
+        raise BayesprogError(f"{', '.join(simulated)}: a simulated sensor's options; with "
+                             f"{'--stdio' if args.stdio else '--ros'} the lab's driver sends "
+                             "the presses")
+    if args.ros:
+        from runner.robot.ros import require
+
+        require()  # before the scenario is loaded: a missing extra is said at once
     return record(Path(args.target), Path(args.output), RecordOptions(
         presses=50 if presses is None else presses, seed=1 if seed is None else seed,
         physics=args.physics, traces=Path(args.traces) if args.traces else None,
-        quiet=args.quiet))
+        quiet=args.quiet, stdio=args.stdio, ros=args.ros, namespace=args.namespace))
 
 
 def validate(path: str, kind: str) -> list | None:
@@ -606,10 +660,14 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--physics", action="store_true",
                    help="probe with a simulated fingertip (MuJoCo; install bayesprog[physics]): "
                    "without --ros, the closed loop in one process")
+    p.add_argument("--log", metavar="FILE.csv|.parquet", default=None,
+                   help="write every probe (as explore --log does) to this file")
     p.set_defaults(func=_cmd_robot)
 
     p = commands.add_parser("record", help="record labelled presses of every material of a "
-                            "scenario (CSV: material,texture,compliance, the cell, raw figures)")
+                            "scenario (CSV: material, the readings by name, the cell, raw "
+                            "figures), or a lab's own sensor's presses sent by its driver "
+                            "(--stdio, --ros)")
     p.add_argument("target", metavar="SCENARIO_OR_MODELS",
                    help="a scenario file, or a models folder (its scenarios/paper.yaml)")
     p.add_argument("--physics", action="store_true",
@@ -624,6 +682,15 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--traces", metavar="FILE.npz", default=None,
                    help="also write each physics press's force and height traces")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--stdio", action="store_true",
+                   help='record the presses a driver sends as JSON lines on standard input, '
+                   '{"material": NAME or "cell": [ix, iy], "readings": {...}}, one reply line '
+                   "each")
+    p.add_argument("--ros", action="store_true",
+                   help="the same over ROS 2: the node bayesprog_recorder reads the lines on "
+                   "NS/probe and replies on NS/reply (install bayesprog[ros])")
+    p.add_argument("--namespace", default="/bayesprog", metavar="NS",
+                   help="with --ros: the node's namespace (default: %(default)s)")
     p.set_defaults(func=_cmd_record)
 
 

@@ -173,10 +173,41 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         rows_supporting=supporting,
         columns=dict(columns or {}), terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
-                    for i in todo})
+                    for i in todo},
+        ranges=_ranges(variables, [i.term for i in todo], data, used))
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()
                           if k in i.estimator.learned} for i in todo}
     return Estimate(out, record, float(ll), iterations, converged)
+
+
+def _ranges(variables: Mapping[str, Variable], terms: Sequence[Term], data: Any,
+            used: np.ndarray) -> dict[str, dict[str, list[float]]]:
+    """The least and greatest value of each real child of ``terms`` in the rows ``used``:
+    over every row (``"*"``) and per state of each of its discrete parents observed in the
+    data (``"M=steel"``), skipping missing values."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for term in terms:
+        name = term.child.name
+        if name not in data.continuous or name in out:
+            continue
+        values = np.asarray(data.continuous[name], float)[used]
+        seen = ~np.isnan(values)
+        if not seen.any():
+            continue
+        spans = {"*": [float(values[seen].min()), float(values[seen].max())]}
+        for parent in term.parents:
+            codes = data.discrete.get(parent.name)
+            states = getattr(variables[parent.name], "states", None)
+            if codes is None or states is None:
+                continue
+            codes = np.asarray(codes)[used]
+            for code, state in enumerate(states):
+                rows = seen & (codes == code)
+                if rows.any():
+                    spans[f"{parent.name}={state}"] = [float(values[rows].min()),
+                                                       float(values[rows].max())]
+        out[name] = spans
+    return out
 
 
 def _previous(label: str, learned: Sequence[FitRecord]) -> Stats | None:

@@ -411,11 +411,13 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
     else:
         model = scenario.sensor_model or held_out_model(scenario)
         matrix = confusion(scenario.readings, model, held_out, HELD_OUT_SEED, noise)
-        source = "Probes are simulated from " + (
-            f"the sensor model `{model.spec.name}`" if isinstance(scenario.sensor_model,
-                                                                 SensorModel)
-            else f"the {model.source}" if isinstance(model, Pooled)
-            else "the perception program's own Normals")
+        if isinstance(scenario.sensor_model, SensorModel):
+            origin = f"the sensor model `{scenario.sensor_model.spec.name}`"
+        elif isinstance(model, Pooled):
+            origin = f"the {model.source}"
+        else:
+            origin = "the perception program's own Normals"
+        source = "Probes are simulated from " + origin
     names = list(scenario.materials)
     learned = scenario.perception.learned
     origin = ("written by hand" if not learned else

@@ -10,6 +10,7 @@ the probed cells' centres), ``steps`` and ``probes``, one per step with its ``ce
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -17,14 +18,17 @@ import numpy as np
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed, make_sensor, reading_seed, start_cell, steps
 from runner.experiments.metrics import BorderDistance, moves
+from runner.robot.log import SessionLog
 from runner.world.physics import ProbeSpec
 from runner.world.readings import shown
 from runner.world.scenario import Scenario
 
 
 def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: int = 0,
-                physics: ProbeSpec | None = None, ablate: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Run the loop for ``count`` probes; returns the outcome (see the module)."""
+                physics: ProbeSpec | None = None, ablate: tuple[str, ...] = (),
+                log: SessionLog | None = None) -> dict[str, Any]:
+    """Run the loop for ``count`` probes, each written to ``log`` when given; returns the
+    outcome (see the module)."""
     explorer = Explorer(scenario, task, ablate=list(ablate))
     start = start_cell(scenario.shape, seed, run)
     explorer.reset(start[None], seed=[decision_seed(seed, run)])
@@ -32,6 +36,12 @@ def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: i
     gamma = BorderDistance(scenario.centres, scenario.border(task), 1)
     truth = scenario.material_map.ravel()
     probes, cells = [], []
+    perception = explorer.readings
+    if log is not None:
+        log.start(perception, scenario.dims, {"scenario": str(scenario.path.resolve()),
+                                              "task": task, "seed": seed, "run": run,
+                                              "ablate": list(ablate)})
+    clock, before = time.perf_counter(), dict(explorer.timings)
     for step in steps(explorer, sensor, count):
         cell = int(step.cells[0])
         gamma.probe(step.cells)
@@ -39,6 +49,21 @@ def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: i
         probes.append({"cell": [int(i) for i in np.unravel_index(cell, scenario.shape)],
                        "readings": shown(explorer.readings, step.readings),
                        "material": scenario.materials[int(truth[cell])]})
+        if log is not None:
+            at = [int(i) for i in np.unravel_index(cell, scenario.shape)]
+            belief = explorer.posterior[0, cell]
+            warnings = perception.range_warnings(step.readings)
+            far = perception.far_warning(step.readings)
+            now = time.perf_counter()
+            log.write(step.k, at, [(i + 0.5) * scenario.cell for i in at],
+                      shown(perception, step.readings), step.readings.missing_names(),
+                      warnings + ([far] if far else []), scenario.materials[int(truth[cell])],
+                      scenario.materials[int(np.argmax(belief))], float(np.max(belief)),
+                      None if step.next is None else
+                      [int(i) for i in np.unravel_index(int(step.next[0]), scenario.shape)],
+                      {k: explorer.timings[k] - before.get(k, 0.0) for k in explorer.timings},
+                      now - clock)
+            clock, before = now, dict(explorer.timings)
     path = float(moves(np.asarray(cells)[None], scenario.centres).sum()) if cells else 0.0
     return {"gamma_m": float(gamma.gamma()[0]),
             "border_cells": int(scenario.border(task).sum()), "path_m": path,

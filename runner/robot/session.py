@@ -386,8 +386,9 @@ class Session:
         before = dict(explorer.timings)
         nxt = explorer.observe(cell, readings)
         missing = readings.missing_names()
-        reply = {"k": self.k, "next": list(nxt), "position": self.position(nxt),
-                 "probed": self.probed(cell), "chosen": self.chosen(), "shape": self.shape()}
+        probed = self.probed(cell)
+        reply: dict = {"k": self.k, "next": list(nxt), "position": self.position(nxt),
+                       "probed": probed, "chosen": self.chosen(), "shape": self.shape()}
         if missing:  # named only when there are: a full probe's reply is as it always was
             reply["missing"] = missing
         if self.holder is not None:
@@ -407,7 +408,7 @@ class Session:
                 self._describe()
             self.log.write(self.k, cell, self.position(cell), shown(perception, readings),
                            missing, warnings, self.material_at(cell),
-                           reply["probed"]["material"], reply["probed"]["probability"],
+                           probed["material"], probed["probability"],
                            list(nxt), {key: explorer.timings[key] - before.get(key, 0.0)
                                        for key in explorer.timings},
                            time.perf_counter() - started)

@@ -333,10 +333,10 @@ class Perception:
                 continue
             beyond = [(max(lo - value, value - hi, 0.0) / max(hi - lo, 1e-300), m, lo, hi)
                       for m, (lo, hi) in spans]
-            ratio, m, lo, hi = min(beyond)
+            ratio, nearest, lo, hi = min(beyond)
             if ratio > FAR:
                 far.append(f"{r.name} {value:g} is {ratio:.0f} spreads beyond the nearest "
-                           f"material's observed range ({m}, [{lo:g}, {hi:g}])")
+                           f"material's observed range ({nearest}, [{lo:g}, {hi:g}])")
         if not far:
             return None
         return ("; ".join(far) + ": outside what the perception program was built for (a "

@@ -23,9 +23,11 @@ from std_msgs.msg import String
 
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
+from runner.robot.log import SessionLog
 from runner.robot.ros.explorer_node import LATCHED, PROBES, STREAM
 from runner.robot.session import probe_line
 from runner.world.physics import ProbeSpec
+from runner.world.readings import Readings, shown
 from runner.world.scenario import Scenario
 
 
@@ -42,6 +44,8 @@ class RobotOptions:
     physics: ProbeSpec | None = None
     #: the frame the fingertip's pose is given in
     frame: str = "workspace"
+    #: where every probe and its answer are written, when asked (``--log``)
+    log: SessionLog | None = None
 
 
 @dataclass
@@ -80,6 +84,7 @@ class RobotNode(Node):
         self.create_subscription(PointStamped, "next_target", self.on_next_target, STREAM)
         self.create_subscription(String, "reply", self.on_reply, STREAM)
         self._reset_sent: float | None = None
+        self._sent: tuple[list[int], Readings] | None = None  # our last probe, for the log
         self._ready = False  # the explorer answered the reset
         self._answered = True  # the explorer has taken our last probe
         self._waiting_since = time.monotonic()
@@ -158,6 +163,7 @@ class RobotNode(Node):
             return
         if "k" in reply and reply["k"] == len(self.outcome.cells) - 1:
             self._answered = True  # our last probe was taken
+            self.write_log(reply)
         elif "error" in reply and not self._answered:
             self.fail(f"the explorer refused a probe: {reply['error']}")
 
@@ -178,6 +184,7 @@ class RobotNode(Node):
     def probe_cell(self, cell: np.ndarray) -> None:
         flat = int(np.ravel_multi_index(tuple(int(i) for i in cell), self.scenario.shape))
         readings = self.sensor.probe(np.array([flat]))
+        self._sent = ([int(i) for i in cell], readings)
         self.publish_fingertip()
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
@@ -186,6 +193,27 @@ class RobotNode(Node):
         self.send(json.dumps(probe_line([int(i) for i in cell], readings,
                                         k=len(self.outcome.cells) - 1)))
         self._waiting_since = time.monotonic()
+
+    def write_log(self, reply: dict) -> None:
+        """Our last probe and the explorer's answer as a row of the log (the explorer's own
+        phases are its to time: here only the round trip)."""
+        log = self.options.log
+        if log is None or self._sent is None:
+            return
+        cell, readings = self._sent
+        perception = self.scenario.readings
+        if log.columns is None:
+            log.start(perception, self.scenario.dims, {
+                "scenario": str(self.scenario.path.resolve()), "task": self.options.task,
+                "seed": self.options.seed, "run": self.options.run, "ablate": []})
+        flat = int(np.ravel_multi_index(tuple(cell), self.scenario.shape))
+        truth = self.scenario.materials[int(self.scenario.material_map.ravel()[flat])]
+        probed = reply.get("probed", {})
+        log.write(int(reply["k"]), cell, [(i + 0.5) * self.scenario.cell for i in cell],
+                  shown(perception, readings), list(reply.get("missing", [])),
+                  [reply["warning"]] if "warning" in reply else [], truth,
+                  str(probed.get("material", "")), float(probed.get("probability", np.nan)),
+                  reply.get("next"), {}, time.monotonic() - self._waiting_since)
 
     def publish_fingertip(self) -> None:
         """Where the fingertip pressed last (its positioning error included), on the surface."""

@@ -85,6 +85,21 @@ def explore(session: Any, namespace: str, frame: str) -> int:
     return 0
 
 
+def record(recorder: Any, namespace: str) -> int:
+    """Record the presses sent to ``bayesprog_recorder`` until SIGINT or SIGTERM."""
+    with _ros() as stop:
+        from runner.robot.ros.recorder_node import RecorderNode
+
+        node = _node(lambda: RecorderNode(recorder, namespace=namespace))
+        name = node.get_fully_qualified_name()
+        print(f"{name}: recording presses of {recorder.scenario.name} on "
+              f"{node.get_namespace().rstrip('/')}/probe into {recorder.out}",
+              file=sys.stderr, flush=True)
+        _spin(node, stop)
+        print(f"{name}: {recorder.summary()}", file=sys.stderr, flush=True)
+    return 0
+
+
 def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) -> int:
     """Drive an explorer with the simulated robot; print the run's Gamma and path length."""
     with _ros() as stop:
