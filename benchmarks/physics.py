@@ -34,8 +34,9 @@ print(json.dumps(closed_loop(scenario, "T2", 100)["gamma_m"]))
 
 
 def per_probe(repeats: int) -> dict[str, float]:
-    """Milliseconds per probe on the paper's layout (60 presses at random cells), and the bare
-    MuJoCo steps of as many presses (``mj_step`` called as often, in C, without reading)."""
+    """Milliseconds per probe on the paper's layout (60 presses at random cells, every feature
+    computed), and the bare MuJoCo steps of as many presses (``mj_step`` called as often, in C,
+    without reading; the electrodes' distance sensors included)."""
     import mujoco
 
     from runner.world.scenario import load_scenario

@@ -1,19 +1,20 @@
 """Probes as physics (MuJoCo): a fingertip on a Cartesian stage presses each cell of a surface
-to a set normal force, strokes it a few millimetres and lifts; the forces and the depth it
-measures become the texture and compliance the explorer reads.
+to a set normal force, strokes it a few millimetres and lifts; the forces, the depth, an array
+of electrodes and a thermal sensor it carries become the named features a scenario maps to its
+readings (by default the paper's texture and compliance).
 
 The scene is built from a scenario: the workspace's surface, each cell of its material; the
 fingertip, a sphere on a Cartesian stage of three slide joints, x and y holding it through a
 compliant force sensor, z force-controlled (the stage carries its weight, so gravity is left
 out). Each material has a contact stiffness and damping (MuJoCo's soft contact, set so that a
-press of F newtons indents the surface F / stiffness metres once settled), a friction
-coefficient and a roughness. The contact under the fingertip takes each cell's properties in
-proportion to its share of the contact disc, so a press on a border feels both materials. The
-roughness is modelled by its equivalent along a stroke: a smooth random relief per material (a
-few variants, each cell one of them) whose heights have the material's roughness as standard
-deviation, bumps about a millimetre across; where the fingertip slides up a slope s of it, the
-friction coefficient under it is raised by s (a sphere sliding up a bump of slope s feels about
-F_n (mu + s) along its path), and lowered going down.
+press of F newtons indents F / stiffness metres once settled), a friction coefficient, a
+roughness and, for the thermal feature, a thermal effusivity. The contact under the fingertip
+takes each cell's properties in proportion to its share of the contact disc, so a press on a
+border feels both materials. The roughness is modelled by its equivalent along a stroke: a
+smooth random relief per material (a few variants, each cell one of them) whose heights have
+the material's roughness as standard deviation, bumps about a millimetre across; where the
+fingertip slides up a slope s of it, the friction coefficient under it is raised by s (a sphere
+sliding up a bump of slope s feels about F_n (mu + s) along its path), and lowered going down.
 
 A probe (:meth:`Scene.probe`), all in simulated time steps of one millisecond:
 
@@ -27,16 +28,64 @@ A probe (:meth:`Scene.probe`), all in simulated time steps of one millisecond:
 4. lift: the simulation of the probe ends (the next probe starts afresh).
 
 Sensor noise (``noise_force`` newtons on every force sample, ``noise_depth`` metres on every
-position sample) and the positioning error are drawn from the probe's own seed. The features
-(:func:`features`): compliance is the depth per newton in units of ``compliance_scale``
-(metres per newton); texture is the fluctuation of the tangential force while stroking
-(its standard deviation around a straight line, per newton of normal force) in units of
-``texture_scale``, plus ``friction_weight`` times the friction ratio (mean tangential over mean
-normal force). The raw figures and the traces are kept with every probe (:class:`Probe`).
+position sample, ``noise_electrode`` metres on every electrode sample, ``noise_temperature``
+kelvin on every temperature sample) and the positioning error are drawn from the probe's own
+seed, in that order (so a feature added later never changes the draws of those before it).
+
+The features (:data:`FEATURES`, :func:`press_features`), one value each per probe in a fixed
+unit, read while settled (the last fifth of the press) or while stroking (the last three
+quarters of the stroke):
+
+- ``texture`` (-): the tangential force's fluctuation while stroking (its standard deviation
+  around a straight line, per newton of normal force) in units of ``texture_scale``, plus
+  ``friction_weight`` times the friction ratio (the paper's E);
+- ``compliance`` (-): the depth per newton in units of ``compliance_scale`` (metres per
+  newton; the paper's C);
+- ``force`` (N), ``depth`` (m): the mean normal force while settled and the depth from first
+  contact; ``friction_ratio`` (-): mean tangential over mean normal force while stroking;
+  ``tangential_sd`` (N): the tangential force's fluctuation while stroking;
+- ``pressure`` (Pa): the static pressure, the settled normal force over the contact area of a
+  sphere of radius R indenting a half-space by the depth d (Hertz: a = sqrt(R d), the area
+  pi a^2, a kept within [R / 100, R]);
+- ``vibration_power`` (N^2): the power of the tangential force's fluctuation in
+  ``vibration_band`` while stroking (20-400 Hz by default: the tens to hundreds of hertz the
+  skin's fast-adapting receptors feel, within the 500 Hz the 1 kHz samples hold): Welch's
+  spectral density (segments of 64, a line taken out of each) summed over the band;
+- ``electrode_spread`` (-): the coefficient of variation (standard deviation over mean)
+  across ``electrodes`` electrodes of their compression while settled; the electrodes lie on
+  the fingertip's lower cap (one at its pole, the others on a golden-angle spiral of equal
+  areas out to ``electrode_angle`` degrees from it), each a MuJoCo distance sensor from a
+  point of the fingertip's surface to the plane of the surface (its compression: how far it
+  lies below). A rigid surface is met by the pole alone (spread sqrt(n - 1)); a soft one
+  wraps the cap, loading the electrodes more evenly (a smaller spread). MuJoCo's touch
+  sensors cannot serve as electrodes here: a sphere on a box makes one contact point, so a
+  touch site reads the whole force or nothing;
+- ``temperature_drop`` (K): how much a thermal sensor in the fingertip, at
+  ``fingertip_temperature`` before the press, has cooled when the fingertip lifts, on a
+  surface at ``surface_temperature``. Two semi-infinite bodies put in contact settle at once
+  at the contact temperature T_c = (e_f T_f + e_s T_s) / (e_f + e_s), e = sqrt(k rho c) each
+  body's thermal effusivity (:func:`contact_temperature`; ``fingertip_effusivity`` about
+  human skin's); the sensor follows T_c as a first-order lag of time constant
+  ``thermal_time_constant`` over the time in contact t (MuJoCo's normal force above zero),
+  so the drop is (T_f - T_c)(1 - exp(-t / tau)). The surface's effusivity is its cells'
+  shares of the contact disc under the press, as for the mechanics; a material without an
+  effusivity gives no temperature drop (NaN: missing), and a scenario that reads one from it
+  is refused (:func:`feature_problems`). Left out: the thermal contact resistance of the
+  interface (roughness, pressure), the bodies' finite thickness (a thin sheet or a coating
+  over another material), heat carried by the stroke onto fresh surface, heating of the
+  surface by earlier presses and the fingertip's recovery between them, convection and
+  radiation, and the sensor's depth below the skin (beyond its time constant).
+
+A scenario maps its readings to features (``readings:`` of ``sensor: physics:``: reading
+name -> feature, by default texture -> texture and compliance -> compliance);
+:class:`PhysicsSensor` returns them as :class:`runner.world.readings.Readings`. The raw
+figures, every feature and the traces are kept with every probe (:class:`Probe`).
 
 Not modelled: the fingertip's own deformation and its skin (it is a rigid sphere against a
-compliant surface), Hertzian (non-linear) indentation, viscoelastic creep, vibration sensing
-beyond the 1 kHz force samples, wear, temperature; volumes (a probe presses a surface).
+compliant surface), Hertzian (non-linear) indentation (the pressure uses Hertz's contact
+radius, the force is linear in the depth), viscoelastic creep, vibration above the 1 kHz force
+samples, the relief as geometry (the electrodes feel a flat surface), wear; volumes (a probe
+presses a surface).
 
 MuJoCo is the ``physics`` extra: it is imported when a scene is built, never before.
 """
@@ -44,13 +93,16 @@ MuJoCo is the ``physics`` extra: it is imported when a scene is built, never bef
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+if TYPE_CHECKING:
+    from runner.world.readings import Readings
 
 #: the optional dependency, its extra, and the option that asks for it
 EXTRA = ("mujoco", "physics")
@@ -85,6 +137,44 @@ DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(
 APPROACH_GAP = 1e-4
 APPROACH_SPEED = 0.002
 Z_DAMPING = 5.0
+#: an electrode: a sphere this small (m) centred on the fingertip's surface, massless and
+#: touching nothing, whose distance to the plane of the surface MuJoCo reports when they
+#: overlap (a cutoff of 0: one clear of it reads 0, and costs less)
+ELECTRODE_RADIUS = 1e-4
+#: Welch's segments for the vibration power (samples), at most
+VIBRATION_SEGMENT = 64
+
+#: every feature of a press: its unit ("1" for a pure number) and what it is, as
+#: ``"UNIT: meaning"`` (``record --physics`` writes each as a column)
+FEATURES: dict[str, str] = {
+    "texture": "1: tangential-force fluctuation per newton of normal force in units of "
+               "texture_scale, plus friction_weight times the friction ratio (the paper's E)",
+    "compliance": "1: depth per newton in units of compliance_scale (the paper's C)",
+    "force": "N: mean normal force while settled",
+    "depth": "m: depth from first contact while settled",
+    "friction_ratio": "1: mean tangential over mean normal force while stroking",
+    "tangential_sd": "N: standard deviation of the tangential force around a straight line "
+                     "while stroking",
+    "pressure": "Pa: static pressure, the settled normal force over the Hertz contact area "
+                "pi R depth",
+    "vibration_power": "N^2: power of the tangential force's fluctuation in vibration_band "
+                       "while stroking (Welch)",
+    "electrode_spread": "1: coefficient of variation of the electrodes' compressions while "
+                        "settled",
+    "temperature_drop": "K: how much the fingertip's thermal sensor cooled over the contact "
+                        "(two semi-infinite bodies, first-order sensor)",
+}
+
+#: the material properties a feature needs beyond the contact's four (stiffness, damping,
+#: friction, roughness, which every material has): a laid material without them cannot give
+#: the feature
+NEEDS: dict[str, tuple[str, ...]] = {"temperature_drop": ("effusivity",)}
+
+#: what such a property is, for the message that asks for it
+_PROPERTY_MEANING = {"effusivity": "thermal effusivity sqrt(k rho c), W s^0.5 m^-2 K^-1"}
+
+#: the readings of a physics sensor unless a scenario names them: reading -> feature
+PAPER_READINGS = {"texture": "texture", "compliance": "compliance"}
 
 
 class _Strict(BaseModel):
@@ -104,18 +194,23 @@ class MaterialPhysics(_Strict):
     variation: float = Field(0.1, ge=0, le=1, description="how much cells of the material "
                              "differ: the relative standard deviation of their stiffness and "
                              "friction (a log-normal factor per cell)")
+    effusivity: float | None = Field(None, gt=0, le=1e5, description="thermal effusivity "
+                                     "sqrt(k rho c) (W s^0.5 m^-2 K^-1), for the temperature "
+                                     "drop; none: the material gives no temperature drop")
     why: str = Field("", description="where the numbers come from")
 
 
 class MaterialPhysicsPatch(_Strict):
     """A scenario's ``physics:`` entry for one material: any of the properties, the others
-    taken from the bundled defaults (a material without defaults needs all four)."""
+    taken from the bundled defaults (a material without defaults needs the contact's four;
+    without an effusivity it gives no temperature drop)."""
 
     stiffness: float | None = Field(None, gt=0, le=1e7)
     damping: float | None = Field(None, ge=0, le=1e5)
     friction: float | None = Field(None, gt=0, le=5)
     roughness: float | None = Field(None, ge=0, le=0.005)
     variation: float | None = Field(None, ge=0, le=1)
+    effusivity: float | None = Field(None, gt=0, le=1e5)
     why: str | None = None
 
 
@@ -159,6 +254,41 @@ class ProbeSpec(_Strict):
     friction_weight: float = Field(0.2, ge=0, le=1, description="texture added per unit of "
                                    "friction ratio")
     seed: int = Field(0, ge=0, description="seed of the surfaces' relief")
+    readings: dict[str, str] = Field(default_factory=lambda: dict(PAPER_READINGS),
+                                     min_length=1, description="the readings the sensor "
+                                     "reports, each a feature of the press: reading name -> "
+                                     "feature (see FEATURES)")
+    vibration_band: tuple[float, float] = Field((20.0, 400.0), description="the band of the "
+                                                "vibration power (Hz), within the 500 Hz of "
+                                                "the 1 kHz samples")
+    electrodes: int = Field(19, ge=2, le=64, description="electrodes on the fingertip's lower "
+                            "cap (a BioTac has 19)")
+    electrode_angle: float = Field(50.0, gt=0, le=90, description="how far from the "
+                                   "fingertip's pole the electrodes reach (degrees)")
+    noise_electrode: float = Field(1e-6, ge=0, le=1e-3, description="standard deviation of "
+                                   "an electrode's noise (m of compression)")
+    fingertip_temperature: float = Field(33.0, ge=-50, le=150, description="the fingertip's "
+                                         "temperature before a press (degrees C; skin is "
+                                         "about 33)")
+    surface_temperature: float = Field(22.0, ge=-50, le=150, description="the surface's "
+                                       "temperature (degrees C; a room's)")
+    fingertip_effusivity: float = Field(1100.0, gt=0, le=1e5, description="the fingertip's "
+                                        "thermal effusivity (W s^0.5 m^-2 K^-1; human skin "
+                                        "is about 1,100)")
+    thermal_time_constant: float = Field(1.0, gt=0, le=100, description="the thermal "
+                                         "sensor's first-order time constant (s)")
+    noise_temperature: float = Field(0.01, ge=0, le=10, description="standard deviation of "
+                                     "the thermal sensor's noise (K)")
+
+    @field_validator("vibration_band")
+    @classmethod
+    def _band_within_the_samples(cls, band: tuple[float, float]) -> tuple[float, float]:
+        low, high = band
+        nyquist = 0.5 / TIMESTEP
+        if not 0 <= low < high <= nyquist:
+            raise ValueError(f"expected 0 <= low < high <= {nyquist:g} Hz (half the "
+                             f"{1 / TIMESTEP:g} Hz samples), found [{low:g}, {high:g}]")
+        return band
 
 
 def default_materials() -> dict[str, MaterialPhysics]:
@@ -202,8 +332,11 @@ class Probe:
     tangential_sd: float
     #: where the fingertip pressed (m), the positioning error included
     at: tuple[float, float]
-    #: per time step: normal force (N), tangential force (N), the fingertip's height (m)
+    #: per time step: normal force (N), tangential force (N), the fingertip's height (m), each
+    #: electrode's compression (m) [steps, electrodes], the thermal sensor (degrees C)
     traces: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+    #: every feature (:data:`FEATURES`, in its units), texture and compliance among them
+    features: dict[str, float] = field(default_factory=dict)
 
 
 def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, press_steps: int,
@@ -211,11 +344,11 @@ def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, pre
     """(texture, compliance, raw figures) of one probe's traces: ``normal``, ``tangential``
     forces and ``height`` per step, the first ``press_steps`` of them the press."""
     press_n, press_z = normal[:press_steps], height[:press_steps]
-    settled = slice(max(press_steps - press_steps // 5, 1), press_steps)  # the last fifth
+    settled = _settled(press_steps)
     force = float(press_n[settled].mean())
     depth = float(_contact_height(press_n, press_z, force) - press_z[settled].mean())
     stroke_n, stroke_t = normal[press_steps:], tangential[press_steps:]
-    steady = slice(len(stroke_t) // 4, len(stroke_t))
+    steady = _steady(len(stroke_t))
     n, t = stroke_n[steady], stroke_t[steady]
     mean_n = max(float(n.mean()), 1e-9)
     ratio = float(t.mean()) / mean_n
@@ -225,6 +358,167 @@ def features(normal: np.ndarray, tangential: np.ndarray, height: np.ndarray, pre
     texture = sd / mean_n / spec.texture_scale + spec.friction_weight * ratio
     return texture, compliance, {"force": force, "depth": depth, "friction_ratio": ratio,
                                  "tangential_sd": sd}
+
+
+def press_features(traces: Mapping[str, np.ndarray], press_steps: int, spec: ProbeSpec
+                   ) -> dict[str, float]:
+    """Every feature of one probe (:data:`FEATURES`, in that order) from its traces
+    (``normal``, ``tangential``, ``height`` per step, ``electrodes`` [steps, electrodes],
+    ``temperature``), the first ``press_steps`` of them the press."""
+    texture, compliance, raw = features(traces["normal"], traces["tangential"],
+                                        traces["height"], press_steps, spec)
+    stroking = traces["tangential"][press_steps:]
+    out = {"texture": texture, "compliance": compliance, **raw,
+           "pressure": static_pressure(raw["force"], raw["depth"], spec.radius),
+           "vibration_power": vibration_power(stroking[_steady(len(stroking))],
+                                              spec.vibration_band),
+           "electrode_spread": electrode_spread(
+               traces["electrodes"][_settled(press_steps)].mean(axis=0)),
+           "temperature_drop": spec.fingertip_temperature - float(traces["temperature"][-1])}
+    assert list(out) == list(FEATURES)
+    return out
+
+
+def _settled(press_steps: int) -> slice:
+    """The press once settled: its last fifth."""
+    return slice(max(press_steps - press_steps // 5, 1), press_steps)
+
+
+def _steady(stroke_steps: int) -> slice:
+    """The stroke once sliding: its last three quarters."""
+    return slice(stroke_steps // 4, stroke_steps)
+
+
+def static_pressure(force: float, depth: float, radius: float) -> float:
+    """The mean pressure (Pa) of ``force`` newtons over the contact of a sphere of ``radius``
+    metres indenting a half-space by ``depth``: F / (pi a^2), a = sqrt(R d) (Hertz), a kept
+    within [R / 100, R] (a depth of zero or less, or deeper than the sphere's radius).
+
+    >>> round(static_pressure(1.0, 1e-3, 0.006))  # a = 2.45 mm
+    53052
+    """
+    a = min(max(np.sqrt(radius * max(depth, 0.0)), radius / 100), radius)
+    return float(force / (np.pi * a * a))
+
+
+def vibration_power(tangential: np.ndarray, band: tuple[float, float]) -> float:
+    """The power (N^2) of the fluctuation of ``tangential`` (N, one sample per time step) in
+    ``band`` (Hz): Welch's spectral density summed over the band's frequencies times their
+    spacing (NaN for fewer than four samples).
+
+    The estimate of ``scipy.signal.welch(x, 1 / TIMESTEP, nperseg=min(64, len(x)),
+    detrend="linear")``, written out in numpy (that call took 1.7 ms a probe, more than every
+    other feature together; the tests hold the two equal): segments of
+    :data:`VIBRATION_SEGMENT` samples overlapping by half, a straight line taken out of each
+    and a Hann window applied; their periodograms, scaled to a one-sided density, averaged.
+
+    >>> t = np.arange(1000) * TIMESTEP  # a sine of amplitude 0.1 N: power 0.1^2 / 2
+    >>> round(vibration_power(0.6 + 0.1 * np.sin(2 * np.pi * 100 * t), (20, 400)), 4)
+    0.005
+    """
+    x = np.asarray(tangential, float)
+    if x.size < 4:
+        return float("nan")
+    size = min(VIBRATION_SEGMENT, x.size)
+    step = size - size // 2
+    starts = np.arange(0, x.size - size + 1, step)
+    segments = x[starts[:, None] + np.arange(size)]
+    ramp = np.arange(size) - (size - 1) / 2
+    segments = (segments - segments.mean(axis=1, keepdims=True)
+                - np.outer(segments @ ramp / (ramp @ ramp), ramp))
+    window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(size) / size)  # periodic Hann
+    fs = 1 / TIMESTEP
+    density = np.abs(np.fft.rfft(segments * window, axis=1)) ** 2 / (fs * (window @ window))
+    density[:, 1:(size + 1) // 2] *= 2  # one-sided: each frequency but 0 and fs / 2 twice
+    density = density.mean(axis=0)
+    frequency = np.fft.rfftfreq(size, TIMESTEP)
+    inside = (frequency >= band[0]) & (frequency <= band[1])
+    return float(density[inside].sum() * (frequency[1] - frequency[0]))
+
+
+def electrode_spread(compressions: np.ndarray) -> float:
+    """The coefficient of variation of the electrodes' ``compressions`` (m): their standard
+    deviation over their mean (NaN when none is compressed).
+
+    >>> round(electrode_spread(np.array([1e-5, 0, 0, 0, 0])), 6)  # the pole alone: sqrt(n - 1)
+    2.0
+    """
+    mean = float(np.mean(compressions))
+    return float(np.std(compressions) / mean) if mean > 0 else float("nan")
+
+
+def electrode_positions(count: int, radius: float, angle: float) -> np.ndarray:
+    """Where ``count`` electrodes lie on a fingertip of ``radius`` (metres, in its own frame,
+    its pole at (0, 0, -radius)): one at the pole, the others on a golden-angle spiral out to
+    ``angle`` degrees from it, each ring of the same area (steps of equal cos theta)."""
+    i = np.arange(count)
+    cos_theta = 1 - (1 - np.cos(np.radians(angle))) * i / (count - 1)
+    sin_theta = np.sqrt(np.maximum(1 - cos_theta**2, 0))
+    phi = i * np.pi * (3 - np.sqrt(5))
+    return radius * np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), -cos_theta],
+                             axis=1)
+
+
+def contact_temperature(e_fingertip: float, t_fingertip: float, e_surface: float,
+                        t_surface: float) -> float:
+    """The temperature at which two semi-infinite bodies put in contact meet at once (degrees
+    C): T_c = (e_f T_f + e_s T_s) / (e_f + e_s), each body's effusivity e = sqrt(k rho c)
+    weighing its temperature: the heat equation's solution for two half-spaces, the model of
+    the skin's contact temperature in studies of thermal touch (e.g. Ho and Jones, 2008).
+
+    >>> round(contact_temperature(1100, 33, 37000, 22), 2)  # skin on copper
+    22.32
+    """
+    return (e_fingertip * t_fingertip + e_surface * t_surface) / (e_fingertip + e_surface)
+
+
+def thermal_trace(in_contact: np.ndarray, e_surface: float, spec: ProbeSpec) -> np.ndarray:
+    """The thermal sensor's temperature (degrees C) per time step: ``fingertip_temperature``
+    until the contact, then a first-order lag of ``thermal_time_constant`` towards the contact
+    temperature, over the time in contact so far (``in_contact`` per step); NaN throughout for
+    a surface of no effusivity (NaN)."""
+    t_c = contact_temperature(spec.fingertip_effusivity, spec.fingertip_temperature,
+                              e_surface, spec.surface_temperature)
+    elapsed = np.cumsum(in_contact) * TIMESTEP
+    lag = np.exp(-elapsed / spec.thermal_time_constant)
+    return t_c + (spec.fingertip_temperature - t_c) * lag
+
+
+def feature_problems(spec: ProbeSpec, properties: Mapping[str, MaterialPhysics],
+                     laid: Iterable[str]) -> list[tuple[tuple, str]]:
+    """What keeps ``spec``'s readings from being read on a surface of the materials ``laid``
+    (of ``properties``; a laid material without properties is another check's): per problem,
+    its path inside ``sensor: physics:`` and the message. A reading of an unknown feature, or
+    of a feature that some laid material lacks a property for (:data:`NEEDS`).
+
+    >>> basalt = MaterialPhysics(stiffness=1e5, damping=280, friction=0.6, roughness=1e-5)
+    >>> spec = ProbeSpec(readings={"heat": "temperature_drop", "grip": "fricton_ratio"})
+    >>> for where, message in feature_problems(spec, {"basalt": basalt}, ["basalt"]):
+    ...     print(where, message)
+    ('readings', 'heat') reading 'heat': temperature_drop needs each laid material's effusivity (thermal effusivity sqrt(k rho c), W s^0.5 m^-2 K^-1), and basalt has none: give it under physics: (basalt: {effusivity: ...}) or read another feature
+    ('readings', 'grip') reading 'grip': unknown feature 'fricton_ratio': did you mean 'friction_ratio'? (expected one of texture, compliance, force, depth, friction_ratio, tangential_sd, pressure, vibration_power, electrode_spread, temperature_drop)
+    """
+    from bayesprog.errors import did_you_mean
+
+    laid = sorted(set(laid))
+    problems: list[tuple[tuple, str]] = []
+    for reading, feature in spec.readings.items():
+        where = ("readings", reading)
+        if feature not in FEATURES:
+            problems.append((where, f"reading {reading!r}: unknown feature {feature!r}"
+                             + did_you_mean(feature, FEATURES)
+                             + f" (expected one of {', '.join(FEATURES)})"))
+            continue
+        for needed in NEEDS.get(feature, ()):
+            lacking = [m for m in laid if m in properties
+                       and getattr(properties[m], needed) is None]
+            if lacking:
+                problems.append((where, f"reading {reading!r}: {feature} needs each laid "
+                                 f"material's {needed} ({_PROPERTY_MEANING[needed]}), and "
+                                 f"{', '.join(lacking)} {'has' if len(lacking) == 1 else 'have'}"
+                                 f" none: give it under physics: ({lacking[0]}: {{{needed}: "
+                                 "...}) or read another feature"))
+    return problems
 
 
 def _contact_height(normal: np.ndarray, height: np.ndarray, force: float) -> float:
@@ -290,6 +584,12 @@ class Scene:
         self.cell_friction = per_cell("friction") * factor[1]
         self.cell_contact = np.stack([self.cell_stiffness, self.cell_damping,
                                       self.cell_friction], axis=1)
+        # NaN where the material has no effusivity: it gives no temperature drop
+        self.cell_effusivity = np.array([
+            np.nan if i not in used or properties[name].effusivity is None
+            else properties[name].effusivity for i, name in enumerate(self.materials)])[flat]
+        self.electrodes = electrode_positions(spec.electrodes, spec.radius,
+                                              spec.electrode_angle)
         # the relief's slopes: a few variants per material, each cell one of them
         rng = np.random.default_rng([spec.seed, 0x5EED])
         self.samples = int(round(self.cell / RELIEF_SPACING))
@@ -326,12 +626,23 @@ class Scene:
             f'pos="{(ix + 0.5) * self.cell:.6g} {(iy + 0.5) * self.cell:.6g} -0.001"/>'
             for ix in range(nx) for iy in range(ny)) if tiles else ""
         r = self.spec.radius
+        # the electrodes: massless, touching nothing, each read as its distance to the plane
+        # of the surface (after the scene's own sensors, so that theirs keep their places)
+        electrodes = "".join(
+            f'<geom name="electrode{i}" type="sphere" size="{ELECTRODE_RADIUS}" mass="0" '
+            f'contype="0" conaffinity="0" group="4" pos="{x:.12g} {y:.12g} {z:.12g}"/>'
+            for i, (x, y, z) in enumerate(self.electrodes))
+        distances = "".join(
+            f'<distance name="electrode{i}" geom1="electrode{i}" geom2="surface_plane" '
+            'cutoff="0"/>' for i in range(len(self.electrodes)))
         return f"""<mujoco model="bayesprog_surface">
   <option timestep="{TIMESTEP}" gravity="0 0 0" cone="elliptic"/>
   <worldbody>
     <geom name="surface" type="box" size="{nx * half:.6g} {ny * half:.6g} 0.01"
           pos="{nx * half:.6g} {ny * half:.6g} -0.01" contype="0" conaffinity="0"
           rgba="0.6 0.6 0.6 1"/>
+    <geom name="surface_plane" type="plane" size="0 0 1" contype="0" conaffinity="0"
+          group="4" rgba="0 0 0 0"/>
     {drawn}
     <body name="fingertip" pos="0 0 0">
       <joint name="x" type="slide" axis="1 0 0"/>
@@ -339,6 +650,7 @@ class Scene:
       <joint name="z" type="slide" axis="0 0 1" damping="{Z_DAMPING}"/>
       <geom name="fingertip" type="sphere" size="{r}" mass="{TIP_MASS}" rgba="0.9 0.8 0.2 1"/>
       <site name="fingertip" size="{r * 1.05:.6g}"/>
+      {electrodes}
     </body>
   </worldbody>
   <contact>
@@ -354,6 +666,7 @@ class Scene:
     <touch name="normal" site="fingertip"/>
     <actuatorfrc name="tangential" actuator="x"/>
     <framepos name="position" objtype="body" objname="fingertip"/>
+    {distances}
   </sensor>
 </mujoco>"""
 
@@ -363,13 +676,25 @@ class Scene:
         (radius sqrt(R depth), at least a tenth of the fingertip's), the friction raised by the
         relief's slope along x under the centre (a sphere sliding up a bump of slope s feels
         about F_n (mu + s) along its path)."""
+        k, b, mu = self.cell_contact[self._under(x, y, depth)].mean(axis=0)
+        centre = self._cell_at(x, y)
+        return float(k), float(b), max(float(mu) + self._slope(centre, x, y), MIN_FRICTION)
+
+    def effusivity_at(self, x: float, y: float, depth: float) -> float:
+        """The thermal effusivity under a fingertip at (x, y) pressed ``depth`` metres in: each
+        cell's in proportion to its share of the contact disc, as :meth:`contact`'s (NaN when
+        a material under it has none)."""
+        return float(self.cell_effusivity[self._under(x, y, depth)].mean())
+
+    def _under(self, x: float, y: float, depth: float) -> np.ndarray:
+        """The cells (flat) under the points of :data:`DISC` over the contact disc of a
+        fingertip at (x, y) pressed ``depth`` metres in (radius sqrt(R depth), at least a
+        tenth of the fingertip's)."""
         nx, ny = self.material_map.shape
         radius = max(np.sqrt(self.spec.radius * max(depth, 0.0)), self.spec.radius / 10)
         px = np.minimum(np.maximum((x + radius * DISC[:, 0]) // self.cell, 0), nx - 1)
         py = np.minimum(np.maximum((y + radius * DISC[:, 1]) // self.cell, 0), ny - 1)
-        k, b, mu = self.cell_contact[(px * ny + py).astype(np.intp)].mean(axis=0)
-        centre = self._cell_at(x, y)
-        return float(k), float(b), max(float(mu) + self._slope(centre, x, y), MIN_FRICTION)
+        return (px * ny + py).astype(np.intp)
 
     def _cell_at(self, x: float, y: float) -> int:
         nx, ny = self.material_map.shape
@@ -387,7 +712,7 @@ class Scene:
 
     def probe(self, flat: int, rng: np.random.Generator) -> Probe:
         """Press, stroke and lift at cell ``flat``; ``rng`` draws the positioning error and the
-        sensor noise."""
+        sensor noise (forces and height, then the electrodes, then the thermal sensor)."""
         import mujoco
 
         model, data, spec = self.model, self.data, self.spec
@@ -403,7 +728,9 @@ class Scene:
         press_steps = int(round(spec.press / TIMESTEP))
         stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
         steps = press_steps + stroke_steps
-        sensed = np.empty((steps, 3))
+        # per step, every sensor: the touch, the x axis's force, the position (three), then
+        # the electrodes' distances
+        readings = np.empty((steps, model.nsensordata))
         xs = x0 + np.concatenate([np.zeros(press_steps),
                                   np.linspace(0, spec.stroke, stroke_steps)])
         qpos, ctrl, sensordata = data.qpos, data.ctrl, data.sensordata
@@ -424,14 +751,24 @@ class Scene:
                 at = (x, y, depth)
             ctrl[0] = xs[k]
             mujoco.mj_step(model, data)
-            sensed[k] = sensordata[0], sensordata[1], sensordata[4]
+            readings[k] = sensordata
+        sensed, distance = readings[:, [0, 1, 4]], readings[:, 5:]
         noise = rng.standard_normal((steps, 3)) * (spec.noise_force, spec.noise_force,
                                                    spec.noise_depth)
         normal, tangential, height = (sensed + noise).T
-        texture, compliance, raw = features(normal, tangential, height, press_steps, spec)
-        return Probe(texture=texture, compliance=compliance, at=(x0 + spec.stroke / 2, y0),
-                     traces={"normal": normal, "tangential": tangential, "height": height},
-                     **raw)
+        # the draws of the features added since come after those above, so that a probe's
+        # texture and compliance stay what they were
+        compression = np.maximum(-(distance + ELECTRODE_RADIUS), 0.0)
+        electrodes = compression + rng.standard_normal(compression.shape) * spec.noise_electrode
+        pressed = spec.radius - float(sensed[press_steps - 1, 2])
+        temperature = thermal_trace(sensed[:, 0] > 0, self.effusivity_at(x0, y0, pressed), spec)
+        temperature = temperature + rng.standard_normal(steps) * spec.noise_temperature
+        traces = {"normal": normal, "tangential": tangential, "height": height,
+                  "electrodes": electrodes, "temperature": temperature}
+        every = press_features(traces, press_steps, spec)
+        raw = {key: every[key] for key in ("force", "depth", "friction_ratio", "tangential_sd")}
+        return Probe(texture=every["texture"], compliance=every["compliance"],
+                     at=(x0 + spec.stroke / 2, y0), traces=traces, features=every, **raw)
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int
@@ -455,19 +792,34 @@ def probe_seed(seed: Sequence[int] | int, step: int) -> list[int]:
 
 class PhysicsSensor:
     """A haptic sensor whose readings come from :class:`Scene` probes: run r's probe at step k
-    is seeded by (its reading seed, k), so a run's readings depend on nothing else."""
+    is seeded by (its reading seed, k), so a run's readings depend on nothing else. Its
+    readings are the features its scene's ``readings:`` names (reading -> feature, in that
+    order); raises BayesprogError when one is unknown or a laid material cannot give it
+    (:func:`feature_problems`)."""
 
     def __init__(self, scene: Scene, seeds: Sequence[int | tuple[int, ...]]):
+        from bayesprog import BayesprogError
+
+        problems = feature_problems(scene.spec, scene.properties, scene.properties)
+        if problems:
+            raise BayesprogError("sensor: physics: " + "; ".join(m for _, m in problems))
         self.scene = scene
         self.seeds = list(seeds)
         self.steps = [0] * len(self.seeds)
         self.last: list[Probe] = []
+        self.names = tuple(scene.spec.readings)
+        self._features = [scene.spec.readings[name] for name in self.names]
 
-    def probe(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def probe(self, cells: np.ndarray) -> Readings:
+        """The readings of one probe per run at ``cells`` [runs] (flat); the probes are kept
+        in :attr:`last`."""
+        from runner.world.readings import Readings
+
         self.last = []
         for r, cell in enumerate(np.asarray(cells).ravel()):
             rng = np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
             self.last.append(self.scene.probe(int(cell), rng))
             self.steps[r] += 1
-        return (np.array([p.texture for p in self.last]),
-                np.array([p.compliance for p in self.last]))
+        values = np.array([[p.features[f] for f in self._features] for p in self.last],
+                          dtype=float).reshape(len(self.last), len(self.names))
+        return Readings(self.names, values)
