@@ -64,12 +64,16 @@ _WHERE = {
     "compare": "bayesprog.learning.evidence",
     "Discovery": "bayesprog.discovery",
     "StructureWarning": "bayesprog.discovery",
+    "Summary": "bayesprog.learning.summary",
+    "summarise": "bayesprog.learning.summary",
+    "scatter_matrix": "bayesprog.draw",
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.bundled import bundled_path, bundled_root
     from bayesprog.discovery import Discovery, StructureWarning, discover
     from bayesprog.display import show_inference
+    from bayesprog.draw import scatter_matrix
     from bayesprog.errors import (
         BayesprogError,
         Diagnostic,
@@ -88,6 +92,7 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.language.document import load_document
     from bayesprog.language.loader import Located, load_yaml
     from bayesprog.learning.evidence import compare
+    from bayesprog.learning.summary import Summary, summarise
     from bayesprog.learning.write import render_values
     from bayesprog.limits import SizeError, check_size, limit
     from bayesprog.model import Term
@@ -132,6 +137,10 @@ __all__ = [
     "StructureWarning",
     "compare",
     "discover",
+    # data sets: summarised group by group, drawn pair by pair
+    "Summary",
+    "scatter_matrix",
+    "summarise",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own
     # YAML files read with the same diagnostics (load_yaml, load_document, Located,
     # wrong_kind; reference_problem for the files they name), the same size limits

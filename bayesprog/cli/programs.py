@@ -86,19 +86,87 @@ def _plugin_validate(file: str, kind: str) -> list[str] | None:
 
 
 def add_show(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("show", help="print a program in Bayesian-programming notation")
-    p.add_argument("file", metavar="FILE", help="a program file, or the name of a bundled "
-                   "one (bayesprog examples)")
+    p = sub.add_parser("show", help="print a program in Bayesian-programming notation, or "
+                       "summarise a data file (.csv, .parquet) group by group")
+    p.add_argument("file", metavar="FILE", help="a program file, a data file (.csv, .tsv, "
+                   ".parquet), or the name of a bundled one (bayesprog examples)")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help='show the program with this term uniform, e.g. "P(S | M)"; repeatable '
                    "(default: none)")
+    p.add_argument("--by", metavar="COLUMN",
+                   help="a data file: the column whose values group the rows (default: the "
+                   "column material or M, else the first column that is not numbers)")
+    p.add_argument("--columns", metavar="A,B,...",
+                   help="a data file: the columns to summarise and draw (default: all but "
+                   "--by's)")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="a data file: also draw its columns pair by pair, one colour per "
+                   "group, each column's distribution on the diagonal (.png, .pdf, .svg; "
+                   "default: no drawing)")
     p.set_defaults(func=cmd_show)
 
 
+#: the suffixes of the data files ``show`` summarises
+DATA_SUFFIXES = (".csv", ".tsv", ".parquet", ".pq")
+
+
 def cmd_show(args: argparse.Namespace) -> int:
+    data = _data_file(args.file)
+    if data is not None:
+        return _show_data(data, args)
+    for flag, given in (("--by", args.by), ("--columns", args.columns), ("--plot", args.plot)):
+        if given:
+            raise UserError(f"{flag}: for a data file (.csv, .tsv, .parquet); {args.file} is "
+                            "read as a program")
     from bayesprog.show import render
 
     print(render(ablated(load_program(args.file), args.ablate)))
+    return 0
+
+
+def _data_file(name: str) -> Path | None:
+    """``name`` as a data file to summarise: a path (or a bundled name) with a data suffix, or
+    the name of a bundled data file when no file or bundled program has that name."""
+    from bayesprog.bundled import bundled_path, find
+
+    if name.lower().endswith(DATA_SUFFIXES):
+        return bundled_path(name, "data")
+    program = find(name, "program")
+    if Path(name).exists() or program is not None:
+        return None
+    return find(name, "data")
+
+
+def _show_data(path: Path, args: argparse.Namespace) -> int:
+    from bayesprog.learning.summary import read_typed, summarise_frame
+
+    if args.ablate:
+        raise UserError(f"--ablate: for a program; {path} is a data file")
+    columns = None
+    if args.columns is not None:
+        columns = [c.strip() for c in args.columns.split(",") if c.strip()]
+        if not columns:
+            raise UserError(f"--columns {args.columns!r}: expected column names separated by "
+                            "commas")
+    out = None
+    if args.plot:
+        out = output_file(args.plot, "--plot")
+        if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+            raise UserError(f"--plot {args.plot}: expected a .png, .pdf or .svg file")
+    frame, source = read_typed(path)
+    summary = summarise_frame(frame, source, args.by, columns)
+    figure = None
+    if out is not None:  # drawn before anything is printed: a drawing that fails says so alone
+        from bayesprog.draw import scatter_matrix
+
+        figure = scatter_matrix(frame, summary.by, summary.columns, source=source)
+    print(summary.text())
+    if figure is not None:
+        try:
+            figure.savefig(out, dpi=110)
+        except (OSError, ValueError) as exc:
+            raise UserError(f"--plot {args.plot}: cannot write it: {exc}") from None
+        print(f"wrote {out}")
     return 0
 
 

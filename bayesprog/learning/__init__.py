@@ -1,5 +1,6 @@
 """Identification: learning a program's parameters from data (``Program.fit``,
-``bayesprog learn``).
+``bayesprog learn``), and the data sets it learns from, summarised group by group
+(``bayesprog show DATA.csv``).
 
 The names are imported at their first read: ``bayesprog learn`` starts reading its data file
 (:class:`~bayesprog.learning.plain_csv.ReadAhead`) before the fit's modules are imported."""
@@ -15,13 +16,17 @@ _WHERE = {
     "Estimate": "bayesprog.learning.fit",
     "fit_terms": "bayesprog.learning.fit",
     "render_fitted": "bayesprog.learning.write",
+    "Summary": "bayesprog.learning.summary",
+    "summarise": "bayesprog.learning.summary",
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.learning.data import Data, DataError, load_data
     from bayesprog.learning.fit import Estimate, fit_terms
+    from bayesprog.learning.summary import Summary, summarise
     from bayesprog.learning.write import render_fitted
 
 __getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 
-__all__ = ["Data", "DataError", "Estimate", "fit_terms", "load_data", "render_fitted"]
+__all__ = ["Data", "DataError", "Estimate", "Summary", "fit_terms", "load_data", "render_fitted",
+           "summarise"]

@@ -397,9 +397,11 @@ def physics_confusion(scenario: Scenario, per_material: int, seed: int) -> np.nd
     return out
 
 
-def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> list[str]:
+def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str],
+                     folder: Path | None = None) -> list[str]:
     """Which materials the perception program recognises from one probe of the scenario's
-    sensor, and whether the least accurately followed task has the least recognised material."""
+    sensor, and whether the least accurately followed task has the least recognised material;
+    with the report's ``folder``, the recordings the scenario learns from drawn beside."""
     noise = scenario.spec.sensor.extra_noise
     held_out = HELD_OUT
     if scenario.spec.sensor.physics is not None:
@@ -437,6 +439,7 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
                         reverse=True)
         taken = ", ".join(f"{n} {100 * v:.1f}%" for v, n in others[:2] if v >= 0.001) or "-"
         lines.append(f"| {m} | {100 * matrix[i, i]:.1f}% | {taken} |")
+    lines += recordings_section(scenario, folder) if folder is not None else []
     per = {r["task"]: r["final_per_border_cell_mm"] for r in rows if r["configuration"] == "full"}
     if set(per) >= set(tasks) and len(tasks) > 1:
         rate = {t: matrix[scenario.task_material(t), scenario.task_material(t)] for t in tasks}
@@ -455,6 +458,88 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str]) -> 
                          f"recognised material is {hardest}'s: perception alone does not "
                          "explain the order here (the layout of the border does too).")
     return lines + [""]
+
+
+#: what each of a scenario's recordings is for (:meth:`Scenario.recordings_paths`)
+RECORDINGS_ROLES = {"perception_recordings": "pi_per is learned from",
+                    "sensor_recordings": "the simulated sensor is fitted to"}
+
+#: the report's figures of recordings: the first file, the second (a scenario may learn pi_per
+#: from one file and fit its sensor to another)
+RECORDINGS_FIGURES = ("recordings.png", "recordings_2.png")
+
+
+#: the columns of a recordings file that are not readings: the cell pressed, and the raw
+#: figures of a physics press (runner.robot.presses.RAW_COLUMNS, which a test holds them to)
+NOT_READINGS = ("ix", "iy", "iz", "force_n", "depth_m", "friction_ratio", "tangential_sd_n")
+
+
+def recording_columns(columns: Sequence[str]) -> list[str]:
+    """The readings among a recordings file's ``columns`` (its material's left out), until a
+    perception names them: every column but the cell pressed and a physics press's raw
+    figures."""
+    return [c for c in columns if c not in NOT_READINGS]
+
+
+def recordings_section(scenario: Scenario, folder: Path, readings: Sequence[str] | None = None,
+                       material: str | None = None, discrete: Sequence[str] = ()) -> list[str]:
+    """The recordings the scenario learns pi_per from or fits its sensor to, drawn into
+    ``folder`` (:func:`figures.recordings_figure`), and the report's lines that show them; none
+    for a scenario without recordings. ``readings``: the columns drawn (default:
+    :func:`recording_columns`); ``material``: the material column (default: ``material``,
+    ``M``, else the first that is not numbers); ``discrete``: readings drawn as states even if
+    they are numbers. A file is read as it was stored with the results in ``folder``'s parent,
+    when they hold it (else from its path): the report shows what the runs learned from."""
+    import tempfile
+
+    from bayesprog import summarise
+
+    files: dict[Path, list[str]] = {}  # a file learned from and fitted to: one figure
+    for role, path in scenario.recordings_paths().items():
+        files.setdefault(Path(path), []).append(role)
+    stored = _stored_files(folder.parent)
+    lines: list[str] = []
+    written: set[str] = set()
+    for (path, roles), png in zip(files.items(), RECORDINGS_FIGURES, strict=False):
+        text = next((stored[r].get("text") for r in roles if r in stored), None)
+        with tempfile.TemporaryDirectory(prefix="bayesprog-recordings-") as tmp:
+            source = path
+            if isinstance(text, str):  # the stored copy, under the file's own name
+                source = Path(tmp) / path.name
+                source.write_text(text, encoding="utf-8")
+            whole = summarise(source, material, source=path.name)
+            shown = list(readings) if readings is not None else recording_columns(whole.columns)
+            if not shown:
+                continue
+            summary = summarise(source, whole.by, shown, discrete, source=path.name)
+            figures.recordings_figure(source, whole.by, shown, folder / png, discrete=discrete,
+                                      title=f"{path.name}: {summary.rows} presses")
+        written.add(png)
+        counts = ", ".join(f"{m} {n}" for m, n in summary.counts.items())
+        empty = {c: int(t["missing"].sum())
+                 for c, t in {**summary.real, **summary.discrete}.items()}
+        missing = ", ".join(f"{c} {empty[c]}" for c in shown if empty[c])
+        uses = " and ".join(RECORDINGS_ROLES[r] for r in roles)
+        lines += [f"![Recordings {path.name}]({png})", "",
+                  f"*The recordings `{path.name}` that {uses}: {summary.rows} presses "
+                  f"({counts}). Off the diagonal, every pair of the readings "
+                  f"{', '.join(shown)}, one colour per material; on the diagonal, each "
+                  "reading's histogram per material (a reading of states: the count of each). "
+                  + (f"Missing readings, each left out of the pairs it is in: {missing}."
+                     if missing else "No reading is missing.") + "*", ""]
+    for png in set(RECORDINGS_FIGURES) - written:  # an earlier report's
+        (folder / png).unlink(missing_ok=True)
+    return [""] + lines if lines else []
+
+
+def _stored_files(out: Path) -> dict[str, Any]:
+    """The files stored with the results in ``out`` (role -> path and text); none when ``out``
+    holds no readable manifest."""
+    try:
+        files = ResultStore(out).manifest().get("files", {})
+    except (OSError, ValueError, BayesprogError):
+        return {}
+    return files if isinstance(files, dict) else {}
 
 
 def comparison_lines(found: list[tuple[str, str, str]], other: Path, name: str) -> list[str]:
@@ -538,7 +623,7 @@ def _build_report(out: Path, animation: bool, compare: Path | None, pool: Any) -
                                                         allow_nan=False).encode())
     atomic_write(folder / "findings.json", json.dumps(_json_safe(judged), indent=1,
                                                       allow_nan=False).encode())
-    extra = perception_lines(scenario, rows, spec.tasks)
+    extra = perception_lines(scenario, rows, spec.tasks, folder)
     if compare is not None:
         extra += comparison_lines(found, compare, spec.name)
     md = _markdown(spec, rows, found, borders, step, task, manifest["hash"], run, extra, video,

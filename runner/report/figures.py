@@ -1,14 +1,17 @@
 """Drawing the workspace: maps over the grid in centimetres with colour bars, the ground-truth
 border as a line between cells, materials with a legend, the path, its start and the chosen
-cell. Used by the report's figures and the notebook's step view.
+cell. Used by the report's figures and the notebook's step view. And a lab's recordings,
+reading by reading per material (:func:`recordings_figure`).
 
 A volume of cells is drawn a plane at a time (:class:`Plane`): one slice along z, or the view
 from above (fields summed over z). Every function here takes a 2-D scenario or a plane."""
 
 from __future__ import annotations
 
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -224,3 +227,16 @@ def axes_in_cm(axes: np.ndarray) -> None:
             ax = axes[r, c]
             ax.set_xlabel("x (cm)" if r == rows - 1 else "", fontsize=7)
             ax.set_ylabel("y (cm)" if c == 0 else "", fontsize=7)
+
+
+def recordings_figure(frame: Any, material_column: str, readings: Sequence[str], path: Path,
+                      title: str | None = None, discrete: Collection[str] = ()) -> None:
+    """A lab's recordings (a DataFrame, or a CSV or Parquet file: one row per press) drawn
+    reading by reading into ``path``: every pair of ``readings`` per material (one colour
+    each, with a legend), each reading's histogram per material on the diagonal (a discrete
+    reading, or one named in ``discrete``: the count of each state), a press's missing
+    readings left out pair by pair (:func:`bayesprog.draw.scatter_matrix`)."""
+    from bayesprog import scatter_matrix
+
+    scatter_matrix(frame, by=material_column, columns=list(readings), discrete=discrete,
+                   title=title).savefig(path, dpi=110)

@@ -268,6 +268,11 @@ def test_an_experiment_runs_on_a_labs_recordings_and_reports_where_they_came_fro
     report = (tmp_path / "out" / "report" / "report.md").read_text()
     assert "learned from 900 probes of `recordings.csv`" in report
     assert "sensor model `fitted to recordings.csv`" in report
+    # the recordings drawn in the perception section, after the recognition table
+    perception = report.split("## Perception", 1)[1].split("\n## ", 1)[0]
+    assert perception.index("| material in the scenario |") \
+        < perception.index("![Recordings recordings.csv](recordings.png)")
+    assert (tmp_path / "out" / "report" / "recordings.png").is_file()
     manifest = json.loads((tmp_path / "out" / "experiment.json").read_text())
     assert {"perception_recordings", "sensor_recordings"} <= set(manifest["files"])
 
