@@ -31,6 +31,7 @@ _WHERE = {
     "SpecError": "bayesprog.errors",
     "ZeroEvidenceError": "bayesprog.errors",
     "short_repr": "bayesprog.errors",
+    "did_you_mean": "bayesprog.errors",
     "Question": "bayesprog.expressions",
     "canonical": "bayesprog.expressions",
     "atomic_write": "bayesprog.files",
@@ -114,6 +115,7 @@ __getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 __all__ = [
     # programs, questions and their answers
     "BayesprogError",
+    "did_you_mean",
     "Density",
     "Diagnostic",
     "Form",

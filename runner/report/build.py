@@ -389,9 +389,9 @@ def physics_confusion(scenario: Scenario, per_material: int, seed: int) -> np.nd
     k = len(scenario.materials)
     out = np.zeros((k, k))
     for m, cells in press_cells(scenario.material_map, per_material, seed):
-        sensor = PhysicsSensor(scene, [])
-        readings = sensor.readings([scene.probe(int(c), np.random.default_rng([seed, m, i]))
-                                    for i, c in enumerate(cells)])
+        readings = PhysicsSensor(scene, []).readings(
+            [scene.probe(int(c), np.random.default_rng([seed, m, i]))
+             for i, c in enumerate(cells)])
         post = scenario.readings.posterior(readings)
         np.add.at(out[m], post.argmax(-1), 1.0 / per_material)
     return out
@@ -439,7 +439,10 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str],
                         reverse=True)
         taken = ", ".join(f"{n} {100 * v:.1f}%" for v, n in others[:2] if v >= 0.001) or "-"
         lines.append(f"| {m} | {100 * matrix[i, i]:.1f}% | {taken} |")
-    lines += recordings_section(scenario, folder) if folder is not None else []
+    if folder is not None:
+        perception = scenario.readings
+        lines += recordings_section(scenario, folder, readings=list(perception.names),
+                                    discrete=[r.name for r in perception.readings if r.discrete])
     per = {r["task"]: r["final_per_border_cell_mm"] for r in rows if r["configuration"] == "full"}
     if set(per) >= set(tasks) and len(tasks) > 1:
         rate = {t: matrix[scenario.task_material(t), scenario.task_material(t)] for t in tasks}
@@ -462,7 +465,8 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str],
 
 #: what each of a scenario's recordings is for (:meth:`Scenario.recordings_paths`)
 RECORDINGS_ROLES = {"perception_recordings": "pi_per is learned from",
-                    "sensor_recordings": "the simulated sensor is fitted to"}
+                    "sensor_recordings": "the simulated sensor is fitted to",
+                    "sensor_resampled": "the simulated sensor resamples"}
 
 #: the report's figures of recordings: the first file, the second (a scenario may learn pi_per
 #: from one file and fit its sensor to another)

@@ -3,7 +3,9 @@ records them to learn pi_per: N presses at random cells of each material of the 
 layout, one row each, ``material`` and the readings by name first (the columns a scenario's
 ``programs: perception: {recordings: FILE.csv}`` reads: for the paper's program
 ``material,texture,compliance``), then the cell and, with physics probes, the raw figures
-(normal force in N, depth in m, friction ratio, the tangential force's fluctuation in N). With ``--traces FILE.npz`` the per-step force and height traces too.
+(normal force in N, depth in m, friction ratio, the tangential force's fluctuation in N) and
+every other feature of the press by its name (:data:`runner.world.physics.FEATURES`: those a
+scenario can map its readings to). With ``--traces FILE.npz`` the per-step force and height traces too.
 
 Press i of material m is seeded by (S, m, i): its cell, its positioning error and its noise, so
 a file is the same whatever else is recorded.
@@ -18,7 +20,7 @@ import numpy as np
 
 from bayesprog import BayesprogError, atomic_write
 from runner.experiments.loop import make_sensor
-from runner.world.physics import Probe, ProbeSpec, press_cells
+from runner.world.physics import FEATURES, Probe, ProbeSpec, press_cells
 from runner.world.scenario import Scenario
 
 #: the raw figures of a physics press, and their columns (with their units)
@@ -45,6 +47,11 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         seeds = [(seed, m, i) for i in range(presses)]
         sensor = make_sensor(scenario, seeds, physics)
         readings = sensor.probe(cells)
+        if set(readings.names) != set(names):
+            raise BayesprogError(f"the fingertip gives the readings "
+                                 f"{', '.join(readings.names)}, the perception program reads "
+                                 f"{', '.join(names)}: map each to a feature under the "
+                                 "scenario's sensor: physics: readings: {READING: FEATURE}")
         probes: list[Probe] = getattr(sensor, "last", [])
         index = np.unravel_index(cells, scenario.shape)
         table["material"] += [scenario.materials[m]] * presses
@@ -56,6 +63,10 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         for probe in probes:
             for key, column in RAW_COLUMNS.items():
                 table.setdefault(column, []).append(float(f"{getattr(probe, key):.6g}"))
+            for feature in FEATURES:  # every feature of the press, beside the readings
+                if feature not in RAW_COLUMNS and feature not in names:
+                    table.setdefault(feature, []).append(
+                        float(f"{probe.features[feature]:.6g}"))
             for key, values in probe.traces.items() if keep_traces else ():
                 traces.setdefault(key, []).append(values)
         done += presses

@@ -73,7 +73,7 @@ class Recorder:
         beside = {k: v for k, v in obj.items() if k in names}
         extra = sorted(set(obj) - RECORD_KEYS - set(beside))
         if extra:
-            from bayesprog.errors import did_you_mean
+            from bayesprog import did_you_mean
 
             raise ValueError(f"unknown key(s) {', '.join(map(repr, extra))}"
                              + did_you_mean(extra[0], sorted(RECORD_KEYS | set(names)))
@@ -112,7 +112,7 @@ class Recorder:
         if "material" in obj:
             material = obj["material"]
             if not isinstance(material, str) or material not in materials:
-                from bayesprog.errors import did_you_mean
+                from bayesprog import did_you_mean
 
                 raise ValueError(f"unknown material {short_repr(material, 40)}: expected one of "
                                  f"{', '.join(materials)}"

@@ -498,7 +498,7 @@ def feature_problems(spec: ProbeSpec, properties: Mapping[str, MaterialPhysics],
     ('readings', 'heat') reading 'heat': temperature_drop needs each laid material's effusivity (thermal effusivity sqrt(k rho c), W s^0.5 m^-2 K^-1), and basalt has none: give it under physics: (basalt: {effusivity: ...}) or read another feature
     ('readings', 'grip') reading 'grip': unknown feature 'fricton_ratio': did you mean 'friction_ratio'? (expected one of texture, compliance, force, depth, friction_ratio, tangential_sd, pressure, vibration_power, electrode_spread, temperature_drop)
     """
-    from bayesprog.errors import did_you_mean
+    from bayesprog import did_you_mean
 
     laid = sorted(set(laid))
     problems: list[tuple[tuple, str]] = []
@@ -813,13 +813,17 @@ class PhysicsSensor:
     def probe(self, cells: np.ndarray) -> Readings:
         """The readings of one probe per run at ``cells`` [runs] (flat); the probes are kept
         in :attr:`last`."""
-        from runner.world.readings import Readings
-
         self.last = []
         for r, cell in enumerate(np.asarray(cells).ravel()):
             rng = np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
             self.last.append(self.scene.probe(int(cell), rng))
             self.steps[r] += 1
-        values = np.array([[p.features[f] for f in self._features] for p in self.last],
-                          dtype=float).reshape(len(self.last), len(self.names))
+        return self.readings(self.last)
+
+    def readings(self, probes: Sequence[Probe]) -> Readings:
+        """The readings of ``probes`` (one per run): the features the scene's readings name."""
+        from runner.world.readings import Readings
+
+        values = np.array([[p.features[f] for f in self._features] for p in probes],
+                          dtype=float).reshape(len(probes), len(self.names))
         return Readings(self.names, values)

@@ -66,7 +66,7 @@ class Reading:
             if isinstance(raw, str):
                 if raw in self.states:
                     return float(self.states.index(raw))
-                from bayesprog.errors import did_you_mean
+                from bayesprog import did_you_mean
 
                 raise ReadingError(f"{self.name}: state {short_repr(raw, 40)} is not one of "
                                    f"{', '.join(self.states)}"
@@ -281,7 +281,7 @@ class Perception:
         null or NaN is missing). Raises ReadingError for a name the program does not read."""
         unknown = [k for k in sent if k not in self._by_name]
         if unknown:
-            from bayesprog.errors import did_you_mean
+            from bayesprog import did_you_mean
 
             raise ReadingError(f"unknown reading(s) {', '.join(map(repr, unknown))}"
                                + did_you_mean(str(unknown[0]), self.names)
@@ -363,7 +363,7 @@ def perception_problems(program: Program, material: str,
     """What keeps ``program`` from perceiving the readings ``named``: an undeclared material
     or reading variable, a material that is not discrete, a field, a name given twice; each
     as (``"material"`` or ``"readings"``: what it is about, the message)."""
-    from bayesprog.errors import did_you_mean
+    from bayesprog import did_you_mean
 
     variables = program.variables
     problems: list[tuple[str, str]] = []

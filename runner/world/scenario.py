@@ -27,11 +27,13 @@ from pydantic import (
 import bayesprog
 from bayesprog import SpecError, limit, load_document, reference_problem
 from runner.world.physics import (
+    FEATURES,
     MaterialPhysics,
     MaterialPhysicsPatch,
     ProbeSpec,
     Scene,
     default_materials,
+    feature_problems,
     merged,
 )
 from runner.world.readings import Perception, ReadingError, perception_problems, reading_pairs
@@ -647,7 +649,7 @@ def _recordings_frame(path: Path, name: str, columns: Mapping[str, str],
     (the material's: 'material'), else by its variable's."""
     import pandas as pd
 
-    from bayesprog.errors import did_you_mean
+    from bayesprog import did_you_mean
 
     file = (path.parent / name).resolve()
     problem = reference_problem(file, "recordings", name) if not file.is_file() else None
@@ -799,6 +801,18 @@ def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ..
                                      at_key=True)
                   for name in sorted(laid) if name in materials and name not in properties
                   and name not in lacking]
+        probe = spec.sensor.physics
+        diags += [located.diagnostic(("sensor", "physics", *where), message, at_key=True)
+                  for where, message in feature_problems(probe, properties, laid)]
+        given, read = list(probe.readings), list(readings.names)
+        if set(given) != set(read):
+            lacking_features = [n for n in read if n not in given]
+            diags.append(located.diagnostic(
+                ("sensor", "physics"), f"the fingertip gives the readings {', '.join(given)}, "
+                f"but the perception program reads {', '.join(read)}: map "
+                + (f"{', '.join(lacking_features)} " if lacking_features else "each reading ")
+                + "to a feature under sensor: physics: readings: {READING: FEATURE} (features: "
+                + ", ".join(FEATURES) + ")", at_key=True))
     return diags
 
 
