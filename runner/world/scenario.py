@@ -804,6 +804,11 @@ def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ..
         probe = spec.sensor.physics
         diags += [located.diagnostic(("sensor", "physics", *where), message, at_key=True)
                   for where, message in feature_problems(probe, properties, laid)]
+        diags += [located.diagnostic(("sensor", "physics", "readings", name), f"reading "
+                                     f"{name!r} is discrete (states {', '.join(r.states)}): "
+                                     "the fingertip's features are numbers", at_key=True)
+                  for name in probe.readings
+                  if name in readings.names and (r := readings.reading(name)).states]
         given, read = list(probe.readings), list(readings.names)
         if set(given) != set(read):
             lacking_features = [n for n in read if n not in given]
