@@ -102,7 +102,7 @@ class TableEstimator(Estimator):
 
 
 def _weighted(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    w = weights.reshape(len(x), -1)
+    w = weights.reshape(len(x), int(np.prod(weights.shape[1:])))  # no row: no -1 to infer
     n = w.sum(0)
     return n, x @ w, (x * x) @ w
 
@@ -110,7 +110,7 @@ def _weighted(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def _moments(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted count, mean and sum of squared deviations per column of ``weights`` [n, m]:
     centred, so that values far from zero keep their precision."""
-    w = weights.reshape(len(x), -1)
+    w = weights.reshape(len(x), int(np.prod(weights.shape[1:])))  # no row: no -1 to infer
     n = w.sum(0)
     safe = np.where(n > 0, n, 1.0)
     mean = (x @ w) / safe

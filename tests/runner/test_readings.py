@@ -1,0 +1,268 @@
+"""A lab's own readings: perceived through whatever variables its pi_per declares (checked
+against scipy.stats), missing ones summed out, drawn by simulated sensors seeded per run,
+recorded, logged and checked at their line before anything runs."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+import bayesprog
+from bayesprog.cli import main
+from runner.attention.explorer import Explorer
+from runner.experiments.loop import make_sensor
+from runner.robot.log import SessionLog
+from runner.robot.recording import Recorder
+from runner.robot.stdio import serve
+from runner.world.readings import Perception, ReadingError, Readings
+from runner.world.scenario import load_scenario
+
+ROOT = Path(__file__).parents[2]
+MODELS = ROOT / "models"
+TRUTH = MODELS / "fingertip" / "truth.yaml"
+FINGERTIP = MODELS / "scenarios" / "fingertip.yaml"
+
+
+@pytest.fixture(scope="module")
+def truth() -> Perception:
+    return Perception(bayesprog.load(TRUTH))
+
+
+@pytest.fixture(scope="module")
+def fingertip():
+    return load_scenario(FINGERTIP)
+
+
+@pytest.fixture(scope="module")
+def world():
+    """The example's world: probes drawn from its true program, whose features depend on
+    each other (no sensor: the perception program is drawn from)."""
+    return load_scenario(MODELS / "scenarios" / "fingertip_truth.yaml")
+
+
+def by_hand(pdc: float, pac: float | None, tdc: float | None, slip: str | None) -> np.ndarray:
+    """P(M | the readings given) of models/fingertip/truth.yaml, by scipy.stats: pac_rms
+    depends on pdc; electrode_var (left out) is summed out with its own Normal."""
+    means = {"pine": (31.0, 3.0, -1.2, 0.25, 0.9, 0.3), "steel": (36.0, 2.5, -2.3, 0.2, 3.4, 0.4),
+             "felt": (12.0, 3.5, -1.6, 0.3, 0.5, 0.25), "rubber": (21.0, 3.0, -2.0, 0.25, 1.3, 0.35)}
+    slips = {"pine": 0.3, "steel": 0.6, "felt": 0.1, "rubber": 0.05}
+    out = []
+    for m, (mp, sp, a, sa, mt, st) in means.items():
+        p = stats.norm(mp, sp).pdf(pdc)
+        if pac is not None:
+            p *= stats.norm(a + 0.02 * pdc, sa).pdf(pac)
+        if tdc is not None:
+            p *= stats.norm(mt, st).pdf(tdc)
+        if slip is not None:
+            p *= slips[m] if slip == "slip" else 1 - slips[m]
+        out.append(p)
+    out = np.array(out)
+    return out / out.sum()
+
+
+def test_features_that_depend_on_each_other_and_a_discrete_one_are_perceived_exactly(truth):
+    assert truth.names == ("pdc", "pac_rms", "tdc", "electrode_var", "slip")
+    assert truth.reading("slip").discrete and not truth.naive_normals
+    nan = math.nan
+    readings = Readings(truth.names, [[30.0, -0.6, 1.0, nan, 1], [25.0, nan, nan, nan, 0],
+                                      [14.0, -1.4, 0.6, nan, nan]])
+    got = truth.posterior(readings)
+    expected = [by_hand(30.0, -0.6, 1.0, "slip"), by_hand(25.0, None, None, "stick"),
+                by_hand(14.0, -1.4, 0.6, None)]
+    np.testing.assert_allclose(got, expected, rtol=1e-10)
+
+
+def test_a_probe_without_any_reading_is_refused(truth):
+    with pytest.raises(ReadingError, match="nothing to perceive"):
+        truth.posterior(Readings(truth.names, np.full((1, 5), np.nan)))
+
+
+def test_readings_as_sent_name_states_and_refuse_what_is_not_a_reading(truth):
+    r = truth.readings_of({"pdc": 20, "slip": "stick", "tdc": None})
+    assert r.missing_names() == ["pac_rms", "tdc", "electrode_var"] and r["slip"][0] == 0.0
+    assert truth.readings_of({"pdc": 20, "slip": 1})["slip"][0] == 1.0
+    with pytest.raises(ReadingError, match="state 'slipped' is not one of stick, slip: did you "
+                                           "mean 'slip'"):
+        truth.readings_of({"slip": "slipped"})
+    with pytest.raises(ReadingError, match="unknown reading.*'tcd'.*did you mean 'tdc'"):
+        truth.readings_of({"tcd": 1.0})
+    with pytest.raises(ReadingError, match="pdc: expected a number"):
+        truth.readings_of({"pdc": "high"})
+
+
+@pytest.mark.parametrize("which", ["world", "fingertip"])
+def test_a_simulated_sensor_is_seeded_per_run_whatever_the_batch(which, request):
+    scenario = request.getfixturevalue(which)  # drawn from the program; resampled recordings
+    seeds = [(3, r, 1) for r in range(6)]
+    cells = np.array([5, 100, 300, 400, 600, 700])
+    together = make_sensor(scenario, seeds).probe(cells)
+    for r in range(6):
+        alone = make_sensor(scenario, seeds[r:r + 1]).probe(cells[r:r + 1])
+        np.testing.assert_array_equal(alone.values, together.values[r:r + 1])
+    again = make_sensor(scenario, seeds).probe(cells)
+    np.testing.assert_array_equal(again.values, together.values)
+
+
+def test_draws_of_the_program_follow_it_given_the_material(world):
+    material = world.material_map.ravel()
+    steel = np.flatnonzero(material == world.materials.index("steel"))[:1]
+    sensor = make_sensor(world, [(1, r, 1) for r in range(3000)])
+    drawn = sensor.probe(np.repeat(steel, 3000))
+    assert stats.kstest(drawn["pdc"], stats.norm(36.0, 2.5).cdf).pvalue > 1e-3
+    slope = np.polyfit(drawn["pdc"], drawn["pac_rms"], 1)[0]
+    assert slope == pytest.approx(0.02, abs=0.01)  # the dependence is drawn, not dropped
+    assert np.mean(drawn["slip"] == 1) == pytest.approx(0.6, abs=0.04)
+
+
+def test_resampled_probes_are_rows_of_the_cells_material(fingertip):
+    frame = pd.read_csv(MODELS / "data" / "fingertip_presses.csv")
+    sensor = make_sensor(fingertip, [(2, r, 1) for r in range(50)])
+    material = fingertip.material_map.ravel()
+    cells = np.arange(0, 50 * 17, 17)
+    drawn = sensor.probe(cells)
+    for r, cell in enumerate(cells):
+        rows = frame[frame["material"] == fingertip.materials[material[cell]]]
+        assert np.isclose(rows["pdc"].to_numpy(), drawn["pdc"][r]).any()
+        row = rows[np.isclose(rows["pdc"].to_numpy(), drawn["pdc"][r])].iloc[0]
+        assert row["tdc"] == pytest.approx(drawn["tdc"][r])
+        assert ["stick", "slip"][int(drawn["slip"][r])] == row["slip"]
+
+
+def test_the_learned_program_keeps_the_observed_ranges_and_warns_only_outside_them(fingertip):
+    frame = pd.read_csv(MODELS / "data" / "fingertip_presses.csv")
+    record = fingertip.perception.learned[-1]
+    for reading in ("pdc", "tdc"):
+        assert record.ranges[reading]["*"] == [frame[reading].min(), frame[reading].max()]
+        for m, rows in frame.groupby("material"):
+            assert record.ranges[reading][f"M={m}"] == [rows[reading].min(), rows[reading].max()]
+    perception = fingertip.readings
+    readings = Readings.of(perception.names, {
+        n: frame[n].map({"stick": 0, "slip": 1}) if n == "slip" else frame[n]
+        for n in perception.names})
+    assert not any(perception.range_warnings(readings, r) for r in range(len(frame)))
+    far = perception.readings_of({"pdc": 500.0, "tdc": 1.0})
+    assert "pdc 500 is outside [" in perception.range_warnings(far)[0]
+    assert perception.far_warning(far).startswith("pdc 500 is ")  # in pdc's own units
+    assert "tdc" not in perception.far_warning(far)
+
+
+STDIO = [{"cell": [2, 2], "readings": {"pdc": 31.0, "pac_rms": -0.6, "tdc": 0.9,
+                                       "electrode_var": 0.28, "slip": "stick"}},
+         {"cell": [3, 2], "readings": {"pdc": 30.0, "tdc": None, "slip": "slip"}},
+         {"cell": [3, 3], "pdc": 29.0, "pac_rms": float("nan")}]
+
+
+def test_a_session_with_missing_and_discrete_readings_leaves_a_log_that_learns(tmp_path,
+                                                                                fingertip):
+    lines = "".join(json.dumps(line) + "\n" for line in STDIO)
+    log = SessionLog(tmp_path / "session.csv")
+    out = io.StringIO()
+    assert serve(Explorer(fingertip, "follow_steel"), io.StringIO(lines), out, log=log) == 3
+    log.close()
+    replies = [json.loads(line) for line in out.getvalue().splitlines()]
+    assert "missing" not in replies[0]
+    assert replies[1]["missing"] == ["pac_rms", "tdc", "electrode_var"]
+    assert replies[2]["missing"] == ["pac_rms", "tdc", "electrode_var", "slip"]
+    table = pd.read_csv(tmp_path / "session.csv")
+    assert list(table["step"]) == [0, 1, 2] and list(table["slip"].fillna("")) == [
+        "stick", "slip", ""]
+    assert table["tdc"].isna().tolist() == [False, True, True]
+    assert list(table["material"]) == ["pine"] * 3
+    assert list(table["decided"]) == [r["probed"]["material"] for r in replies]
+    assert [[a, b] for a, b in zip(table["next_ix"], table["next_iy"], strict=True)] == [
+        r["next"] for r in replies]
+    meta = json.loads((tmp_path / "session.json").read_text())
+    assert meta["task"] == "follow_steel" and meta["readings"] == list(fingertip.readings.names)
+
+
+def test_recording_a_labs_sensor_over_stdio_writes_recordings_that_learn(tmp_path, fingertip):
+    recorder = Recorder(fingertip, tmp_path / "presses.csv")
+    rng = np.random.default_rng(5)
+    lines = []
+    for material, (pdc, tdc) in {"steel": (36, 3.4), "felt": (12, 0.5)}.items():
+        for _ in range(20):
+            lines.append(json.dumps({"material": material, "readings": {
+                "pdc": pdc + rng.normal(), "pac_rms": -1.5 + 0.1 * rng.normal(),
+                "tdc": tdc + 0.1 * rng.normal(), "electrode_var": 0.3 + 0.01 * rng.normal(),
+                "slip": ["stick", "slip"][int(rng.integers(2))]}}))
+    lines += [json.dumps({"cell": [0, 0], "pdc": 30.0}),  # pine in the layout
+              json.dumps({"cell": [0, 0], "material": "felt", "pdc": 30.0}),
+              json.dumps({"material": "steel"})]
+    replies = [recorder.answer(line) for line in lines]
+    recorder.close()
+    assert replies[39] == {"recorded": 40, "material": "felt"}
+    assert replies[40] == {"recorded": 41, "material": "pine"}
+    assert "not felt: expected the two to agree" in replies[41]["error"]
+    assert "nothing recorded" in replies[42]["error"]
+    table = pd.read_csv(tmp_path / "presses.csv")
+    assert list(table.columns) == ["material", *fingertip.readings.names, "ix", "iy"]
+    assert len(table) == 41 and table.iloc[40]["ix"] == 0 and np.isnan(table.iloc[0]["ix"])
+    steel = table[table["material"] == "steel"]
+    program = bayesprog.load(MODELS / "fingertip" / "pi_per.yaml")
+    labelled = table[table["material"] != "pine"]  # one press of pine: too few to learn
+    fitted = program.fit(labelled[["material", *fingertip.readings.names]].rename(
+        columns={"material": "M"}), states_from_data=["M"]).program
+    mean = fitted.term("P(pdc | M)").params["mean"].array  # type: ignore[union-attr]
+    states = fitted.variables["M"].states  # type: ignore[union-attr]
+    assert mean[list(states).index("steel")] == pytest.approx(steel["pdc"].mean())
+
+
+def write_scenario(tmp_path: Path, old: str, new: str) -> Path:
+    text = FINGERTIP.read_text().replace("../", f"{MODELS}/").replace(old, new)
+    assert text != FINGERTIP.read_text().replace("../", f"{MODELS}/"), old
+    path = tmp_path / "lab.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    ("readings: [pdc, pac_rms, tdc, electrode_var, slip]",
+     "readings: [pdc, pac_rms, tcd, electrode_var, slip]",
+     "lab.yaml:14:15: perception program 'fingertip_per': fingertip_per declares no variable "
+     "'tcd' for the reading 'tcd': did you mean 'tdc'?"),
+    ("    material: M\n", "    material: m\n",
+     "lab.yaml:13:15: perception program 'fingertip_per': fingertip_per declares no material "
+     "variable 'm': did you mean 'M'?"),
+    ("  resample: ../data/fingertip_presses.csv", "  model: ../sensors/biotac_proxy.yaml",
+     "a sensor model gives the readings texture, compliance (the paper's), but the perception "
+     "program reads pdc, pac_rms, tdc, electrode_var, slip"),
+    ("  resample: ../data/fingertip_presses.csv", "  physics: {readings: {pdc: pressure}}",
+     "the fingertip gives the readings pdc, but the perception program reads pdc, pac_rms, "
+     "tdc, electrode_var, slip: map pac_rms, tdc, electrode_var, slip to a feature"),
+])
+def test_what_a_lab_gets_wrong_is_refused_at_its_line_before_anything_runs(
+        tmp_path, capsys, old, new, expected):
+    path = write_scenario(tmp_path, old.replace("../", f"{MODELS}/"),
+                          new.replace("../", f"{MODELS}/"))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err, err
+
+
+def test_a_resampled_file_without_a_readings_column_is_refused_at_its_line(tmp_path, capsys):
+    frame = pd.read_csv(MODELS / "data" / "fingertip_presses.csv").drop(columns=["tdc"])
+    frame.to_csv(tmp_path / "short.csv", index=False)
+    path = write_scenario(tmp_path, f"resample: {MODELS}/data/fingertip_presses.csv",
+                          f"resample: {tmp_path}/short.csv")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    line = path.read_text().splitlines().index(f"  resample: {tmp_path}/short.csv") + 1
+    assert f"lab.yaml:{line}:13: recordings" in err and "no column 'tdc'" in err, err
+
+
+def test_a_labs_experiment_runs_through_its_own_readings(tmp_path):
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text(f"experiment: 1\nname: lab\nrunner: haptic\nscenario: {FINGERTIP}\n"
+                          "tasks: [follow_felt]\nconfigurations: [full, without_S]\n"
+                          "runs: 3\niterations: 12\nseed: 4\n")
+    assert main(["run", str(experiment), "--out", str(tmp_path / "out"), "-q",
+                 "--no-report"]) == 0
+    assert main(["results", str(tmp_path / "out"), "-o", str(tmp_path / "runs.csv")]) == 0
+    assert set(pd.read_csv(tmp_path / "runs.csv")["configuration"]) == {"full", "without_S"}
