@@ -176,10 +176,14 @@ def simulate(
     # the cues behind each probed cell, at that cell (from the decision that chose it; none
     # for the start cell)
     cues = {name: np.full((runs, iterations), np.nan) for name in CUES}
+    readings = {READING + name: np.full((runs, iterations), np.nan)
+                for name in explorer.readings.names}
     rows = np.arange(runs)
     for step in steps(explorer, sensor, iterations):
         k = step.k
         out_paths[:, k] = step.cells
+        for name, values in step.readings.columns().items():
+            readings[READING + name][:, k] = values
         out_gamma[:, k] = gamma.probe(step.cells)
         if step.next is not None:
             d, cells = explorer.decision, step.next
@@ -187,12 +191,15 @@ def simulate(
             cues["saliency"][:, k + 1] = d.saliency[rows, cells]
             cues["uncertainty"][:, k + 1] = d.uncertainty[rows, cells]
             cues["target_probability"][:, k + 1] = explorer.target_probabilities[rows, cells]
-    return {"gamma": out_gamma, "paths": out_paths, **cues}
+    return {"gamma": out_gamma, "paths": out_paths, **cues, **readings}
 
 
 #: stored per probe beside Gamma and the path: the cues at the probed cell when it was chosen,
 #: and its probability under pi_tar's posterior then
 CUES = ("inhibition", "saliency", "uncertainty", "target_probability")
+#: and each reading of the probe, stored under this prefix and its name (NaN: missing; a
+#: discrete reading its state's index)
+READING = "reading:"
 
 
 def mean_sem(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,7 @@ import numpy as np
 
 from bayesprog import BayesprogError, atomic_write, require_extra
 from runner.experiments.executors import progress_bar
-from runner.experiments.experiment import CUES, load_replications, stored_experiment
+from runner.experiments.experiment import CUES, READING, load_replications, stored_experiment
 from runner.experiments.metrics import border_band
 from runner.experiments.store import ResultStore
 from runner.report.figures import centre_cm
@@ -37,6 +37,8 @@ COLUMNS = {
     "uncertainty": "U there",
     "target_probability": "its probability under pi_tar's posterior when it was chosen",
 }
+#: then one column per reading of the scenario's perception, by its name (empty: missing; a
+#: discrete reading by its state), prefixed ``reading_`` where a name is one of the columns
 
 
 def runs_table(out: str | Path) -> Any:
@@ -71,13 +73,24 @@ def runs_table(out: str | Path) -> Any:
                     columns["z_cm"] = scenario.centres[paths.ravel(), 2] * 100
                 for name in CUES:
                     columns[name] = r.get(name, np.full(paths.shape, np.nan)).ravel()
+                for reading in scenario.readings.readings:  # results of before: not stored
+                    values = r.get(READING + reading.name)
+                    if values is None:
+                        continue
+                    column = reading.name if reading.name not in COLUMNS else \
+                        f"reading_{reading.name}"
+                    flat = values.ravel()
+                    columns[column] = flat if reading.states is None else pd.Categorical(
+                        [None if np.isnan(v) else reading.states[int(v)] for v in flat],
+                        categories=list(reading.states))
                 frames.append(pd.DataFrame(columns))
                 bar.update(1)
     bar.close()
     table = pd.concat(frames, ignore_index=True)
     for name in ("task", "configuration"):
         table[name] = table[name].astype("category")
-    return table[[c for c in COLUMNS if c in table.columns]]
+    readings = [c for c in table.columns if c not in COLUMNS]
+    return table[[c for c in COLUMNS if c in table.columns] + readings]
 
 
 def write_runs(out: str | Path, path: str | Path) -> tuple[Path, int]:
