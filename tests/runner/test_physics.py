@@ -189,7 +189,8 @@ def test_the_closed_loop_with_a_simulated_fingertip(capsys, paper_physics):
     for probe, cell in zip(outcome["probes"], cells, strict=True):
         material = paper_physics.materials[paper_physics.material_map[cell]]
         assert probe["material"] == material
-        assert set(probe) == {"cell", "texture", "compliance", "material"}
+        assert set(probe) == {"cell", "readings", "material"}
+        assert set(probe["readings"]) == {"texture", "compliance"}
     centres = (np.array(cells) + 0.5) * paper_physics.cell
     assert outcome["path_m"] == pytest.approx(np.linalg.norm(np.diff(centres, axis=0),
                                                              axis=1).sum())

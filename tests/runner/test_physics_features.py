@@ -275,3 +275,12 @@ def test_a_sensor_that_asks_what_its_surface_cannot_give_is_refused():
 def test_a_vibration_band_outside_the_samples_is_refused(band):
     with pytest.raises(ValueError, match="vibration_band"):
         ProbeSpec(vibration_band=band)
+
+
+def test_the_sensor_reads_probes_made_elsewhere(paper_physics):
+    scene = paper_physics.physics_scene()
+    probes = [scene.probe(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
+    readings = PhysicsSensor(scene, []).readings(probes)
+    assert readings.names == ("texture", "compliance")
+    assert readings.values.tolist() == [list(MAIN_PROBES[940, (11, 940, s)]) for s in (0, 1)]
+    assert PhysicsSensor(scene, []).readings([]).values.shape == (0, 2)
