@@ -425,8 +425,13 @@ def perception_lines(scenario: Scenario, rows: list[dict], tasks: list[str],
     origin = ("written by hand" if not learned else
               f"learned from {learned[-1].rows_used} probes of `{learned[-1].data}` "
               f"({learned[-1].method})")
+    named = ", ".join(r.name + (f" ({r.variable})" if r.variable != r.name else "")
+                      + (f", one of {'/'.join(r.states)}" if r.states else "")
+                      for r in scenario.readings.readings)
     lines = ["## Perception (pi_per)", "",
-             f"pi_per's parameters are {origin}. {source}"
+             f"pi_per perceives the material {scenario.readings.material} of a probed cell "
+             f"through {len(scenario.readings.readings)} reading(s): {named}. "
+             f"Its parameters are {origin}. {source}"
              + (f" plus white noise of sd {noise}" if noise else "") + f". Single-probe "
              f"recognition on {held_out} held-out probes per material (seed {HELD_OUT_SEED}): "
              f"{100 * np.diag(matrix).mean():.1f}% on average over the {len(names)} materials.", "",
