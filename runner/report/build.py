@@ -41,6 +41,7 @@ from runner.report.verdicts import (  # noqa: F401  (the report's statistics, re
     statistics_table,
 )
 from runner.world.physics import PhysicsSensor
+from runner.world.readings import shown
 from runner.world.scenario import Scenario
 from runner.world.sensor import Pooled, ProgramNormals, SensorModel, confusion
 
@@ -183,7 +184,8 @@ def replay(experiment: Experiment, task: str, configuration: str, run: int, step
         belief = explorer.belief()[0]
         yield {"I": d.inhibition[0], "S": d.saliency[0], "U": d.uncertainty[0], "belief": belief,
                "shape": shape_field, "posterior": posterior, "cell": int(cells[0]),
-               "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path]}
+               "next": int(decision_cells[0]), "path": [int(p[0]) for p in explorer.path],
+               "readings": shown(explorer.readings, step.readings)}
 
 
 class DecisionFigure:

@@ -91,10 +91,24 @@ class StepView:
                               f"{self.configuration}, run {self.run}", z)
 
     def figure(self, k: int) -> Any:
-        """Step ``k`` as a matplotlib figure (in a volume, the slice of the chosen cell)."""
+        """Step ``k`` as a matplotlib figure (in a volume, the slice of the chosen cell), its
+        caption with the probe's readings by name."""
         figure = self._figure(decision_slice(self.experiment.scenario, [self.frames[k]]))
         figure.show(self.frames[k], k)
+        read = self.frames[k].get("readings", {})
+        shown = [f"{name} {'missing' if v is None else (f'{v:.4g}' if isinstance(v, float) else v)}"
+                 for name, v in read.items()]
+        figure.caption.axes.text(0.0, 0.0, "the probe's readings:\n  " + "\n  ".join(shown),
+                                 va="bottom", fontsize=8, transform=figure.caption.axes.transAxes)
         return figure.fig
+
+    def readings(self) -> Any:
+        """The replayed run's probes as a pandas DataFrame: the step, the probed cell and each
+        reading by its name (None where missing)."""
+        import pandas as pd
+
+        return pd.DataFrame([{"step": k, "cell": f["cell"], **f.get("readings", {})}
+                             for k, f in enumerate(self.frames)])
 
     def _repr_html_(self) -> str:
         import tempfile
