@@ -290,14 +290,16 @@ class Pooled:
     def from_recordings(cls, frame: Any, perception: Perception, material_column: str,
                         source: str, path: Path | None = None) -> Pooled:
         """The rows of each material of a recordings frame (its columns named as the
-        readings' variables); a material without rows draws nothing (it must not be laid)."""
+        readings' variables) that hold at least one reading; a material without such rows
+        draws nothing (it must not be laid)."""
         pools = []
         for name in perception.materials:
             rows = frame[frame[material_column].astype(str) == name]
             columns = [np.array([r.value(_plain(v)) for v in rows[r.variable]], float)
                        for r in perception.readings]
-            pools.append(np.stack(columns, axis=1) if len(rows)
-                         else np.full((1, len(columns)), np.nan))
+            pool = np.stack(columns, axis=1) if len(rows) else np.empty((0, len(columns)))
+            pool = pool[~np.isnan(pool).all(axis=1)]  # a press with no reading: nothing drawn
+            pools.append(pool if len(pool) else np.full((1, len(columns)), np.nan))
         pooled = cls(perception.names, pools, [r.discrete for r in perception.readings],
                      perception.materials, source)
         pooled.path = path

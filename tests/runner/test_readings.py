@@ -265,4 +265,14 @@ def test_a_labs_experiment_runs_through_its_own_readings(tmp_path):
     assert main(["run", str(experiment), "--out", str(tmp_path / "out"), "-q",
                  "--no-report"]) == 0
     assert main(["results", str(tmp_path / "out"), "-o", str(tmp_path / "runs.csv")]) == 0
-    assert set(pd.read_csv(tmp_path / "runs.csv")["configuration"]) == {"full", "without_S"}
+    table = pd.read_csv(tmp_path / "runs.csv")
+    assert set(table["configuration"]) == {"full", "without_S"}
+    # every probe's readings, by name, are rows of the recordings of the cell's material
+    scenario = load_scenario(FINGERTIP)
+    presses = pd.read_csv(MODELS / "data" / "fingertip_presses.csv")
+    assert list(table.columns[-5:]) == list(scenario.readings.names)
+    assert set(table["slip"]) <= {"stick", "slip"}
+    truth = scenario.material_map.ravel()[table["cell"]]
+    for (pdc, tdc), m in zip(table[["pdc", "tdc"]].to_numpy(), truth, strict=True):
+        rows = presses[presses["material"] == scenario.materials[m]]
+        assert np.isclose(rows["pdc"], pdc).any() and np.isclose(rows["tdc"], tdc).any()
