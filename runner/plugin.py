@@ -146,11 +146,16 @@ def tune(experiment: Path, out: Path, options: TuneOptions = TuneOptions()) -> i
 
 
 def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
-    """Rebuild ``out/report`` from the stored results. Where there is a second core, the
-    process that draws Fig. 11 is started first: it imports the figures while this process
-    reads the results."""
+    """Rebuild ``out/report`` from the stored results; of a session's log (``out`` a .csv,
+    .parquet or .pq file), write its report beside it (:func:`report_log`). Where there is a
+    second core, the process that draws Fig. 11 is started first: it imports the figures
+    while this process reads the results."""
     import os
 
+    from runner.robot.log import is_log
+
+    if is_log(out):
+        return report_log(out, options)
     from runner.experiments.executors import process_pool, stop_pool
     from runner.experiments.store import hold
 
@@ -171,6 +176,25 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
             if pool is not None:
                 stop_pool(pool)
     print(f"report written to {folder / 'report.md'} (and report.html)")
+    return 0
+
+
+def report_log(log: Path, options: ReportOptions = ReportOptions()) -> int:
+    """The report of a session's log (``explore --log``, ``robot --log``): the session
+    replayed, its path and final maps drawn, its numbers, into ``LOG_report/`` beside it
+    (:mod:`runner.report.session`). It has no animation; ``--compare`` takes experiments."""
+    if options.compare is not None:
+        raise BayesprogError(f"--compare {options.compare}: compares an experiment's findings "
+                             f"with another's; {log} is a session's log (report it alone)")
+    from runner.report.session import build_session_report
+
+    try:
+        folder = build_session_report(log)
+    except KeyboardInterrupt:
+        print(f"interrupted while drawing the report of {log}", file=sys.stderr)
+        return 130
+    print(f"session report written to {folder / 'report.md'} (and report.html, "
+          "path.png, maps.png, summary.json)")
     return 0
 
 
@@ -598,8 +622,13 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_tune)
 
     p = commands.add_parser("report", help="rebuild an experiment's report from its stored "
-                            "results")
-    p.add_argument("out", metavar="DIR", help="an experiment's output folder (bayesprog run --out)")
+                            "results, or draw a session from its log (explore --log, robot "
+                            "--log)")
+    p.add_argument("out", metavar="DIR|LOG.csv",
+                   help="an experiment's output folder (bayesprog run --out), or a session's "
+                   "log (.csv, .parquet, with its .json beside it): the session is replayed "
+                   "and its report (the path over the layout, the final maps, the numbers) "
+                   "written into LOG_report/ beside the log")
     _report_arguments(p)
     p.set_defaults(func=_cmd_report)
 

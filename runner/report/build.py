@@ -949,6 +949,12 @@ def _p(row: dict, key: str) -> str:
 
 def _html(md: str, spec: ExperimentSpec, animation: str | None) -> str:
     """report.md as HTML (the same text, tables and figures), the animation as a video."""
+    return html_page(md, spec.name, animation)
+
+
+def html_page(md: str, title: str, animation: str | None = None) -> str:
+    """A report's markdown as an HTML page titled ``title`` (the same text, tables and
+    figures); the link to ``animation``, when given, as a video."""
     import markdown
 
     body = markdown.markdown(md, extensions=["tables"])
@@ -960,5 +966,5 @@ def _html(md: str, spec: ExperimentSpec, animation: str | None) -> str:
              "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;"
              "padding:2px 6px}img{max-width:100%}")
     return ("<!doctype html><html><head><meta charset='utf-8'><title>"
-            f"{html.escape(spec.name)}</title><style>{style}</style></head><body>{body}"
+            f"{html.escape(title)}</title><style>{style}</style></head><body>{body}"
             "</body></html>")

@@ -162,6 +162,23 @@ def draw_map(ax: Any, values: np.ndarray, scenario: View, *, cmap: str = "viridi
     return image
 
 
+#: the colours of the materials a layout lays out, in the scenario's order of them
+PALETTE = ["#e8dcc8", "#9ecae1", "#a1d99b", "#fdae6b", "#bcbddc", "#fc9272"]
+#: and of the materials it does not lay out (a material perceived that is not there)
+UNLAID = ["#8c564b", "#e377c2", "#bcbd22", "#17becf", "#393b79", "#637939", "#843c39",
+          "#7b4173", "#d6616b", "#e7ba52"]
+
+
+def material_colours(scenario: View) -> list[str]:
+    """A colour per material of the scenario, by index: :func:`draw_materials`'s for those its
+    layout lays out (of a volume: anywhere in it), darker ones for the others."""
+    whole = scenario.scenario if isinstance(scenario, Plane) else scenario
+    present = np.unique(whole.material_map).tolist()
+    laid = iter(PALETTE * (1 + len(present) // len(PALETTE)))
+    other = iter(UNLAID * (1 + len(whole.materials) // len(UNLAID)))
+    return [next(laid) if m in present else next(other) for m in range(len(whole.materials))]
+
+
 def draw_materials(ax: Any, scenario: View, legend: bool = True,
                    extra: list[Any] | None = None) -> None:
     """The true material of every cell, one colour per material present, with a legend (and
@@ -172,7 +189,7 @@ def draw_materials(ax: Any, scenario: View, legend: bool = True,
     # the colours of the whole workspace, so that every plane of a volume shows a material alike
     whole = scenario.scenario if isinstance(scenario, Plane) else scenario
     present = list(dict.fromkeys(np.unique(whole.material_map).tolist()))
-    palette = ["#e8dcc8", "#9ecae1", "#a1d99b", "#fdae6b", "#bcbddc", "#fc9272"]
+    palette = PALETTE
     index = np.searchsorted(present, scenario.material_map)
     ax.imshow(index.T, origin="lower", extent=extent_cm(scenario), interpolation="nearest",
               cmap=ListedColormap(palette[: len(present)]), vmin=-0.5, vmax=len(present) - 0.5)

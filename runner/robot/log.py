@@ -13,9 +13,11 @@ A log is a recordings file: ``bayesprog learn PI_PER.yaml LOG.csv --column mater
 identifies pi_per again from the sessions a lab ran (the readings' columns are named as the
 readings; give ``--column NAME=VARIABLE`` where a reading is named otherwise than its
 variable, as the paper's texture and compliance are). Beside it, ``LOG.json`` says what the
-session explored (the scenario, its task, seed and ablations), so that ``bayesprog report
-LOG.csv`` can draw it. A CSV log is written row by row and flushed, so an interrupted session
-keeps every probe it answered; a Parquet log is written in row groups, the last at the end.
+session explored (the scenario's absolute path, its task, seed and ablations, and ``run`` when
+the decisions' random stream is an experiment run's), so that ``bayesprog report LOG.csv`` can
+replay and draw it (:func:`read_meta`, :func:`read_probes`). A CSV log is written row by row
+and flushed, so an interrupted session keeps every probe it answered; a Parquet log is written
+in row groups, the last at the end.
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ from __future__ import annotations
 import csv
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 from bayesprog import BayesprogError
-from runner.world.readings import Perception
+from runner.world.readings import Perception, ReadingError
 
 #: the file kinds a log is written as, by suffix
 SUFFIXES = (".csv", ".parquet", ".pq")
@@ -142,3 +145,184 @@ class SessionLog:
         elif self._file is not None:
             self._file.close()
             self._file = None
+
+
+# reading a log back ----------------------------------------------------------------------------
+def is_log(path: Path) -> bool:
+    """Whether ``path`` names a session log (by its suffix; a folder never is one)."""
+    return Path(path).suffix.lower() in SUFFIXES and not Path(path).is_dir()
+
+
+def read_meta(path: Path) -> dict[str, Any]:
+    """What the session of the log ``path`` explored, from the file beside it, checked whole
+    (every problem said at once)."""
+    meta_file = meta_path(path)
+    if not Path(path).is_file():
+        raise BayesprogError(f"cannot read {path}: no such file")
+    try:
+        meta = json.loads(meta_file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise BayesprogError(f"{path}: no {meta_file.name} beside it, which says what the "
+                             "session explored (explore --log and robot --log write it): "
+                             "keep the two files together") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise BayesprogError(f"{meta_file}: not a readable session description: {exc}") from None
+    if not isinstance(meta, dict):
+        raise BayesprogError(f"{meta_file}: expected a JSON object, found {type(meta).__name__}")
+    problems = []
+
+    def natural(key: str, required: bool = True) -> None:
+        value = meta.get(key)
+        if value is None and not required:
+            return
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            problems.append(f"{key!r} a non-negative integer, found {value!r}")
+
+    for key in ("scenario", "task", "material"):
+        if not isinstance(meta.get(key), str):
+            problems.append(f"{key!r} a string, found {meta.get(key)!r}")
+    natural("seed")
+    natural("run", required=False)
+    for key in ("ablate", "readings"):
+        value = meta.get(key)
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            problems.append(f"{key!r} a list of strings, found {value!r}")
+    if meta.get("dims") not in (2, 3):
+        problems.append(f"'dims' 2 or 3, found {meta.get('dims')!r}")
+    if problems:
+        raise BayesprogError(f"{meta_file}: expected " + "; ".join(problems))
+    return meta
+
+
+@dataclass(frozen=True)
+class Probe:
+    """One row of a log, read back: where it is in the file (``where``), the step, the cell
+    probed, its readings by name as they were sent (a number, a state's name, None where
+    missing), the missing readings' names, the warnings, the layout's material there, the
+    material decided and its probability, the next cell (None: no decision after it) and the
+    timings in milliseconds by phase (``total`` too; NaN where the log has none)."""
+
+    where: str
+    step: int
+    cell: tuple[int, ...]
+    readings: dict[str, float | str | None]
+    missing: tuple[str, ...]
+    warnings: str
+    material: str
+    decided: str
+    probability: float
+    next_cell: tuple[int, ...] | None
+    timings: dict[str, float]
+
+
+def read_probes(path: Path, perception: Perception, shape: tuple[int, ...]) -> list[Probe]:
+    """The rows of the log ``path`` of a session over ``perception``'s readings on a grid of
+    ``shape``. A row that does not parse is an error at its line (the first one, and how many
+    more there are)."""
+    path = Path(path)
+    records, first = _records(path)
+    cell = ["ix", "iy", "iz"][: len(shape)]
+    needed = ["step", *cell, *perception.names, "missing", "warnings", "material", "decided",
+              "probability", *[f"next_{a}" for a in cell]]
+    absent = [c for c in needed if c not in first]
+    if absent:
+        raise BayesprogError(f"{path}: no column {', '.join(map(repr, absent))}: expected the "
+                             f"columns of a session log over {', '.join(perception.names)} on a "
+                             f"{len(shape)}-D grid (its columns: {', '.join(first)})")
+    probes, bad = [], []
+    for where, row in records:
+        try:
+            probes.append(_probe(where, row, perception, shape))
+        except (ValueError, ReadingError) as exc:
+            bad.append(f"{where}: {exc}")
+    if bad:
+        more = f" (and {len(bad) - 1} more row(s) that do not parse)" if len(bad) > 1 else ""
+        raise BayesprogError(bad[0] + more)
+    if not probes:
+        raise BayesprogError(f"{path}: no probes: the session answered none")
+    return probes
+
+
+def _records(path: Path) -> tuple[list[tuple[str, dict[str, Any]]], list[str]]:
+    """The rows of a log as (where, column -> value) and its columns."""
+    if path.suffix.lower() == ".csv":
+        try:
+            with path.open(newline="", encoding="utf-8") as f:
+                reader = csv.reader(f)
+                header = next(reader, [])
+                out = []
+                for values in reader:
+                    if len(values) != len(header):
+                        raise BayesprogError(f"{path}:{reader.line_num}: expected "
+                                             f"{len(header)} fields, found {len(values)}")
+                    out.append((f"{path}:{reader.line_num}", dict(zip(header, values,
+                                                                      strict=True))))
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise BayesprogError(f"cannot read {path}: {exc}") from None
+        return out, header
+    from bayesprog import require_extra
+
+    require_extra("pyarrow", "parquet", f"reading {path}")
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(str(path))
+    except (OSError, ValueError) as exc:  # pyarrow's errors are both
+        raise BayesprogError(f"cannot read {path}: {exc}") from None
+    return ([(f"{path}: row {i + 1}", row) for i, row in enumerate(table.to_pylist())],
+            list(table.column_names))
+
+
+def _blank(value: Any) -> bool:
+    return value is None or value == "" or (isinstance(value, float) and math.isnan(value))
+
+
+def _whole(row: dict[str, Any], column: str) -> int:
+    value = row[column]
+    try:
+        if isinstance(value, str):
+            value = int(value)
+        if isinstance(value, bool) or int(value) != value or value < 0:
+            raise ValueError
+    except (TypeError, ValueError):
+        raise ValueError(f"column {column!r}: expected a non-negative integer, found "
+                         f"{value!r}") from None
+    return int(value)
+
+
+def _real(row: dict[str, Any], column: str) -> float:
+    value = row.get(column)
+    if _blank(value):
+        return math.nan
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"column {column!r}: expected a number, found {value!r}") from None
+
+
+def _probe(where: str, row: dict[str, Any], perception: Perception,
+           shape: tuple[int, ...]) -> Probe:
+    axes = ("ix", "iy", "iz")[: len(shape)]
+    cell = tuple(_whole(row, a) for a in axes)
+    if not all(i < n for i, n in zip(cell, shape, strict=True)):
+        raise ValueError(f"cell {list(cell)} is outside the {' x '.join(map(str, shape))} grid")
+    nexts = [row[f"next_{a}"] for a in axes]
+    next_cell = None
+    if not all(_blank(v) for v in nexts):
+        next_cell = tuple(_whole(row, f"next_{a}") for a in axes)
+    readings: dict[str, float | str | None] = {}
+    for reading in perception.readings:
+        raw = row[reading.name]
+        if _blank(raw):
+            readings[reading.name] = None
+        elif reading.discrete:
+            readings[reading.name] = str(raw)
+        else:
+            readings[reading.name] = _real(row, reading.name)
+        reading.value(readings[reading.name])  # a state not declared, a number not finite
+    missing = str(row["missing"] or "")
+    return Probe(where, _whole(row, "step"), cell, readings,
+                 tuple(m for m in missing.split(";") if m), str(row["warnings"] or ""),
+                 str(row["material"] or ""), str(row["decided"] or ""),
+                 _real(row, "probability"), next_cell,
+                 {p: _real(row, f"{p}_ms") for p in (*PHASES, "total")})

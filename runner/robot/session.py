@@ -48,7 +48,7 @@ import bayesprog
 from bayesprog import BayesprogError, short_repr
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed
-from runner.world.readings import Readings, shown
+from runner.world.readings import Perception, Readings, shown
 
 if TYPE_CHECKING:
     from runner.robot.log import SessionLog
@@ -135,6 +135,8 @@ class Session:
         self.seed = seed
         #: the decisions' seeds of the current exploration (an experiment run's when reset so)
         self._seeds: int | list[tuple[int, ...]] = seed
+        #: the experiment's run whose decisions' stream a reset asked for (None: the seed's own)
+        self.run: int | None = None
         self.line_no = 0
         #: the number of the next step (probes answered since the start or the last reset)
         self.k = 0
@@ -215,8 +217,11 @@ class Session:
         """What the session explores, beside its log."""
         assert self.log is not None
         e = self.explorer
-        self.log.start(e.readings, e.dims, {"scenario": str(e.scenario.path.resolve()), "task": e.task,
-                                            "seed": self.seed, "ablate": list(e.ablated)})
+        meta = {"scenario": str(e.scenario.path.resolve()), "task": e.task, "seed": self.seed,
+                "ablate": list(e.ablated)}
+        if self.run is not None:  # the decisions' stream is that run's (decision_seed)
+            meta["run"] = self.run
+        self.log.start(e.readings, e.dims, meta)
 
     # one line --------------------------------------------------------------------------------
     def answer(self, line: str) -> dict | None:
@@ -291,8 +296,10 @@ class Session:
             run = _natural(opts["run"], "run")
             self._seeds = [decision_seed(seed, run)]
             reply["run"] = run
+            self.run = run
         else:
             self._seeds = seed
+            self.run = None
         self.seed = seed
         self.holder = claim
         self.k, self._started, self.expected = 0, False, None
@@ -417,10 +424,16 @@ class Session:
         return reply
 
 
-def probe_line(cell: list[int], readings: Readings, run: int = 0, k: int | None = None) -> dict:
-    """The probe line a driver sends for one run's readings (missing ones as null)."""
-    values = {n: (None if math.isnan(v) else float(v))
-              for n, v in zip(readings.names, readings.values[run], strict=True)}
+def probe_line(cell: list[int], readings: Readings, run: int = 0, k: int | None = None,
+               perception: Perception | None = None) -> dict:
+    """The probe line a driver sends for one run's readings (missing ones as null); with the
+    ``perception`` that reads them, a discrete reading is sent by its state's name (without
+    it, every reading is sent as a number: a discrete one's index as a float is refused)."""
+    if perception is not None:
+        values = shown(perception, readings, run)
+    else:
+        values = {n: (None if math.isnan(v) else float(v))
+                  for n, v in zip(readings.names, readings.values[run], strict=True)}
     line: dict = {"cell": cell, "readings": values}
     if k is not None:
         line["k"] = k

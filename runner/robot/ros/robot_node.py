@@ -191,7 +191,8 @@ class RobotNode(Node):
         self._answered = False
         # the step it answers: a late or repeated message is refused, never taken as another
         self.send(json.dumps(probe_line([int(i) for i in cell], readings,
-                                        k=len(self.outcome.cells) - 1)))
+                                        k=len(self.outcome.cells) - 1,
+                                        perception=self.scenario.readings)))
         self._waiting_since = time.monotonic()
 
     def write_log(self, reply: dict) -> None:
