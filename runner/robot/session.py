@@ -114,7 +114,7 @@ class Session:
     >>> session.answer('{"cell": [5, 8], "texture": 0.5, "compliance": null}')["missing"]
     ['compliance']
     >>> session.answer("not json")
-    {'error': 'line 2: Expecting value: line 1 column 1 (char 0)'}
+    {'error': 'line 3: Expecting value: line 1 column 1 (char 0)'}
     >>> session.answer("   ") is None
     True
     """
