@@ -62,6 +62,9 @@ _WHERE = {
     "bundled_root": "bayesprog.bundled",
     "require_extra": "bayesprog.extras",
     "compare": "bayesprog.learning.evidence",
+    "read_data": "bayesprog.learning.data",
+    "BadRow": "bayesprog.learning.csv_rows",
+    "BadRowsWarning": "bayesprog.learning.data",
     "Discovery": "bayesprog.discovery",
     "StructureWarning": "bayesprog.discovery",
 }
@@ -87,6 +90,8 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.inference.event import Probability
     from bayesprog.language.document import load_document
     from bayesprog.language.loader import Located, load_yaml
+    from bayesprog.learning.csv_rows import BadRow
+    from bayesprog.learning.data import BadRowsWarning, read_data
     from bayesprog.learning.evidence import compare
     from bayesprog.learning.write import render_values
     from bayesprog.limits import SizeError, check_size, limit
@@ -132,6 +137,11 @@ __all__ = [
     "StructureWarning",
     "compare",
     "discover",
+    # data sets: their rows that can be read, the bad ones set aside and named (read_data,
+    # BadRow; Program.fit(on_bad_lines=...) warns with BadRowsWarning)
+    "BadRow",
+    "BadRowsWarning",
+    "read_data",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own
     # YAML files read with the same diagnostics (load_yaml, load_document, Located,
     # wrong_kind; reference_problem for the files they name), the same size limits
