@@ -63,6 +63,9 @@ _WHERE = {
     "bundled_root": "bayesprog.bundled",
     "require_extra": "bayesprog.extras",
     "compare": "bayesprog.learning.evidence",
+    "read_data": "bayesprog.learning.data",
+    "BadRow": "bayesprog.learning.csv_rows",
+    "BadRowsWarning": "bayesprog.learning.data",
     "Discovery": "bayesprog.discovery",
     "StructureWarning": "bayesprog.discovery",
     "Summary": "bayesprog.learning.summary",
@@ -92,6 +95,8 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.inference.event import Probability
     from bayesprog.language.document import load_document
     from bayesprog.language.loader import Located, load_yaml
+    from bayesprog.learning.csv_rows import BadRow
+    from bayesprog.learning.data import BadRowsWarning, read_data
     from bayesprog.learning.evidence import compare
     from bayesprog.learning.summary import Summary, summarise
     from bayesprog.learning.write import render_values
@@ -143,6 +148,11 @@ __all__ = [
     "Summary",
     "scatter_matrix",
     "summarise",
+    # data sets: their rows that can be read, the bad ones set aside and named (read_data,
+    # BadRow; Program.fit(on_bad_lines=...) warns with BadRowsWarning)
+    "BadRow",
+    "BadRowsWarning",
+    "read_data",
     # for applications built on bayesprog (runner plugins, see bayesprog.cli): their own
     # YAML files read with the same diagnostics (load_yaml, load_document, Located,
     # wrong_kind; reference_problem for the files they name), the same size limits

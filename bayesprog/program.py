@@ -52,6 +52,7 @@ if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayes
     from bayesprog.inference.mixed import Joint
     from bayesprog.language.document import Document
     from bayesprog.learning import Estimate
+    from bayesprog.learning.csv_rows import BadRow
     from bayesprog.learning.evidence import Evidence
     from bayesprog.records import FitRecord
 
@@ -590,7 +591,7 @@ class Program:
 
     def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
-            states_from_data: Sequence[str] = ()) -> Fit:
+            states_from_data: Sequence[str] = (), on_bad_lines: str = "error") -> Fit:
         """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
         DataFrame or a mapping of columns (or a CSV file being read on a thread meanwhile,
         :class:`~bayesprog.learning.plain_csv.ReadAhead`, as ``bayesprog learn`` reads it
@@ -599,6 +600,14 @@ class Program:
         ``states_from_data`` names variables whose states are those found in their column
         (sorted, as written: a lab's own materials), the terms over them learned anew; the
         fitted file then declares them so.
+
+        A bad row (more or fewer fields than the header, a line that is not UTF-8 text, a
+        value that is not a number of a continuous column or outside its support, a state the
+        program does not declare) is refused, the earliest in the file, with its line
+        (``on_bad_lines="error"``, as pandas names it); ``"skip"`` sets every bad row aside
+        and learns from the others, as from the file without them (``fit.set_aside`` names
+        each row, its line and why; the record counts them); ``"warn"`` also warns
+        (:class:`~bayesprog.learning.data.BadRowsWarning`). A missing value is not bad.
 
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
@@ -617,8 +626,24 @@ class Program:
         >>> fit = p.fit({"M": ["wood", "wood", "silk", "silk"], "E": [0.4, 0.6, 0.1, 0.3]})
         >>> fit.program.term("P(E | M)").params["mean"].array.round(3).tolist()
         [0.5, 0.2]
+        >>> fit = p.fit({"M": ["wood", "wood", "silk", "silk", "wool"],
+        ...              "E": [0.4, 0.6, 0.1, 0.3, 0.2]}, on_bad_lines="skip")
+        >>> fit.record.rows_set_aside, fit.set_aside[0].row
+        (1, 5)
+        >>> fit.set_aside[0].why
+        "column 'M': unknown state 'wool' of M (did you mean 'wood'?): expected one of wood, silk"
         """
+        import warnings
+
         from bayesprog.learning import fit_terms
+        from bayesprog.learning.data import (
+            BadRowError,
+            BadRowsWarning,
+            check_on_bad_lines,
+            load_data,
+            open_variable,
+            set_aside_message,
+        )
 
         if isinstance(freeze, str):
             freeze = [freeze]
@@ -637,49 +662,49 @@ class Program:
                 isinstance(k, str) and isinstance(v, str) for k, v in columns.items())):
             raise ArgumentError(f"columns: expected a mapping of column names to variable "
                                 f"names, found {short_repr(columns)}")
+        mode = check_on_bad_lines(on_bad_lines)
         if isinstance(states_from_data, str):
             states_from_data = [states_from_data]
-        if states_from_data:
-            program, found = self._with_states_from(data, list(states_from_data), columns,
-                                                    labels)
-            fit = program.fit(data, freeze=labels, max_iter=max_iter, tol=tol, columns=columns)
-            fit.states = found
-            return fit
-        estimate = fit_terms(self.variables, self.terms, self.learned, data, freeze=labels,
-                             max_iter=max_iter, tol=tol, columns=columns)
-        terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
-                 if t.label in estimate.params else t for t in self.terms]
-        fitted = Program(self.variables, terms, self.questions, self.inputs, name=self.name,
-                         description=self.description, path=self.path, ablated=self.ablated,
-                         learned=[*self.learned, estimate.record], time=self.time)
-        return Fit(fitted, estimate, self.path)
+        names = list(states_from_data)
+        for name in names:
+            open_variable(self.variables, name)
+        try:
+            if names:  # the data read once: their states, then their rows for the new program
+                loaded = load_data(data, self.variables, columns, on_bad_lines=mode,
+                                   states_from_data=names)
+                program = self._with_states_from(loaded.states, labels)
+                fit = program.fit(loaded, freeze=labels, max_iter=max_iter, tol=tol,
+                                  columns=columns)
+                fit.states = loaded.states
+            else:
+                estimate = fit_terms(self.variables, self.terms, self.learned, data,
+                                     freeze=labels, max_iter=max_iter, tol=tol,
+                                     columns=columns, on_bad_lines=mode)
+                terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
+                         if t.label in estimate.params else t for t in self.terms]
+                fitted = Program(self.variables, terms, self.questions, self.inputs,
+                                 name=self.name, description=self.description, path=self.path,
+                                 ablated=self.ablated, learned=[*self.learned, estimate.record],
+                                 time=self.time)
+                fit = Fit(fitted, estimate, self.path)
+        except BadRowError as exc:
+            raise exc.fixed('on_bad_lines="skip" sets bad rows aside') from None
+        if mode == "warn" and fit.set_aside:
+            warnings.warn(set_aside_message(fit.record.data, fit.set_aside), BadRowsWarning,
+                          stacklevel=2)
+        return fit
 
-    def _with_states_from(self, data: Any, names: Sequence[str],
-                          columns: Mapping[str, str] | None, freeze: Sequence[str]
-                          ) -> tuple[Program, dict[str, list[str]]]:
-        """This program with each variable of ``names`` taking the states found in its column
-        of ``data`` (sorted, as written), and the terms over it starting from neutral values
+    def _with_states_from(self, found: Mapping[str, list[str]], freeze: Sequence[str]
+                          ) -> Program:
+        """This program with each variable of ``found`` taking the states found in its column
+        of the data (sorted, as written), and the terms over it starting from neutral values
         (uniform tables, means 0, spreads 1) that the fit then replaces."""
         from bayesprog.forms.base import nonnegative, positive, real, simplex, unit_interval
-        from bayesprog.learning.data import DataError, read_frame
 
-        frame, source, _, _ = read_frame(data)
-        frame = frame.rename(columns=dict(columns or {}))
-        found: dict[str, list[str]] = {}
         variables = dict(self.variables)
-        for name in names:
-            var = self.variables.get(name)
-            if not isinstance(var, Discrete) or var.kind != "states":
-                raise ArgumentError(f"states from the data: {name!r} is not a variable with "
-                                    "named states of this program")
-            if name not in frame.columns:
-                raise DataError(f"{source}: no column for {name} to take its states from")
-            values = sorted({str(v) for v in frame[name] if isinstance(v, str) or (
-                v is not None and v == v)})
-            if not values:
-                raise DataError(f"{source}: column {name} holds no value to take states from")
-            found[name] = values
-            variables[name] = Discrete(name, tuple(values), description=var.description)
+        for name, values in found.items():
+            variables[name] = Discrete(name, tuple(values),
+                                       description=self.variables[name].description)
         neutral = {nonnegative: 1.0, positive: 1.0, real: 0.0, unit_interval: 0.5}
         terms = []
         for t in self.terms:
@@ -707,10 +732,9 @@ class Program:
                 t, child=child, parents=tuple(variables[p.name] for p in t.parents),
                 params=params))
         # the statistics of earlier fits count other states: this fit starts afresh
-        program = Program(variables, terms, self.questions, self.inputs, name=self.name,
-                          description=self.description, path=self.path, ablated=self.ablated,
-                          learned=[], time=self.time)
-        return program, found
+        return Program(variables, terms, self.questions, self.inputs, name=self.name,
+                       description=self.description, path=self.path, ablated=self.ablated,
+                       learned=[], time=self.time)
 
     def _repr_html_(self) -> str | None:
         """In a notebook: the decomposition in Bayesian-programming notation and the graph."""
@@ -744,6 +768,12 @@ class Fit:
     @property
     def converged(self) -> bool:
         return self.estimate.converged
+
+    @property
+    def set_aside(self) -> list[BadRow]:
+        """The bad rows of the data set aside (``on_bad_lines``): each one's line (in a CSV
+        file), why, and row."""
+        return self.estimate.set_aside
 
     def text(self, source: str | Path | None = None, *, rounded: bool = False) -> str:
         """The fitted program file: ``source`` (by default the file the program was loaded

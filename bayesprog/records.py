@@ -85,6 +85,10 @@ class FitRecord:
     rows_supporting: int | None = _field(
         "the rows behind the learned values: these and those of the earlier fits this one "
         "continued from", None)
+    rows_set_aside: int | None = _field(
+        "bad rows of the data set aside (learn --on-bad-lines skip or warn): rows of more or "
+        "fewer fields than the header, values that cannot be read for their variable; counted "
+        "in rows, not in rows_used. Absent: bad rows were refused", None)
     terms: list[str] = _field("the terms learned", default_factory=list)
     statistics: dict[str, dict[str, Any]] = _field("per learned term, its sufficient "
                                                    "statistics", default_factory=dict)

@@ -515,7 +515,7 @@ decomposition: [{term: P(Region), form: table, table: [0.2, 0.3, 0.5]}]
 def test_a_row_with_more_fields_than_the_header_is_refused(tmp_path):
     data = tmp_path / "shifted.csv"
     data.write_text("M,E\nwood,0.1,7\nwood,0.3\n")
-    with pytest.raises(DataError, match=r"row 1 \(line 2\) has 3 fields, the header 2"):
+    with pytest.raises(DataError, match=r"row 1 \(line 2\): 3 fields, expected 2"):
         bayesprog.loads(NORMAL).fit(data)
 
 
@@ -885,7 +885,7 @@ decomposition:
     for path in (good, bad, tmp_path / "missing.csv", tmp_path, json_file):
         assert outcome(ReadAhead(path)) == outcome(path), path
     assert outcome(ReadAhead(bad))[1] == f"{bad}: row 2 (line 3), column 'A': unknown state " \
-        "'maybe' of A: expected one of y, n"
+        "'maybe' of A: expected one of y, n (on_bad_lines=\"skip\" sets bad rows aside)"
 
     def broken(path, threads):
         raise MemoryError("no room")

@@ -11,8 +11,13 @@ import math
 import sys
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bayesprog.cli.common import UserError, column_renames, load_program, output_file
+from bayesprog.files import atomic_write
+
+if TYPE_CHECKING:
+    from bayesprog.learning.csv_rows import BadRow
 
 
 def add_learn(sub: argparse._SubParsersAction) -> None:
@@ -42,6 +47,13 @@ def add_learn(sub: argparse._SubParsersAction) -> None:
                    help="write the learned values to the precision their rows support "
                    "(significant digits; a mean to a twentieth of its standard error) instead "
                    "of as fitted")
+    p.add_argument("--on-bad-lines", choices=("error", "warn", "skip"), default="error",
+                   help="a bad row (more or fewer fields than the header, a line that is not "
+                   "UTF-8, a value that is not a number or outside its support, a state not "
+                   "declared): error refuses the first, naming its line; skip sets every bad "
+                   "row aside, says how many and lists them (line and why) in "
+                   "FITTED.set-aside.txt; warn also prints them. Empty cells are missing "
+                   "values, never bad (default: %(default)s)")
     p.set_defaults(func=cmd_learn)
 
 
@@ -53,19 +65,35 @@ def cmd_learn(args: argparse.Namespace) -> int:
 
     args.data = str(bundled_path(args.data, "data"))
     data = ReadAhead(args.data)  # read on a thread while the program loads
+    from bayesprog.learning.data import BadRowError
+
     program = load_program(args.file)
     output_file(args.output)
     if Path(args.output).resolve() == Path(args.data).resolve():
         raise UserError(f"-o {args.output}: that is the data file; expected a new program file")
+    set_aside = args.on_bad_lines != "error"
+    listing = Path(args.output).with_suffix(".set-aside.txt")
+    if set_aside and listing.resolve() in (Path(args.data).resolve(), Path(args.file).resolve()):
+        raise UserError(f"-o {args.output}: the list of bad rows set aside would be written "
+                        f"to {listing}, the data or the program; name the output otherwise")
     if not (args.tol >= 0 and math.isfinite(args.tol)):
         raise UserError(f"--tol: expected a number >= 0, found {args.tol}")
     columns = column_renames(args.column)
-    fit = program.fit(data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
-                      columns=columns or None, states_from_data=args.states_from_data)
+    try:
+        fit = program.fit(data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
+                          columns=columns or None, states_from_data=args.states_from_data,
+                          on_bad_lines="skip" if set_aside else "error")
+    except BadRowError as exc:
+        raise UserError(str(exc.fixed("--on-bad-lines skip sets bad rows aside"))) from None
     try:
         out = fit.save(args.output, rounded=args.rounded)
+        if set_aside:
+            atomic_write(listing, "".join(f"{_bad_place(args.data, b)}: {b.why}\n"
+                                          for b in fit.set_aside).encode("utf-8"),
+                         parents=False)
     except OSError as exc:
-        raise UserError(f"cannot write {args.output}: {exc.strerror or exc}") from None
+        raise UserError(f"cannot write {exc.filename or args.output}: "
+                        f"{exc.strerror or exc}") from None
     record = fit.record
     rows = record.rows_supporting or record.rows_used
     iterations = f", {record.iterations} iterations" if record.iterations > 1 else ""
@@ -80,10 +108,22 @@ def cmd_learn(args: argparse.Namespace) -> int:
     print(f"{out}: {', '.join(record.terms)} learned from {record.rows_used} of {record.rows} "
           f"rows of {record.data} ({record.method}{iterations}); log-likelihood "
           f"{record.log_likelihood:.6g}; {written}")
+    if set_aside:
+        if args.on_bad_lines == "warn":
+            for bad in fit.set_aside:
+                print(f"{_bad_place(args.data, bad)}: set aside: {bad.why}", file=sys.stderr)
+        n = len(fit.set_aside)
+        print(f"{n or 'no'} bad row{'s' if n != 1 else ''} of {record.data} set aside, listed "
+              f"in {listing}")
     if not fit.converged:
         print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
               "(raise --max-iter)", file=sys.stderr)
     return 0
+
+
+def _bad_place(data: str, bad: BadRow) -> str:
+    """``DATA:LINE`` (as compilers name a place, for an editor to open), or ``DATA: row R``."""
+    return f"{data}:{bad.line}" if bad.line is not None else f"{data}: row {bad.row}"
 
 
 def add_discover(sub: argparse._SubParsersAction) -> None:

@@ -239,7 +239,7 @@ _RECORD: dict[str, tuple[type, ...]] = {
     "data": (str,), "sha256": (str,), "rows": (int,), "rows_used": (int,),
     "log_likelihood": (int, float), "method": (str,), "iterations": (int,),
     "digits": (int, type(None)), "columns": (dict,), "rows_supporting": (int, type(None)),
-    "terms": (list,), "statistics": (dict,), "structure": (type(None),)}
+    "rows_set_aside": (int, type(None)), "terms": (list,), "statistics": (dict,), "structure": (type(None),)}
 
 
 def _record(raw: Any) -> FitRecord:

@@ -10,9 +10,13 @@ from typing import TYPE_CHECKING
 from bayesprog.extras import lazy_names
 
 _WHERE = {
+    "BadRow": "bayesprog.learning.csv_rows",
+    "BadRowError": "bayesprog.learning.data",
+    "BadRowsWarning": "bayesprog.learning.data",
     "Data": "bayesprog.learning.data",
     "DataError": "bayesprog.learning.data",
     "load_data": "bayesprog.learning.data",
+    "read_data": "bayesprog.learning.data",
     "Estimate": "bayesprog.learning.fit",
     "fit_terms": "bayesprog.learning.fit",
     "render_fitted": "bayesprog.learning.write",
@@ -21,12 +25,20 @@ _WHERE = {
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
-    from bayesprog.learning.data import Data, DataError, load_data
+    from bayesprog.learning.csv_rows import BadRow
+    from bayesprog.learning.data import (
+        BadRowError,
+        BadRowsWarning,
+        Data,
+        DataError,
+        load_data,
+        read_data,
+    )
     from bayesprog.learning.fit import Estimate, fit_terms
     from bayesprog.learning.summary import Summary, summarise
     from bayesprog.learning.write import render_fitted
 
 __getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
 
-__all__ = ["Data", "DataError", "Estimate", "Summary", "fit_terms", "load_data", "render_fitted",
-           "summarise"]
+__all__ = ["BadRow", "BadRowError", "BadRowsWarning", "Data", "DataError", "Estimate",
+           "Summary", "fit_terms", "load_data", "read_data", "render_fitted", "summarise"]

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from bayesprog.inference.binding import Bound
 from bayesprog.inference.factors import observed_part
 from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.inference.relevance import Family
+from bayesprog.learning.csv_rows import BadRow
 from bayesprog.learning.data import Data, DataError, load_data
 from bayesprog.model import LearnOptions, Term
 from bayesprog.records import FitRecord
@@ -47,13 +48,15 @@ JOINT_LIMIT = 1 << 23
 
 @dataclass
 class Estimate:
-    """Learned parameters by term label, and the fit's record for the fitted file."""
+    """Learned parameters by term label, the fit's record for the fitted file, and the bad rows
+    of the data set aside (``on_bad_lines``)."""
 
     params: dict[str, Params]
     record: FitRecord
     log_likelihood: float
     iterations: int
     converged: bool
+    set_aside: list[BadRow] = field(default_factory=list)
 
 
 @dataclass
@@ -96,14 +99,16 @@ class _Group:
 def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
               learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
               max_iter: int = 200, tol: float = 1e-8,
-              columns: Mapping[str, str] | None = None) -> Estimate:
+              columns: Mapping[str, str] | None = None, on_bad_lines: str = "error"
+              ) -> Estimate:
     """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``
-    (``columns``: the variable each differently named column holds)."""
+    (``columns``: the variable each differently named column holds; ``on_bad_lines``: what
+    is done with a bad row, see :func:`~bayesprog.learning.data.load_data`)."""
     if not (np.isfinite(tol) and tol >= 0):
         raise DataError(f"tol: expected a number >= 0, found {tol}")
     if max_iter < 1:
         raise DataError(f"max_iter: expected at least 1, found {max_iter}")
-    data = load_data(source, variables, columns)
+    data = load_data(source, variables, columns, on_bad_lines=on_bad_lines)
     seen = [r for r in learned if r.sha256 == data.sha256]
     if seen:
         raise DataError(f"{data.source}: these data (SHA-256 {data.sha256[:12]}...) were already "
@@ -120,7 +125,8 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         present |= ~np.isnan(values)
     used = np.nonzero(present)[0]
     if len(used) == 0:
-        raise DataError(f"{data.source}: no row has a value in a column of the program")
+        aside = f" ({len(data.set_aside)} bad rows set aside)" if data.set_aside else ""
+        raise DataError(f"{data.source}: no row has a value in a column of the program{aside}")
     em = _Em(variables, model, todo, data, used)
     params = {t.label: {k: v for k, v in t.params.items() if isinstance(v, ParamValue)}
               for t in model}  # runtime inputs were refused above
@@ -171,13 +177,14 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         sha256=data.sha256, rows=data.rows, rows_used=int(len(used)),
         log_likelihood=float(ll), method=method, iterations=iterations,
         rows_supporting=supporting,
+        rows_set_aside=None if data.set_aside is None else len(data.set_aside),
         columns=dict(columns or {}), terms=[i.term.label for i in todo],
         statistics={i.term.label: {k: v.tolist() for k, v in stats[i.term.label].items()}
                     for i in todo},
         ranges=_ranges(variables, [i.term for i in todo], data, used))
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()
                           if k in i.estimator.learned} for i in todo}
-    return Estimate(out, record, float(ll), iterations, converged)
+    return Estimate(out, record, float(ll), iterations, converged, list(data.set_aside or ()))
 
 
 def _ranges(variables: Mapping[str, Variable], terms: Sequence[Term], data: Any,
@@ -459,8 +466,7 @@ class _Em:
         impossible = ~np.isfinite(row_ll.reshape(n))
         if np.any(impossible):
             row = int(self.used[rows[np.argmax(impossible)]])
-            line = f" (line {row + 2})" if self.data.csv else ""
-            raise DataError(f"{self.data.source}: row {row + 1}{line} has probability zero under "
+            raise DataError(f"{self.data.place(row)} has probability zero under "
                             "the program's current parameters (a state a table rules out, or a "
                             "value a density gives zero); start EM from values without zeros, "
                             "or give pseudo_counts")

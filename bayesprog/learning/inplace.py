@@ -187,8 +187,8 @@ def record_lines(record: Mapping[str, Any], indent: str = "") -> list[str] | Non
     this writer knows."""
     lines: list[str] = []
     for key, value in record.items():
-        if value is None and key in ("digits", "structure"):  # as fitted; not discovered
-            continue
+        if value is None and key in ("digits", "rows_set_aside", "structure"):
+            continue  # as fitted; bad rows refused; not discovered
         head = indent + ("- " if not lines else "  ")
         if key == "statistics" and isinstance(value, Mapping) and value:
             lines.append(f"{head}statistics:")

@@ -233,7 +233,7 @@ def _record(record: FitRecord) -> Any:
 
     out = CommentedMap()
     for key, value in record.as_data().items():
-        if key == "digits" and value is None:  # written as fitted
+        if key in ("digits", "rows_set_aside") and value is None:  # as fitted; rows refused
             continue
         if key == "structure":
             if value is not None:
