@@ -591,7 +591,8 @@ class Program:
 
     def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
-            states_from_data: Sequence[str] = (), on_bad_lines: str = "error") -> Fit:
+            states_from_data: Sequence[str] = (), on_bad_lines: str = "error",
+            other_columns: str = "refuse") -> Fit:
         """Learn the program's free parameters from ``data``: a CSV or Parquet file, a pandas
         DataFrame or a mapping of columns (or a CSV file being read on a thread meanwhile,
         :class:`~bayesprog.learning.plain_csv.ReadAhead`, as ``bayesprog learn`` reads it
@@ -607,7 +608,9 @@ class Program:
         (``on_bad_lines="error"``, as pandas names it); ``"skip"`` sets every bad row aside
         and learns from the others, as from the file without them (``fit.set_aside`` names
         each row, its line and why; the record counts them); ``"warn"`` also warns
-        (:class:`~bayesprog.learning.data.BadRowsWarning`). A missing value is not bad.
+        (:class:`~bayesprog.learning.data.BadRowsWarning`). A missing value is not bad. A
+        column that is no variable's is refused (``other_columns="refuse"``: a misspelt name),
+        or read past (``"ignore"``: a log's cells and timings beside the variables).
 
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
@@ -671,7 +674,7 @@ class Program:
         try:
             if names:  # the data read once: their states, then their rows for the new program
                 loaded = load_data(data, self.variables, columns, on_bad_lines=mode,
-                                   states_from_data=names)
+                                   states_from_data=names, other_columns=other_columns)
                 program = self._with_states_from(loaded.states, labels)
                 fit = program.fit(loaded, freeze=labels, max_iter=max_iter, tol=tol,
                                   columns=columns)
@@ -679,7 +682,8 @@ class Program:
             else:
                 estimate = fit_terms(self.variables, self.terms, self.learned, data,
                                      freeze=labels, max_iter=max_iter, tol=tol,
-                                     columns=columns, on_bad_lines=mode)
+                                     columns=columns, on_bad_lines=mode,
+                                     other_columns=other_columns)
                 terms = [dataclasses.replace(t, params={**t.params, **estimate.params[t.label]})
                          if t.label in estimate.params else t for t in self.terms]
                 fitted = Program(self.variables, terms, self.questions, self.inputs,

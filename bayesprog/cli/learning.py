@@ -43,6 +43,9 @@ def add_learn(sub: argparse._SubParsersAction) -> None:
                    help="the variable takes the states found in its column (sorted), the terms "
                    "over it learned anew, e.g. a lab's own materials; repeatable (default: the "
                    "states declared)")
+    p.add_argument("--ignore-other-columns", action="store_true",
+                   help="read past the columns that are no variable's (a session log's cells, "
+                   "timings and decisions beside its readings) instead of refusing them")
     p.add_argument("--rounded", action="store_true",
                    help="write the learned values to the precision their rows support "
                    "(significant digits; a mean to a twentieth of its standard error) instead "
@@ -82,7 +85,8 @@ def cmd_learn(args: argparse.Namespace) -> int:
     try:
         fit = program.fit(data, freeze=args.freeze, max_iter=args.max_iter, tol=args.tol,
                           columns=columns or None, states_from_data=args.states_from_data,
-                          on_bad_lines="skip" if set_aside else "error")
+                          on_bad_lines="skip" if set_aside else "error",
+                          other_columns="ignore" if args.ignore_other_columns else "refuse")
     except BadRowError as exc:
         raise UserError(str(exc.fixed("--on-bad-lines skip sets bad rows aside"))) from None
     try:

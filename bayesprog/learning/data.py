@@ -186,12 +186,14 @@ def read_frame(source: Any, keep_bad: bool = False) -> Frame:
 
 def load_data(source: Any, variables: Mapping[str, Variable],
               rename: Mapping[str, str] | None = None, *, on_bad_lines: str = "error",
-              states_from_data: Collection[str] = ()) -> Data:
+              states_from_data: Collection[str] = (), other_columns: str = "refuse") -> Data:
     """Read ``source`` and code its columns for ``variables`` (``rename``: the variable each
     differently named column holds, ``{"material": "M"}``); every problem names its place. A
     bad row is refused (``on_bad_lines="error"``: the earliest) or set aside (``"skip"``,
     ``"warn"``: the caller warns). A variable of ``states_from_data`` takes the states found in
-    its column's rows that are kept (sorted, as written). Data already coded are returned as
+    its column's rows that are kept (sorted, as written). A column that is no variable's is
+    refused (``other_columns="refuse"``: a misspelt name) or read past (``"ignore"``: a
+    session log's cells and timings beside its readings). Data already coded are returned as
     they are.
 
     Each column is coded through its distinct values: a value is looked up once, however many
@@ -199,9 +201,13 @@ def load_data(source: Any, variables: Mapping[str, Variable],
     if isinstance(source, Data):
         return source
     skip = check_on_bad_lines(on_bad_lines) != "error"
+    if other_columns not in ("refuse", "ignore"):
+        raise DataError(f"other_columns: expected 'refuse' or 'ignore', found "
+                        f"{other_columns!r}")
     read = read_columns(source, keep_bad=True)  # bad rows refused below, the earliest first
-    columns = _columns(read, variables, rename, refuse_others=True)
-    readers = {c: _reader(variables[c]) for c in columns if c not in states_from_data}
+    columns = _columns(read, variables, rename, refuse_others=other_columns == "refuse")
+    readers = {c: _reader(variables[c]) for c in columns
+               if c not in states_from_data and c in variables}
     coded, bad = _checked(read, columns, readers, skip)
     data = Data(read.source, read.sha256, read.rows, {}, {}, read.csv, read.lines,
                 bad if skip else None)

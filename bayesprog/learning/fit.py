@@ -99,7 +99,8 @@ class _Group:
 def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
               learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
               max_iter: int = 200, tol: float = 1e-8,
-              columns: Mapping[str, str] | None = None, on_bad_lines: str = "error"
+              columns: Mapping[str, str] | None = None, on_bad_lines: str = "error",
+              other_columns: str = "refuse"
               ) -> Estimate:
     """Learn the parameters of ``terms`` (those not frozen) from the data at ``source``
     (``columns``: the variable each differently named column holds; ``on_bad_lines``: what
@@ -108,7 +109,8 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         raise DataError(f"tol: expected a number >= 0, found {tol}")
     if max_iter < 1:
         raise DataError(f"max_iter: expected at least 1, found {max_iter}")
-    data = load_data(source, variables, columns, on_bad_lines=on_bad_lines)
+    data = load_data(source, variables, columns, on_bad_lines=on_bad_lines,
+                     other_columns=other_columns)
     seen = [r for r in learned if r.sha256 == data.sha256]
     if seen:
         raise DataError(f"{data.source}: these data (SHA-256 {data.sha256[:12]}...) were already "

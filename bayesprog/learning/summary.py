@@ -182,8 +182,8 @@ def _aligned(corner: str, names: list[str], header: list[str], cells: list[list[
 def read_typed(data: Any, discrete: Collection[str] = ()) -> tuple[Any, str]:
     """(a :func:`typed` frame, the source's name) of a CSV or Parquet file, a DataFrame or a
     mapping of columns. Raises DataError for a file that cannot be read."""
-    frame, source, _, _ = read_frame(data)
-    return typed(frame, discrete), source
+    read = read_frame(data)
+    return typed(read.frame, discrete), read.source
 
 
 def summarise(data: Any, by: str | None = None, columns: Sequence[str] | None = None,

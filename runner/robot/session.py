@@ -428,7 +428,7 @@ def probe_line(cell: list[int], readings: Readings, run: int = 0, k: int | None 
                perception: Perception | None = None) -> dict:
     """The probe line a driver sends for one run's readings (missing ones as null); with the
     ``perception`` that reads them, a discrete reading is sent by its state's name (without
-    it, every reading is sent as a number: a discrete one's index as a float is refused)."""
+    it, as its state's index)."""
     if perception is not None:
         values = shown(perception, readings, run)
     else:

@@ -71,8 +71,9 @@ class Reading:
                 raise ReadingError(f"{self.name}: state {short_repr(raw, 40)} is not one of "
                                    f"{', '.join(self.states)}"
                                    + did_you_mean(raw, self.states))
-            if isinstance(raw, (int, np.integer)) and not isinstance(raw, bool) \
-                    and 0 <= raw < len(self.states):
+            if isinstance(raw, (int, np.integer, float, np.floating)) \
+                    and not isinstance(raw, bool) and float(raw).is_integer() \
+                    and 0 <= raw < len(self.states):  # a state's index (2.0 as 2)
                 return float(raw)
             if isinstance(raw, float) and math.isnan(raw):
                 return math.nan

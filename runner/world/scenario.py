@@ -25,7 +25,7 @@ from pydantic import (
 )
 
 import bayesprog
-from bayesprog import SpecError, limit, load_document, reference_problem
+from bayesprog import SpecError, did_you_mean, limit, load_document, reference_problem
 from runner.world.physics import (
     FEATURES,
     MaterialPhysics,
@@ -188,6 +188,10 @@ class RecordingsSpec(_Strict):
                                     "holds, for a column named neither as its reading nor as "
                                     "its variable (the material's column may be named "
                                     "'material')")
+    on_bad_lines: Literal["error", "warn", "skip"] = Field(
+        "error", description="a bad row (of the wrong number of fields, a value that is not "
+        "a number, a state not declared) refuses the file at its line (error), or is set "
+        "aside and named in a warning (warn, skip), as bayesprog learn --on-bad-lines does")
 
 
 class ProgramsSpec(_Strict):
@@ -225,6 +229,9 @@ class SensorSpec(_Strict):
                                       "the physics extra): how it probes, its noise, how its "
                                       "signals become features; {} or true for the defaults")
     extra_noise: float = Field(0.0, ge=0)
+    on_bad_lines: Literal["error", "warn", "skip"] = Field(
+        "error", description="for its recordings (recordings:, resample:), as for the "
+        "perception's")
 
     @field_validator("physics", mode="before")
     @classmethod
@@ -507,11 +514,12 @@ def load_scenario(path: str | Path) -> Scenario:
               if (problem := reference_problem((path.parent / name).resolve(), "program", name))]
     if unread:
         raise SpecError(unread)
+    set_aside: list = []
     if recordings is None:
         perception = bayesprog.load((path.parent / files["perception"]).resolve())
         _check_perception(perception, spec, located)
     else:
-        perception = _learned_perception(path, recordings, located)
+        perception, set_aside = _learned_perception(path, recordings, located)
     readings = Perception(perception, spec.programs.material, spec.programs.readings)
     materials = readings.materials
     target = _load_target((path.parent / spec.programs.target).resolve(), spec)
@@ -559,7 +567,7 @@ def load_scenario(path: str | Path) -> Scenario:
     sensor_model: SensorModel | Pooled | None = None
     diags += _sensor_problems(spec, located, readings)
     if spec.sensor.recordings is not None and not diags:
-        sensor_model = _fitted_sensor(path, spec, located, materials)
+        sensor_model = _fitted_sensor(path, spec, located, perception)
     if spec.sensor.resample is not None and not diags:
         sensor_model = _resampled_sensor(path, spec, located, readings)
     if spec.sensor.model is not None:
@@ -587,7 +595,7 @@ def load_scenario(path: str | Path) -> Scenario:
                                                        strict=True)) if not cells.any()]
     if empty:
         raise SpecError(empty)
-    scenario.warnings = _clipped(scenario, located)
+    scenario.warnings = set_aside + _clipped(scenario, located)
     return scenario
 
 
@@ -640,44 +648,71 @@ def _check_perception(program: bayesprog.Program, spec: ScenarioSpec, located: A
 
 
 def _recordings_frame(path: Path, name: str, columns: Mapping[str, str],
-                      needed: Sequence[tuple[str, str]], located: Any, where: tuple
-                      ) -> tuple[Path, Any, dict[str, str]]:
+                      needed: Sequence[tuple[str, str]], located: Any, where: tuple,
+                      variables: Mapping[str, Any], states_from_data: Sequence[str] = (),
+                      on_bad_lines: str = "error") -> tuple[Path, Any, dict[str, str], list]:
     """The recordings ``name`` (relative to the scenario at ``path``) as a DataFrame whose
     columns are named as the variables ``needed`` (pairs of a reading or the material's
-    column name and its variable), and the columns it read under another name; a problem at
-    ``where``. A column is found by the name ``columns`` gives it, else by its reading's name
-    (the material's: 'material'), else by its variable's."""
-    import pandas as pd
-
-    from bayesprog import did_you_mean
-
+    column name and its variable), each checked against the program's ``variables``; the
+    columns it read under another name; and the bad rows set aside (``on_bad_lines``, as
+    ``bayesprog learn`` takes it: by default the first is refused). A problem is at ``where``.
+    A column is found by the name ``columns`` gives it, else by its reading's name (the
+    material's: 'material'), else by its variable's."""
     file = (path.parent / name).resolve()
     problem = reference_problem(file, "recordings", name) if not file.is_file() else None
     if problem:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: {problem}")])
     try:
-        frame = (pd.read_parquet(file) if file.suffix.lower() in (".parquet", ".pq")
-                 else pd.read_csv(file, sep=None, engine="python"))
+        header = _header(file)
     except (OSError, ValueError, UnicodeDecodeError, ImportError) as exc:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: cannot read it as "
                                             f"CSV or Parquet: {exc}")]) from None
-    frame.columns = [str(c) for c in frame.columns]
-    rename = {c: v for c, v in columns.items() if c in frame.columns and c != v}
+    rename = {c: v for c, v in columns.items() if c in header and c != v}
     for column, variable in needed:
-        if variable not in frame.columns and variable not in rename.values() \
-                and column in frame.columns and column != variable:
+        if variable not in header and variable not in rename.values() \
+                and column in header and column != variable:
             rename[column] = variable
-    frame = frame.rename(columns=rename)
-    missing = [(c, v) for c, v in needed if v not in frame.columns]
+    found = [rename.get(c, c) for c in header]
+    missing = [(c, v) for c, v in needed if v not in found]
     if missing:
-        spare = [c for c in frame.columns if c not in {v for _, v in needed}]
+        spare = [c for c in header if c not in rename]
         told = [f"{c!r}" + (f" (for {v})" if v != c else "") + did_you_mean(c, spare).replace(
             ": did you mean", ", did you mean") for c, v in missing]
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: no column "
                                             f"{', '.join(told)} (columns: "
-                                            f"{', '.join(map(str, frame.columns))}; name the "
+                                            f"{', '.join(map(str, header))}; name the "
                                             "columns with columns: {COLUMN: VARIABLE})")])
-    return file, frame, rename
+    try:
+        frame, set_aside = bayesprog.read_data(
+            file, {v: variables[v] for _, v in needed}, columns=rename or None,
+            states_from_data=states_from_data, on_bad_lines=on_bad_lines)
+    except bayesprog.BayesprogError as exc:
+        hint = "" if on_bad_lines != "error" else " (on_bad_lines: skip sets bad rows aside)"
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}{hint}")]
+                        ) from None
+    return file, frame, rename, list(set_aside)
+
+
+def _header(file: Path) -> list[str]:
+    """The column names of a CSV or Parquet file."""
+    if file.suffix.lower() in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        return [str(c) for c in pq.read_schema(file).names]
+    import csv
+
+    with file.open(newline="", encoding="utf-8") as handle:
+        return next(csv.reader(handle), [])
+
+
+def _set_aside(located: Any, where: tuple, name: str, rows: Sequence[Any]) -> list:
+    """The bad rows of recordings set aside, as a warning at the key that names them."""
+    if not rows:
+        return []
+    listed = "; ".join(str(r) for r in rows[:5]) + (f"; and {len(rows) - 5} more"
+                                                    if len(rows) > 5 else "")
+    return [located.diagnostic(where, f"warning: recordings {name!r}: {len(rows)} bad row(s) "
+                               f"set aside: {listed}")]
 
 
 def _needed_columns(material: str, pairs: Sequence[tuple[str, str]]) -> list[tuple[str, str]]:
@@ -686,10 +721,12 @@ def _needed_columns(material: str, pairs: Sequence[tuple[str, str]]) -> list[tup
     return [(MATERIAL_COLUMN, material), *pairs]
 
 
-def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayesprog.Program:
+def _learned_perception(path: Path, spec: RecordingsSpec, located: Any
+                        ) -> tuple[bayesprog.Program, list]:
     """The perception program learned from a lab's recordings: the template's forms, the
     materials of the recordings (as written), its terms fitted by maximum likelihood (as
-    ``bayesprog learn --states-from-data M`` does)."""
+    ``bayesprog learn --states-from-data M`` does); and the warnings of the bad rows set
+    aside (``on_bad_lines``)."""
     where = ("programs", "perception", "recordings")
     template_path = ((path.parent / spec.program).resolve() if spec.program
                      else perception_template())
@@ -701,17 +738,17 @@ def _learned_perception(path: Path, spec: RecordingsSpec, located: Any) -> bayes
             f"perception program {template.name!r}: {message}") for key, message in problems])
     pairs = reading_pairs(template, spec.material, spec.readings)
     needed = _needed_columns(spec.material, pairs)
-    file, frame, rename = _recordings_frame(path, spec.recordings, spec.columns, needed,
-                                            located, where)
-    variables = [v for _, v in needed]
-    # columns beyond the readings (a recording's cell, its raw figures) are not the program's
-    data: Any = str(file) if set(frame.columns) <= set(variables) else frame[variables]
-    try:
-        return template.fit(data, columns=(rename or None) if isinstance(data, str) else None,
-                            states_from_data=[spec.material]).program
+    file, frame, rename, bad = _recordings_frame(
+        path, spec.recordings, spec.columns, needed, located, where, template.variables,
+        [spec.material], spec.on_bad_lines)
+    try:  # the file itself, so that its learned: record names it; its other columns read past
+        fitted = template.fit(str(file), columns=rename or None, states_from_data=[
+            spec.material], on_bad_lines="skip" if bad else "error",
+            other_columns="ignore").program
     except bayesprog.BayesprogError as exc:
         raise SpecError([located.diagnostic(where, f"recordings {spec.recordings!r}: "
                                             f"{exc}")]) from None
+    return fitted, _set_aside(located, where, spec.recordings, bad)
 
 
 def _sensor_columns(spec: ScenarioSpec) -> dict[str, str]:
@@ -735,12 +772,14 @@ def _sensor_problems(spec: ScenarioSpec, located: Any, readings: Perception) -> 
 
 
 def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
-                   materials: tuple[str, ...]) -> SensorModel:
+                   perception: bayesprog.Program) -> SensorModel:
+    materials = tuple(perception.variables["M"].states)  # type: ignore[union-attr]
     where = ("sensor", "recordings")
     assert spec.sensor.recordings is not None
     needed = [(MATERIAL_COLUMN, "M"), ("texture", "E"), ("compliance", "C")]
-    file, frame, _ = _recordings_frame(path, spec.sensor.recordings, _sensor_columns(spec),
-                                       needed, located, where)
+    file, frame, _, _ = _recordings_frame(path, spec.sensor.recordings, _sensor_columns(spec),
+                                          needed, located, where, perception.variables,
+                                          on_bad_lines=spec.sensor.on_bad_lines)
     found = sorted({str(m) for m in frame["M"]})
     lacking = [m for m in materials if m not in found]
     if lacking:
@@ -763,7 +802,9 @@ def _resampled_sensor(path: Path, spec: ScenarioSpec, located: Any, readings: Pe
     assert name is not None
     needed = _needed_columns(readings.material, [(r.name, r.variable)
                                                  for r in readings.readings])
-    file, frame, _ = _recordings_frame(path, name, _sensor_columns(spec), needed, located, where)
+    file, frame, _, _ = _recordings_frame(path, name, _sensor_columns(spec), needed, located,
+                                          where, readings.program.variables,
+                                          on_bad_lines=spec.sensor.on_bad_lines)
     laid = {spec.background, *(o.material for o in spec.objects)}
     found = {str(m) for m in frame[readings.material]}
     lacking = [m for m in readings.materials if m in laid and m not in found]

@@ -276,3 +276,54 @@ def test_a_labs_experiment_runs_through_its_own_readings(tmp_path):
     for (pdc, tdc), m in zip(table[["pdc", "tdc"]].to_numpy(), truth, strict=True):
         rows = presses[presses["material"] == scenario.materials[m]]
         assert np.isclose(rows["pdc"], pdc).any() and np.isclose(rows["tdc"], tdc).any()
+
+
+def test_a_bad_row_of_the_recordings_is_refused_at_its_line_or_set_aside_when_asked(
+        tmp_path, capsys):
+    lines = (MODELS / "data" / "fingertip_presses.csv").read_text().splitlines()
+    lines[7] = lines[7] + ",extra"  # line 8: a field too many
+    lines[12] = lines[12].replace("stick", "stuck").replace("slip,", "stuck,")  # line 13
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    path = write_scenario(tmp_path, f"recordings: {MODELS}/data/fingertip_presses.csv",
+                          f"recordings: {tmp_path}/bad.csv")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "line 8" in err and "fields" in err and "on_bad_lines: skip" in err, err
+    text = path.read_text().replace("    material: M\n", "    material: M\n    on_bad_lines: skip\n")
+    path.write_text(text)
+    scenario = load_scenario(path)
+    warned = " ".join(str(w) for w in scenario.warnings)
+    assert "2 bad row(s) set aside" in warned and "line 8" in warned and "line 13" in warned
+    assert "'stuck'" in warned and "did you mean" in warned
+    assert scenario.perception.learned[-1].rows_set_aside == 2
+    assert scenario.perception.learned[-1].rows_used == len(lines) - 1 - 2
+
+
+def test_a_session_log_learns_pi_per_again(tmp_path, fingertip):
+    sensor = make_sensor(fingertip, [(9, 0, 1)])
+    explorer = Explorer(fingertip, "follow_felt")
+    log = SessionLog(tmp_path / "log.csv")
+    from runner.robot.session import Session, probe_line
+
+    session = Session(explorer, seed=3, log=log)
+    cell = [4, 4]
+    for _ in range(60):
+        flat = int(np.ravel_multi_index(tuple(cell), fingertip.shape))
+        reply = session.answer(json.dumps(probe_line(cell, sensor.probe(np.array([flat])),
+                                                     perception=fingertip.readings)))
+        cell = reply["next"]
+    log.close()
+    out = tmp_path / "relearned.yaml"
+    assert main(["learn", str(MODELS / "fingertip" / "pi_per.yaml"), str(tmp_path / "log.csv"),
+                 "--column", "material=M", "--states-from-data", "M", "--ignore-other-columns",
+                 "-o", str(out)]) == 0
+    relearned = bayesprog.load(out)
+    table = pd.read_csv(tmp_path / "log.csv")
+    states = list(relearned.variables["M"].states)  # type: ignore[union-attr]
+    assert states == sorted(set(table["material"]))
+    mean = relearned.term("P(tdc | M)").params["mean"].array  # type: ignore[union-attr]
+    for m, rows in table.groupby("material"):
+        assert mean[states.index(m)] == pytest.approx(rows["tdc"].mean(), rel=1e-12)
+    assert main(["learn", str(MODELS / "fingertip" / "pi_per.yaml"), str(tmp_path / "log.csv"),
+                 "--column", "material=M", "--states-from-data", "M", "-o",
+                 str(tmp_path / "refused.yaml")]) == 2  # its cells are no variable's
