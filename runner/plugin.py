@@ -152,7 +152,7 @@ def report(out: Path, options: ReportOptions = ReportOptions()) -> int:
     while this process reads the results."""
     import os
 
-    from runner.robot.log import is_log
+    from runner.experiments.log import is_log
 
     if is_log(out):
         return report_log(out, options)
@@ -301,7 +301,7 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
         except BayesprogError as exc:
             raise BayesprogError(f"--ablate {term!r}: {exc}") from None
     explorer = Explorer(scenario, task, ablate=options.ablate)
-    from runner.robot.log import SessionLog
+    from runner.experiments.log import SessionLog
 
     log = SessionLog(options.log) if options.log is not None else None
     try:
@@ -342,7 +342,7 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
     task = _task(scenario, options.task)
-    from runner.robot.log import SessionLog
+    from runner.experiments.log import SessionLog
     from runner.robot.ros.robot_node import RobotOptions
     from runner.robot.ros.run import robot as run_robot
 
@@ -382,7 +382,7 @@ def _closed_loop(target: Path, options: RobotCommand) -> int:
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
     task = _task(scenario, options.task)
-    from runner.robot.log import SessionLog
+    from runner.experiments.log import SessionLog
 
     log = SessionLog(options.log) if options.log is not None else None
     try:

@@ -1,6 +1,6 @@
 """The report of a session's log (``bayesprog report LOG.csv``): the session replayed and drawn.
 
-A log (:mod:`runner.robot.log`) keeps every probe of an exploration driven over stdio or ROS 2,
+A log (:mod:`runner.experiments.log`) keeps every probe of an exploration driven over stdio or ROS 2,
 or of a robot's closed loop, and beside it what was explored. The report replays the probes
 through a fresh :class:`~runner.attention.explorer.Explorer` of the scenario, its task and
 ablations, reset as the session was (its seed, or an experiment run's decisions' stream, and
@@ -34,7 +34,7 @@ from bayesprog import BayesprogError
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed
 from runner.experiments.metrics import BorderDistance, behaviour, moves
-from runner.robot.log import PHASES, Probe, meta_path, read_meta, read_probes
+from runner.experiments.log import PHASES, Probe, meta_path, read_meta, read_probes
 from runner.world.scenario import Scenario
 
 #: the report's files, in a session report's folder
@@ -221,7 +221,7 @@ def report_folder(log: Path) -> Path:
 def build_session_report(log: Path, progress: bool | None = None) -> Path:
     """Replay the session of ``log`` and write its report (figures, report.md, report.html,
     summary.json) into :func:`report_folder`; returns the folder."""
-    from bayesprog.files import atomic_write
+    from bayesprog import atomic_write
     from runner.report import session_figures
     from runner.report.build import html_page
 

@@ -6,14 +6,11 @@ probe and the next cell drawn where they are seen from above)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from runner.report import figures
-
-if TYPE_CHECKING:
-    from runner.report.session import LoggedSession, Replay
 
 #: the marks of the path figure: the start, the last probe, a probe with a missing reading and
 #: one with a warning (colours apart from the layout's pastel materials and from each other)
@@ -28,8 +25,8 @@ def _map_size(view: figures.View, largest: float) -> tuple[float, float]:
     return nx * scale, ny * scale
 
 
-def path_figure(session: LoggedSession, title: str = "") -> Any:
-    """The probes of ``session`` in order over the layout's true materials (a legend by
+def path_figure(session: Any, title: str = "") -> Any:
+    """The probes of ``session`` (a :class:`runner.report.session.LoggedSession`) in order over the layout's true materials (a legend by
     material) and the task's ground-truth border: a line through the probed cells with one
     marker per probe (labelled ``probes``, coloured by step), the start and the last probe
     marked, probes with a missing reading or a warning marked over theirs."""
@@ -78,8 +75,9 @@ def path_figure(session: LoggedSession, title: str = "") -> Any:
     return fig
 
 
-def maps_figure(session: LoggedSession, replayed: Replay, title: str = "") -> Any:
-    """The final maps of the replay: the belief P(M = the task's material) and the material
+def maps_figure(session: Any, replayed: Any, title: str = "") -> Any:
+    """The final maps of the replay ``replayed`` (a :class:`runner.report.session.Replay` of
+    ``session``): the belief P(M = the task's material) and the material
     decided at each probed cell (a cross where it is not the layout's), the posterior over
     the next cell, and the last decision's cues (inhibition, saliency, uncertainty), each with
     its colour bar; the border, the path and the next cell over the heat maps."""

@@ -51,7 +51,7 @@ from runner.experiments.loop import decision_seed
 from runner.world.readings import Perception, Readings, shown
 
 if TYPE_CHECKING:
-    from runner.robot.log import SessionLog
+    from runner.experiments.log import SessionLog
 
 #: The longest line read (characters); a longer one is answered with an error.
 MAX_LINE = 1 << 20

@@ -11,7 +11,7 @@ from collections.abc import Iterable, Iterator
 from typing import IO
 
 from runner.attention.explorer import Explorer
-from runner.robot.log import SessionLog
+from runner.experiments.log import SessionLog
 from runner.robot.session import MAX_LINE, Session
 
 

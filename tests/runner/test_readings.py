@@ -18,7 +18,7 @@ import bayesprog
 from bayesprog.cli import main
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import make_sensor
-from runner.robot.log import SessionLog
+from runner.experiments.log import SessionLog
 from runner.robot.recording import Recorder
 from runner.robot.stdio import serve
 from runner.world.readings import Perception, ReadingError, Readings
@@ -26,7 +26,7 @@ from runner.world.scenario import load_scenario
 
 ROOT = Path(__file__).parents[2]
 MODELS = ROOT / "models"
-TRUTH = MODELS / "fingertip" / "truth.yaml"
+TRUTH = MODELS / "fingertip" / "fingertip_sensor.yaml"
 FINGERTIP = MODELS / "scenarios" / "fingertip.yaml"
 
 
@@ -48,7 +48,7 @@ def world():
 
 
 def by_hand(pdc: float, pac: float | None, tdc: float | None, slip: str | None) -> np.ndarray:
-    """P(M | the readings given) of models/fingertip/truth.yaml, by scipy.stats: pac_rms
+    """P(M | the readings given) of models/fingertip/fingertip_sensor.yaml, by scipy.stats: pac_rms
     depends on pdc; electrode_var (left out) is summed out with its own Normal."""
     means = {"pine": (31.0, 3.0, -1.2, 0.25, 0.9, 0.3), "steel": (36.0, 2.5, -2.3, 0.2, 3.4, 0.4),
              "felt": (12.0, 3.5, -1.6, 0.3, 0.5, 0.25), "rubber": (21.0, 3.0, -2.0, 0.25, 1.3, 0.35)}
@@ -205,7 +205,7 @@ def test_recording_a_labs_sensor_over_stdio_writes_recordings_that_learn(tmp_pat
     assert list(table.columns) == ["material", *fingertip.readings.names, "ix", "iy"]
     assert len(table) == 41 and table.iloc[40]["ix"] == 0 and np.isnan(table.iloc[0]["ix"])
     steel = table[table["material"] == "steel"]
-    program = bayesprog.load(MODELS / "fingertip" / "pi_per.yaml")
+    program = bayesprog.load(MODELS / "fingertip" / "fingertip_per.yaml")
     labelled = table[table["material"] != "pine"]  # one press of pine: too few to learn
     fitted = program.fit(labelled[["material", *fingertip.readings.names]].rename(
         columns={"material": "M"}), states_from_data=["M"]).program
@@ -314,7 +314,7 @@ def test_a_session_log_learns_pi_per_again(tmp_path, fingertip):
         cell = reply["next"]
     log.close()
     out = tmp_path / "relearned.yaml"
-    assert main(["learn", str(MODELS / "fingertip" / "pi_per.yaml"), str(tmp_path / "log.csv"),
+    assert main(["learn", str(MODELS / "fingertip" / "fingertip_per.yaml"), str(tmp_path / "log.csv"),
                  "--column", "material=M", "--states-from-data", "M", "--ignore-other-columns",
                  "-o", str(out)]) == 0
     relearned = bayesprog.load(out)
@@ -324,6 +324,6 @@ def test_a_session_log_learns_pi_per_again(tmp_path, fingertip):
     mean = relearned.term("P(tdc | M)").params["mean"].array  # type: ignore[union-attr]
     for m, rows in table.groupby("material"):
         assert mean[states.index(m)] == pytest.approx(rows["tdc"].mean(), rel=1e-12)
-    assert main(["learn", str(MODELS / "fingertip" / "pi_per.yaml"), str(tmp_path / "log.csv"),
+    assert main(["learn", str(MODELS / "fingertip" / "fingertip_per.yaml"), str(tmp_path / "log.csv"),
                  "--column", "material=M", "--states-from-data", "M", "-o",
                  str(tmp_path / "refused.yaml")]) == 2  # its cells are no variable's
