@@ -32,9 +32,9 @@ import numpy as np
 
 from bayesprog import BayesprogError
 from runner.attention.explorer import Explorer
+from runner.experiments.log import PHASES, Probe, meta_path, read_meta, read_probes
 from runner.experiments.loop import decision_seed
 from runner.experiments.metrics import BorderDistance, behaviour, moves
-from runner.experiments.log import PHASES, Probe, meta_path, read_meta, read_probes
 from runner.world.scenario import Scenario
 
 #: the report's files, in a session report's folder

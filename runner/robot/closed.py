@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from runner.attention.explorer import Explorer
+from runner.experiments.log import SessionLog
 from runner.experiments.loop import decision_seed, make_sensor, reading_seed, start_cell, steps
 from runner.experiments.metrics import BorderDistance, moves
-from runner.experiments.log import SessionLog
 from runner.world.physics import ProbeSpec
 from runner.world.readings import shown
 from runner.world.scenario import Scenario

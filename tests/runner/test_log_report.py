@@ -16,11 +16,11 @@ import pytest
 
 from bayesprog.cli import main
 from runner.attention.explorer import Explorer
+from runner.experiments.log import SessionLog
 from runner.experiments.loop import make_sensor
 from runner.experiments.metrics import gamma_brute_force
 from runner.report import session_figures
 from runner.report.session import build_session_report, load_session, replay, summary
-from runner.experiments.log import SessionLog
 from runner.robot.session import probe_line
 from runner.robot.stdio import serve
 from runner.world.scenario import load_scenario

@@ -17,8 +17,8 @@ from scipy import stats
 import bayesprog
 from bayesprog.cli import main
 from runner.attention.explorer import Explorer
-from runner.experiments.loop import make_sensor
 from runner.experiments.log import SessionLog
+from runner.experiments.loop import make_sensor
 from runner.robot.recording import Recorder
 from runner.robot.stdio import serve
 from runner.world.readings import Perception, ReadingError, Readings

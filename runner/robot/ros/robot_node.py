@@ -21,9 +21,9 @@ from geometry_msgs.msg import PointStamped, TransformStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
+from runner.experiments.log import SessionLog
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
-from runner.experiments.log import SessionLog
 from runner.robot.ros.explorer_node import LATCHED, PROBES, STREAM
 from runner.robot.session import probe_line
 from runner.world.physics import ProbeSpec
