@@ -16,10 +16,14 @@ Measured in one run on this machine:
   peak resident memory, and the cost per run x cell relative to the smallest point (``--plot``
   draws them);
 * a robot session over standard input and output: ``bayesprog explore --stdio`` fed 4,000
-  probes at random cells of the paper's workspace, each with readings from the scenario's
-  simulated sensor, one line in and its reply read before the next (as a robot would): the
-  probes answered per second in each block of 1,000, so that a cost per step that grows with
-  the session's length shows;
+  probes of the paper's workspace, each at the cell the last reply asked for (``--session-cells
+  random``: at random cells) with readings from the scenario's simulated sensor, one line in
+  and its reply read before the next (as a robot would), and the same lines answered by
+  ``Session.answer`` in this process: the probes answered per second in each block of 1,000,
+  the medians of ``--session-repeats`` sessions each way and the last block's rate over the
+  second's, so that a cost per step that grows with the session's length shows
+  (``--only-session``: this alone; ``--session-scenario``: on another scenario, its readings
+  sent by name);
 * a naive reference: one run at a time (one decision per engine call), no incremental updates
   (uncertainty of every cell and inhibition recomputed each step, a cold multi-start ICP at every
   step). It is measured on a sample of runs of one task and configuration and extrapolated to
@@ -39,7 +43,8 @@ Measured in one run on this machine:
 
     python benchmarks/experiment.py [--repeats 3] [--naive-runs 2] [--out results/...json]
         [--plot docs/performance.png] [--volume-repeats 1] [--only-commands]
-        [--against DIR [--pairs 5]]
+        [--against DIR [--pairs 5]] [--only-session] [--session-repeats 3]
+        [--session-cells next] [--session-scenario SCENARIO]
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -62,7 +68,8 @@ from runner.attention.cues import inhibition, uncertainty
 from runner.attention.explorer import CONFIGURATIONS, Explorer
 from runner.attention.shape import MIN_POINTS, match
 from runner.experiments.experiment import load_experiment, make_sensor, run_experiment, simulate
-from runner.robot.session import probe_line
+from runner.robot.session import Session, probe_line
+from runner.world.scenario import load_scenario
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "models" / "experiments" / "paper.yaml"
@@ -472,39 +479,108 @@ def naive(sample_runs: int) -> dict[str, float]:
             "extrapolated_seconds": per_run * total_runs}
 
 
-def session(probes: int = 4000, block: int = 1000, task: str = "T2") -> dict:
-    """Seconds per block of ``probes`` fed one by one to ``bayesprog explore --stdio`` (at
-    random cells, readings from the scenario's simulated sensor), and probes per second."""
-    experiment = load_experiment(PAPER)
-    scenario = experiment.scenario
-    rng = np.random.default_rng(0)
-    cells = rng.integers(scenario.centres.shape[0], size=probes)
-    sensor = make_sensor(scenario, [(0, 0, 1)])
-    ny = scenario.shape[1]
-    lines = []
-    for cell in cells:
-        readings = sensor.probe(np.array([cell]))
-        lines.append(json.dumps(probe_line([int(cell) // ny, int(cell) % ny], readings))
-                     + "\n")
-    command = [sys.executable, "-m", "bayesprog.cli", "explore", str(scenario.path),
-               "--stdio", "--task", task]
-    seconds = []
+def _session_blocks(probe: Callable[[int, dict | None], str], probes: int, block: int,
+                    answer: Callable[[str], dict | None]) -> list[float]:
+    """Seconds per block of ``probes`` lines, each made by ``probe`` from its step and the last
+    reply and handed to ``answer``, whose reply comes before the next line is made."""
+    seconds, reply = [], None
+    for start in range(0, probes, block):
+        began = time.perf_counter()
+        for k in range(start, min(start + block, probes)):
+            reply = answer(probe(k, reply)) or {}
+            if "error" in reply:
+                raise RuntimeError(f"explore --stdio: {reply['error']}")
+        seconds.append(time.perf_counter() - began)
+    return seconds
+
+
+def _piped_session(command: list[str], probe: Callable[[int, dict | None], str], probes: int,
+                   block: int) -> list[float]:
+    """Seconds per block of lines written to a fresh ``command``'s standard input, each
+    reply read from its output before the next line is written."""
     with subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                           bufsize=1) as process:
-        assert process.stdin is not None and process.stdout is not None
-        for start in range(0, probes, block):
-            began = time.perf_counter()
-            for line in lines[start:start + block]:
-                process.stdin.write(line)
-                process.stdin.flush()
-                reply = json.loads(process.stdout.readline())
-                if "error" in reply:
-                    raise RuntimeError(f"explore --stdio: {reply['error']}")
-            seconds.append(time.perf_counter() - began)
-        process.stdin.close()
-    rates = [block / s for s in seconds]
-    return {"probes": probes, "block": block, "task": task, "block_seconds": seconds,
-            "probes_per_second": rates, "last_over_first_time": seconds[-1] / seconds[0]}
+        stdin, stdout = process.stdin, process.stdout
+        assert stdin is not None and stdout is not None
+
+        def through_pipe(line: str) -> dict:
+            stdin.write(line)
+            stdin.flush()
+            return json.loads(stdout.readline())
+
+        seconds = _session_blocks(probe, probes, block, through_pipe)
+        stdin.close()
+    return seconds
+
+
+def _session_rates(runs: list[list[float]], block: int) -> dict:
+    """Probes per second by block for every repeat, their median by block, and the last
+    block's median over the second's and the first's (the first block pays the compilation of
+    the questions and kernels; a cost per step that grows with the session's length shows as
+    a ratio below 1 against the second)."""
+    rates = [[block / s for s in seconds] for seconds in runs]
+    medians = [statistics.median(column) for column in zip(*rates, strict=True)]
+    return {"probes_per_second": rates, "median_per_block": medians,
+            "last_over_first": medians[-1] / medians[0],
+            "last_over_second": medians[-1] / medians[min(1, len(medians) - 1)]}
+
+
+def session(probes: int = 4000, block: int = 1000, task: str = "T2", repeats: int = 1,
+            cells: str = "next", scenario_path: Path | None = None) -> dict:
+    """Probes per second by block of ``block`` in a session of ``probes`` probes, ``repeats``
+    times each way: fed one line at a time to ``bayesprog explore --stdio`` in a fresh process,
+    and to :meth:`Session.answer` in this process (the same lines and replies without the pipe,
+    the replies' JSON text or the process's start), each with a fresh explorer and sensor.
+
+    With ``cells="next"`` each probe is made at the cell the last reply asked for, as a robot
+    does (the first at a random cell); with ``"random"``, at random cells. The readings come
+    from the scenario's simulated sensor (``scenario_path``, by default the paper's; its
+    first task when it has no task ``task``), sent by name. Following the explorer, the shape cue is in force
+    from the first block on, and every block does the same work; at random cells it comes
+    into force only in the second or third block, whose rate drops for that reason alone."""
+    scenario = load_scenario(scenario_path) if scenario_path else load_experiment(PAPER).scenario
+    task = task if task in scenario.spec.tasks else next(iter(scenario.spec.tasks))
+    at_random = np.random.default_rng(0).integers(scenario.centres.shape[0], size=probes)
+    ny = scenario.shape[1]
+
+    def prober() -> Callable[[int, dict | None], str]:
+        sensor = make_sensor(scenario, [(0, 0, 1)])
+
+        def probe(k: int, reply: dict | None) -> str:
+            if cells == "next" and reply is not None:
+                cell = reply["next"][0] * ny + reply["next"][1]
+            else:
+                cell = int(at_random[k])
+            line = probe_line([cell // ny, cell % ny], sensor.probe(np.array([cell])),
+                              perception=scenario.readings)
+            return json.dumps(line) + "\n"
+
+        return probe
+
+    command = [sys.executable, "-m", "bayesprog.cli", "explore", str(scenario.path),
+               "--stdio", "--task", task]
+    piped, in_process = [], []
+    for _ in range(repeats):
+        piped.append(_piped_session(command, prober(), probes, block))
+        in_process.append(_session_blocks(prober(), probes, block,
+                                          Session(Explorer(scenario, task, runs=1)).answer))
+    found = {"probes": probes, "block": block, "task": task, "cells": cells,
+             "repeats": repeats, "stdio": _session_rates(piped, block),
+             "in_process": _session_rates(in_process, block)}
+    # the keys of earlier results (one session over the pipe): the median by block
+    found["probes_per_second"] = found["stdio"]["median_per_block"]
+    found["last_over_first_time"] = 1 / found["stdio"]["last_over_first"]
+    return found
+
+
+def _session_lines(robot: dict) -> list[str]:
+    where = "the cells asked for" if robot["cells"] == "next" else "random cells"
+    return [f"{name}, {robot['probes']:,} probes at {where}, median of {robot['repeats']}: "
+            + ", ".join(f"{r:.0f}" for r in robot[key]["median_per_block"])
+            + f" probes per second by block of {robot['block']:,}; the last block's rate "
+            f"{robot[key]['last_over_second']:.2f}x the second's"
+            for name, key in (("explore --stdio", "stdio"), ("Session.answer in process",
+                                                             "in_process"))]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -518,7 +594,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only-commands", action="store_true",
                         help="time the whole commands only")
     parser.add_argument("--only-scaling", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--only-session", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--only-session", action="store_true",
+                        help="a robot session of 4,000 probes only: probes per second "
+                             "by block of 1,000, through explore --stdio and in process")
+    parser.add_argument("--session-repeats", type=int, default=3,
+                        help="sessions each way (the medians by block)")
+    parser.add_argument("--session-cells", choices=("next", "random"), default="next",
+                        help="probe the cells the replies ask for, or random cells")
+    parser.add_argument("--session-scenario", type=Path, default=None, metavar="SCENARIO",
+                        help="the session on another scenario (its readings by name, e.g. "
+                             "models/scenarios/fingertip.yaml: five readings, one discrete)")
     parser.add_argument("--against", type=Path, default=None,
                         help="another checkout: only the paired comparison of the commands")
     parser.add_argument("--pairs", type=int, default=5)
@@ -538,7 +623,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"written to {out}")
         return 0
     if args.only_session:
-        print(json.dumps(session(), indent=1))
+        robot = session(repeats=args.session_repeats, cells=args.session_cells,
+                        scenario_path=args.session_scenario)
+        print("\n".join(_session_lines(robot)))
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"session": robot}, indent=2))
+        print(f"written to {out}")
         return 0
     if args.only_scaling:
         points = scaling()
@@ -565,7 +656,7 @@ def main(argv: list[str] | None = None) -> int:
     points = scaling()
     if args.plot:
         plot_scaling(points, Path(args.plot))
-    robot = session()
+    robot = session(repeats=args.session_repeats, cells=args.session_cells)
     ref = naive(args.naive_runs)
     found = commands(args.repeats, args.volume_repeats)
     sweep = sweeps()
@@ -586,10 +677,7 @@ def main(argv: list[str] | None = None) -> int:
           f"  peak {p['peak_mib']:6.0f} MiB ({p['peak_mib'] - p['before_mib']:5.0f} MiB added)"
           f"  cost per run x cell "
           f"{p['cost_per_run_cell_relative']:.2f}x the smallest" for p in points),
-        f"explore --stdio, {robot['probes']:,} probes at random cells: "
-        + ", ".join(f"{r:.0f}" for r in robot["probes_per_second"])
-        + f" probes per second by block of {robot['block']:,}; the last block took "
-        f"{robot['last_over_first_time']:.2f}x the first's time",
+        *_session_lines(robot),
         f"naive reference: {ref['seconds_per_run']:.2f} s per run of 100 iterations, measured on "
         f"{ref['sample_runs']} run(s) and extrapolated to 1,500 runs: "
         f"{ref['extrapolated_seconds']:.0f} s",

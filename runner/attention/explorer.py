@@ -124,6 +124,9 @@ class Explorer:
             np.sqrt(sum(squares, np.zeros(()))) / self.diagonal)
         self.last: Decision | None = None
         self.registration: Registration | None = None
+        self._stacked = np.empty((0, runs), np.int64)
+        self._stacked_from: list[np.ndarray] | None = None
+        self._stacked_steps = 0
         #: seconds spent per phase since construction (perception, cues, shape, decision)
         self.timings: dict[str, float] = defaultdict(float)
 
@@ -273,6 +276,25 @@ class Explorer:
         where = tuple(np.broadcast_to(i, values.shape)[inner][keep] for i in block)
         self._saliency[where] = values[inner][keep]
 
+    def stacked_path(self) -> np.ndarray:
+        """The path as one array [steps, runs] (flat cells): a view of a buffer into which only
+        the steps probed since the last call are copied, and which doubles when full. Stacking
+        the whole list at every step made a step's cost grow with the exploration's length: a
+        robot's session of 4,000 probes ended at about half its first rate. A new path (a
+        reset) is copied from its start."""
+        steps = len(self.path)
+        if self._stacked_from is not self.path:
+            self._stacked_from, self._stacked_steps = self.path, 0
+        done = self._stacked_steps
+        if done < steps:
+            if steps > len(self._stacked):
+                grown = np.empty((max(2 * len(self._stacked), steps, 64), self.runs), np.int64)
+                grown[:done] = self._stacked[:done]
+                self._stacked = grown
+            self._stacked[done:steps] = np.stack(self.path[done:steps])
+            self._stacked_steps = steps
+        return self._stacked[:steps]
+
     def border_cells(self) -> np.ndarray:
         """The probed cells of the perceived border that the walker follows, [runs, cells]: of
         the perceived border of the task's material, the connected part (8-neighbours; 26 in a
@@ -280,7 +302,7 @@ class Explorer:
         if self.dims == 2:  # a flood fill from that cell (the border's other parts untouched)
             target, perceived = self.percept()
             part = np.empty((self.runs, len(self.centres)), bool)
-            followed_border_2d(target, perceived, np.stack(self.path), part)
+            followed_border_2d(target, perceived, self.stacked_path(), part)
             return part
         from scipy import ndimage
 

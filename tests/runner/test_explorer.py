@@ -189,3 +189,18 @@ def test_the_perceived_stimulus_kept_per_probe_is_the_one_read_from_the_map():
         np.testing.assert_array_equal(s, whole)
         compared += int(np.sum(s > 0))
     assert compared > 100  # the maps had salient cells to agree on
+
+
+def test_the_path_kept_as_an_array_is_the_path_stacked(scenario):
+    """The array of the path that the followed border reads, copied into its buffer a few
+    steps at a time as the path grows past the buffer's size, is the whole path stacked,
+    however often it is read, and a reset's new path replaces the old one."""
+    explorer = Explorer(scenario, "T2", runs=2)
+    rng = np.random.default_rng(3)
+    for start in ([[1, 1], [5, 5]], [[7, 3], [0, 9]]):
+        explorer.reset(np.array(start), seed=1)
+        for step in range(150):
+            explorer.path.append(rng.integers(0, len(explorer.centres), 2))
+            if step % 7 == 0 or step > 120:
+                np.testing.assert_array_equal(explorer.stacked_path(), np.stack(explorer.path))
+        assert explorer.stacked_path().shape == (150, 2)
