@@ -359,14 +359,16 @@ def _run_paper(root: Path, out: Path) -> float:
 
 def _same_chunks(a: Path, b: Path) -> bool:
     """Whether two experiments' folders hold the same chunks with the same arrays (their
-    configuration hashes aside)."""
+    configuration hashes aside): every array both store equal (a checkout may store more per
+    probe than another, as the readings are since they are stored), the paths and Gamma
+    among them."""
     files = sorted(p.relative_to(a) for p in (a / "chunks").rglob("*.npz"))
     if files != sorted(p.relative_to(b) for p in (b / "chunks").rglob("*.npz")):
         return False
     for name in files:
         with np.load(a / name) as x, np.load(b / name) as y:
-            keys = sorted(k for k in x.files if k != "config")
-            if keys != sorted(k for k in y.files if k != "config") or not all(
+            keys = sorted(set(x.files) & set(y.files) - {"config"})
+            if not {"gamma", "paths"} <= set(keys) or not all(
                     np.array_equal(x[k], y[k], equal_nan=x[k].dtype.kind == "f") for k in keys):
                 return False
     return True
