@@ -25,6 +25,7 @@ from typing import IO
 import numpy as np
 
 from bayesprog import BayesprogError, short_repr
+from runner.robot.session import json_object
 from runner.world.readings import ReadingError, shown
 from runner.world.scenario import Scenario
 
@@ -63,12 +64,7 @@ class Recorder:
             return {"error": f"line {self.line_no}: {exc}"}
 
     def _record(self, line: str) -> dict:
-        try:
-            obj = json.loads(line)
-        except RecursionError:
-            raise ValueError("JSON nested too deeply: expected one flat JSON object") from None
-        if not isinstance(obj, dict):
-            raise ValueError("expected a JSON object")
+        obj = json_object(line)
         names = self.perception.names
         beside = {k: v for k, v in obj.items() if k in names}
         extra = sorted(set(obj) - RECORD_KEYS - set(beside))

@@ -245,15 +245,7 @@ class Session:
             return {"error": f"line {self.line_no}: {exc}"}
 
     def _answer(self, line: str) -> dict:
-        if len(line.rstrip("\n")) >= MAX_LINE:
-            raise ValueError(f"a line of more than {MAX_LINE:,} characters: expected one "
-                             "JSON object of a probe (the rest of the line is skipped)")
-        try:
-            obj = json.loads(line)
-        except RecursionError:
-            raise ValueError("JSON nested too deeply: expected one flat JSON object") from None
-        if not isinstance(obj, dict):
-            raise ValueError("expected a JSON object")
+        obj = json_object(line)
         if "reset" in obj:
             return self._reset(obj)
         self._check_holder(obj)
@@ -431,6 +423,20 @@ class Session:
         self.k += 1
         self.stepped = True
         return reply
+
+
+def json_object(line: str) -> dict:
+    """One input line as the JSON object it must be (ValueError saying why it is not)."""
+    if len(line.rstrip("\n")) >= MAX_LINE:
+        raise ValueError(f"a line of more than {MAX_LINE:,} characters: expected one JSON "
+                         "object (the rest of the line is skipped)")
+    try:
+        obj = json.loads(line)
+    except RecursionError:
+        raise ValueError("JSON nested too deeply: expected one flat JSON object") from None
+    if not isinstance(obj, dict):
+        raise ValueError("expected a JSON object")
+    return obj
 
 
 def probe_line(cell: list[int], readings: Readings, run: int = 0, k: int | None = None,
