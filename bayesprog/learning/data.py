@@ -370,7 +370,10 @@ def _columns(read: Columns, variables: Mapping[str, Variable],
         if var is None and refuse_others:
             raise DataError(f"{name}: column {column!r} (column {i + 1}): the program has no "
                             f"variable {column!r}; expected columns among "
-                            f"{', '.join(variables)}")
+                            f"{', '.join(variables)} (a column of another name is read as "
+                            f"its variable with --column {column}=VARIABLE; columns that are no "
+                            "variable's, as a log's, are read past with --ignore-other-columns, "
+                            "in Python other_columns='ignore')")
         if isinstance(var, Continuous) and var.index is not None:
             raise DataError(f"{name}: column {column!r}: {column} is a field (one value per "
                             f"state of {var.index}); fields are not learned from columns")

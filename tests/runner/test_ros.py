@@ -822,3 +822,76 @@ def test_when_the_explorer_dies_the_robot_prints_what_it_did_and_exits_1(paper):
     outcome = json.loads(out)
     assert 6 <= outcome["probes"] < 500 and len(outcome["path"]) == outcome["probes"]
     assert outcome["gamma"] > 0 and outcome["path_length"] > 0
+
+
+# --- a lab's own readings over ROS 2 -----------------------------------------------------------
+
+FINGERTIP = ROOT / "models" / "scenarios" / "fingertip.yaml"
+
+
+def test_named_and_missing_readings_over_ros_are_answered_as_over_stdio_and_logged(tmp_path):
+    """A lab's probe lines (its readings by name, some missing) on NS/probe get the replies
+    stdio gives, and --log writes every probe."""
+    namespace = f"/t{random.SystemRandom().randrange(10**6)}"
+    log = tmp_path / "session.csv"
+    process = start("explore", str(FINGERTIP), "--ros", "--namespace", namespace,
+                    "--task", "follow_felt", "--log", str(log))
+    client = Client(namespace)
+    lines = [json.dumps({"cell": [2, 2], "readings": {"pdc": 31.0, "pac_rms": -0.6, "tdc": 0.9,
+                                                      "electrode_var": 0.28, "slip": "stick"}}),
+             json.dumps({"cell": [3, 2], "readings": {"pdc": 30.0, "tdc": None}}),
+             json.dumps({"cell": [3, 3], "readings": {"tcd": 1.0}})]
+    try:
+        client.handshake()
+        replies = [client.ask(line) if i < 2 else None for i, line in enumerate(lines)]
+        n = len(client.got["reply"])
+        client.publisher.publish(String(data=lines[2]))
+        client.spin(lambda: len(client.got["reply"]) > n)
+        replies[2] = json.loads(client.got["reply"][n].data)
+    finally:
+        client.close()
+        status, _, err = stop(process)
+    assert status == 0 and "Traceback" not in err, err
+    session = Session(Explorer(load_scenario(FINGERTIP), "follow_felt"))
+    expected = [session.answer(line + "\n") for line in [RESET] * client.preamble + lines]
+    expected = expected[client.preamble:]
+    assert replies[:2] == expected[:2]
+    assert replies[1]["missing"] == ["pac_rms", "tdc", "electrode_var", "slip"]
+    assert "did you mean 'tdc'" in replies[2]["error"]
+    table = pd.read_csv(log)
+    assert list(table["step"]) == [0, 1] and table["tdc"].isna().tolist() == [False, True]
+
+
+def test_a_labs_driver_records_its_sensor_over_ros(tmp_path):
+    namespace = f"/t{random.SystemRandom().randrange(10**6)}"
+    out = tmp_path / "presses.csv"
+    process = start("record", str(FINGERTIP), "--ros", "--namespace", namespace, "-o", str(out))
+    client = Client(namespace, name="lab_driver")
+    presses = [{"material": "steel", "readings": {"pdc": 35.0, "tdc": 3.1, "slip": "slip"}},
+               {"cell": [0, 0], "readings": {"pdc": 30.0, "pac_rms": -0.7}},
+               {"material": "stel", "readings": {"pdc": 1.0}}]
+    replies = []
+    try:
+        client.spin(lambda: client.publisher.get_subscription_count() > 0
+                    and client.node.count_publishers(f"{client.ns}/reply") > 0, timeout=60)
+        for press in presses:  # each sent until answered: a reader may miss the first
+            n = len(client.got["reply"])
+            end = time.monotonic() + 30
+            while len(client.got["reply"]) == n:
+                assert time.monotonic() < end, "the recorder never answered"
+                client.publisher.publish(String(data=json.dumps(press)))
+                until = time.monotonic() + 0.5
+                while len(client.got["reply"]) == n and time.monotonic() < until:
+                    client.executor.spin_once(timeout_sec=0.02)
+            replies.append(json.loads(client.got["reply"][n].data))
+    finally:
+        client.close()
+        status, _, err = stop(process)
+    assert status == 0 and "Traceback" not in err, err
+    assert replies[0]["material"] == "steel" and replies[1]["material"] == "pine"
+    assert "unknown material 'stel'" in replies[2]["error"]
+    table = pd.read_csv(out)
+    assert set(table["material"]) == {"steel", "pine"}  # a press repeated is recorded again
+    assert list(table.columns)[:6] == ["material", "pdc", "pac_rms", "tdc", "electrode_var",
+                                       "slip"]
+    assert "press(es) recorded" in err
