@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -45,6 +46,21 @@ def meta_path(path: Path) -> Path:
     return path.with_suffix(".json")
 
 
+def fixed_columns(dims: int) -> list[str]:
+    """The columns of a log beside its readings'."""
+    cell = ["ix", "iy", "iz"][:dims]
+    return ["step", *cell, *["x_m", "y_m", "z_m"][:dims], "missing", "warnings", "material",
+            "decided", "probability", *[f"next_{a}" for a in cell],
+            *[f"{p}_ms" for p in PHASES], "total_ms"]
+
+
+def reading_columns(names: Sequence[str], dims: int) -> dict[str, str]:
+    """Each reading's column in a log: its name, or ``reading_NAME`` where its name is one of
+    the log's other columns (a reading called ``material`` or ``step``)."""
+    fixed = set(fixed_columns(dims))
+    return {n: f"reading_{n}" if n in fixed else n for n in names}
+
+
 class SessionLog:
     """Writes a session's probes to ``path`` (CSV or Parquet, by its suffix), for a session
     over ``perception``'s readings on a grid of ``dims`` axes; ``meta`` is what it explores
@@ -61,6 +77,7 @@ class SessionLog:
 
             require_extra("pyarrow", "parquet", "--log FILE.parquet")
         self.columns: list[str] | None = None
+        self.reading_columns: dict[str, str] = {}
         self.discrete: set[str] = set()
         self._file: IO[str] | None = None
         self._writer: Any = None
@@ -80,12 +97,13 @@ class SessionLog:
         meta_path(self.path).write_text(json.dumps(meta, indent=1) + "\n")
         if self.columns is not None:
             return
-        cell = ["ix", "iy", "iz"][:dims]
-        self.columns = (["step", *cell, *["x_m", "y_m", "z_m"][:dims], *perception.names,
-                         "missing", "warnings", "material", "decided", "probability",
-                         *[f"next_{a}" for a in cell], *[f"{p}_ms" for p in PHASES],
-                         "total_ms"])
-        self.discrete = {r.name for r in perception.readings if r.discrete}
+        fixed = fixed_columns(dims)
+        #: each reading's column: its name, ``reading_NAME`` where that is one of the others'
+        self.reading_columns = reading_columns(perception.names, dims)
+        at = 1 + 2 * dims
+        self.columns = [*fixed[:at], *self.reading_columns.values(), *fixed[at:]]
+        self.discrete = {self.reading_columns[r.name] for r in perception.readings
+                         if r.discrete}
         if not self.parquet:
             self._file = self.path.open("w", newline="")
             self._csv = csv.writer(self._file)
@@ -101,7 +119,7 @@ class SessionLog:
         row: dict[str, Any] = {"step": step}
         row.update(zip(["ix", "iy", "iz"], cell, strict=False))
         row.update(zip(["x_m", "y_m", "z_m"], position, strict=False))
-        row.update(readings)
+        row.update({self.reading_columns.get(n, n): v for n, v in readings.items()})
         row.update({"missing": ";".join(missing), "warnings": "; ".join(warnings),
                     "material": material, "decided": decided, "probability": probability})
         row.update(zip(["next_ix", "next_iy", "next_iz"], next_cell or [], strict=False))
@@ -221,8 +239,9 @@ def read_probes(path: Path, perception: Perception, shape: tuple[int, ...]) -> l
     more there are)."""
     path = Path(path)
     records, first = _records(path)
+    columns = reading_columns(perception.names, len(shape))
     cell = ["ix", "iy", "iz"][: len(shape)]
-    needed = ["step", *cell, *perception.names, "missing", "warnings", "material", "decided",
+    needed = ["step", *cell, *columns.values(), "missing", "warnings", "material", "decided",
               "probability", *[f"next_{a}" for a in cell]]
     absent = [c for c in needed if c not in first]
     if absent:
@@ -232,7 +251,7 @@ def read_probes(path: Path, perception: Perception, shape: tuple[int, ...]) -> l
     probes, bad = [], []
     for where, row in records:
         try:
-            probes.append(_probe(where, row, perception, shape))
+            probes.append(_probe(where, row, perception, shape, columns))
         except (ValueError, ReadingError) as exc:
             bad.append(f"{where}: {exc}")
     if bad:
@@ -301,7 +320,7 @@ def _real(row: dict[str, Any], column: str) -> float:
 
 
 def _probe(where: str, row: dict[str, Any], perception: Perception,
-           shape: tuple[int, ...]) -> Probe:
+           shape: tuple[int, ...], columns: dict[str, str]) -> Probe:
     axes = ("ix", "iy", "iz")[: len(shape)]
     cell = tuple(_whole(row, a) for a in axes)
     if not all(i < n for i, n in zip(cell, shape, strict=True)):
@@ -312,13 +331,13 @@ def _probe(where: str, row: dict[str, Any], perception: Perception,
         next_cell = tuple(_whole(row, f"next_{a}") for a in axes)
     readings: dict[str, float | str | None] = {}
     for reading in perception.readings:
-        raw = row[reading.name]
+        raw = row[columns[reading.name]]
         if _blank(raw):
             readings[reading.name] = None
         elif reading.discrete:
             readings[reading.name] = str(raw)
         else:
-            readings[reading.name] = _real(row, reading.name)
+            readings[reading.name] = _real(row, columns[reading.name])
         reading.value(readings[reading.name])  # a state not declared, a number not finite
     missing = str(row["missing"] or "")
     return Probe(where, _whole(row, "step"), cell, readings,

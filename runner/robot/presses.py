@@ -61,18 +61,27 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         table["ix"] += [int(i) for i in index[0]]
         table["iy"] += [int(i) for i in index[1]]
         for probe in probes:
-            for key, column in RAW_COLUMNS.items():
-                table.setdefault(column, []).append(float(f"{getattr(probe, key):.6g}"))
-            for feature in FEATURES:  # every feature of the press, beside the readings
-                if feature not in RAW_COLUMNS and feature not in names:
-                    table.setdefault(feature, []).append(
-                        float(f"{probe.features[feature]:.6g}"))
+            mapped = dict(sensor.scene.spec.readings)  # type: ignore[attr-defined]
+            for column, value in figures_of(probe, mapped).items():
+                table.setdefault(column, []).append(float(f"{value:.6g}"))
             for key, values in probe.traces.items() if keep_traces else ():
                 traces.setdefault(key, []).append(values)
         done += presses
         if progress is not None:
             progress(done)
     return table, {key: np.stack(rows) for key, rows in traces.items()}
+
+
+def figures_of(probe: Probe, mapped: dict[str, str]) -> dict[str, float]:
+    """A physics press's raw figures (by :data:`RAW_COLUMNS`) and every other feature (by its
+    name), written beside its readings (``mapped``: reading -> feature): a feature a reading
+    of its name already is, is not written twice; a column another reading has is named
+    ``feature_NAME``."""
+    out = {column: (key, float(getattr(probe, key))) for key, column in RAW_COLUMNS.items()}
+    out.update({feature: (feature, float(probe.features[feature])) for feature in FEATURES
+                if feature not in RAW_COLUMNS})
+    return {(f"feature_{column}" if column in mapped else column): value
+            for column, (feature, value) in out.items() if mapped.get(column) != feature}
 
 
 def _written(value: float | str | None) -> float | str | None:

@@ -380,10 +380,16 @@ def perception_problems(program: Program, material: str,
         problems.append(("readings", f"{program.name} declares no reading: expected "
                          f"variables beside the material {material!r}"))
     seen: set[str] = set()
+    observed: dict[str, str] = {}
     for name, variable in pairs:
         if name in seen:
             problems.append(("readings", f"reading {name!r} is named twice"))
         seen.add(name)
+        if variable in observed:
+            problems.append(("readings", f"readings {observed[variable]!r} and {name!r} are "
+                             f"both the variable {variable!r}: expected one reading per "
+                             "variable"))
+        observed.setdefault(variable, name)
         if variable == material:
             problems.append(("readings", f"reading {name!r} is the material {material!r} "
                              "itself"))
@@ -400,27 +406,30 @@ def perception_problems(program: Program, material: str,
 
 def learned_ranges(program: Program, material: str, readings: Sequence[Reading]
                    ) -> dict[str, dict[str, tuple[float, float]]]:
-    """Per real reading, the range its values covered in the data the program was last learned
+    """Per real reading, the range its values covered in the data the program was learned
     from: over every row (key ``"*"``) and per material (by name), from the ``ranges`` of
-    its ``learned:`` record; empty for a program written by hand."""
-    if not program.learned:
-        return {}
-    record = program.learned[-1]
-    ranges = getattr(record, "ranges", None) or {}
+    its ``learned:`` records (a fit that continued an earlier one learned from both data
+    sets: the ranges of both); empty for a program written by hand."""
     out: dict[str, dict[str, tuple[float, float]]] = {}
-    for r in readings:
-        got = ranges.get(r.variable)
-        if not got or r.discrete:
-            continue
-        per: dict[str, tuple[float, float]] = {}
-        for key, span in got.items():
-            if key == "*":
-                per["*"] = (float(span[0]), float(span[1]))
-            elif key.startswith(f"{material}="):
-                per[key[len(material) + 1:]] = (float(span[0]), float(span[1]))
-        if "*" in per:
-            out[r.name] = per
-    return out
+    for record in program.learned:
+        ranges = getattr(record, "ranges", None) or {}
+        for r in readings:
+            got = ranges.get(r.variable)
+            if not got or r.discrete:
+                continue
+            per = out.setdefault(r.name, {})
+            for key, span in got.items():
+                if key == "*":
+                    at = "*"
+                elif key.startswith(f"{material}="):
+                    at = key[len(material) + 1:]
+                else:
+                    continue
+                low, high = float(span[0]), float(span[1])
+                if at in per:
+                    low, high = min(low, per[at][0]), max(high, per[at][1])
+                per[at] = (low, high)
+    return {name: per for name, per in out.items() if "*" in per}
 
 
 def _normal_of(program: Program, variable: str, material: str

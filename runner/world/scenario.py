@@ -308,7 +308,7 @@ class Scenario:
         """Simulated probes drawn from a perception program (by default the scenario's) given
         the cell's material: its own Normals when every reading is a Normal given the
         material alone (the paper's), else draws of the program per material (made once per
-        program, from the physics seed of the scenario)."""
+        program, from a fixed seed)."""
         perception = perception or self.readings
         if perception.naive_normals:
             return ProgramNormals(perception)
@@ -567,9 +567,11 @@ def load_scenario(path: str | Path) -> Scenario:
     sensor_model: SensorModel | Pooled | None = None
     diags += _sensor_problems(spec, located, readings)
     if spec.sensor.recordings is not None and not diags:
-        sensor_model = _fitted_sensor(path, spec, located, perception)
+        sensor_model, more = _fitted_sensor(path, spec, located, readings)
+        set_aside += more
     if spec.sensor.resample is not None and not diags:
-        sensor_model = _resampled_sensor(path, spec, located, readings)
+        sensor_model, more = _resampled_sensor(path, spec, located, readings)
+        set_aside += more
     if spec.sensor.model is not None:
         model_path = (path.parent / spec.sensor.model).resolve()
         problem = reference_problem(model_path, "sensor model", spec.sensor.model)
@@ -655,16 +657,20 @@ def _recordings_frame(path: Path, name: str, columns: Mapping[str, str],
     columns are named as the variables ``needed`` (pairs of a reading or the material's
     column name and its variable), each checked against the program's ``variables``; the
     columns it read under another name; and the bad rows set aside (``on_bad_lines``, as
-    ``bayesprog learn`` takes it: by default the first is refused). A problem is at ``where``.
-    A column is found by the name ``columns`` gives it, else by its reading's name (the
-    material's: 'material'), else by its variable's."""
+    ``bayesprog learn`` takes it: by default the first is refused). Read as ``bayesprog
+    learn`` reads data (its delimiter by the suffix, a byte-order mark and spaces after the
+    delimiters skipped). A problem is at ``where``. A column is found by the name ``columns``
+    gives it, else by its reading's name (the material's: 'material'), else by its
+    variable's."""
     file = (path.parent / name).resolve()
     problem = reference_problem(file, "recordings", name) if not file.is_file() else None
     if problem:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: {problem}")])
-    try:
-        header = _header(file)
-    except (OSError, ValueError, UnicodeDecodeError, ImportError) as exc:
+    mode = "skip" if on_bad_lines != "error" else "error"  # warned here, at the scenario's line
+    hint = "" if on_bad_lines != "error" else " (on_bad_lines: skip sets bad rows aside)"
+    try:  # its columns as the reader names them, to find the readings' among them
+        header = [str(c) for c in bayesprog.read_data(file, on_bad_lines="skip")[0].columns]
+    except bayesprog.BayesprogError as exc:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: cannot read it as "
                                             f"CSV or Parquet: {exc}")]) from None
     rename = {c: v for c, v in columns.items() if c in header and c != v}
@@ -685,24 +691,11 @@ def _recordings_frame(path: Path, name: str, columns: Mapping[str, str],
     try:
         frame, set_aside = bayesprog.read_data(
             file, {v: variables[v] for _, v in needed}, columns=rename or None,
-            states_from_data=states_from_data, on_bad_lines=on_bad_lines)
+            states_from_data=states_from_data, on_bad_lines=mode)
     except bayesprog.BayesprogError as exc:
-        hint = "" if on_bad_lines != "error" else " (on_bad_lines: skip sets bad rows aside)"
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}{hint}")]
                         ) from None
     return file, frame, rename, list(set_aside)
-
-
-def _header(file: Path) -> list[str]:
-    """The column names of a CSV or Parquet file."""
-    if file.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
-
-        return [str(c) for c in pq.read_schema(file).names]
-    import csv
-
-    with file.open(newline="", encoding="utf-8") as handle:
-        return next(csv.reader(handle), [])
 
 
 def _set_aside(located: Any, where: tuple, name: str, rows: Sequence[Any]) -> list:
@@ -771,52 +764,59 @@ def _sensor_problems(spec: ScenarioSpec, located: Any, readings: Perception) -> 
     return out
 
 
-def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any,
-                   perception: bayesprog.Program) -> SensorModel:
-    materials = tuple(perception.variables["M"].states)  # type: ignore[union-attr]
+def _fitted_sensor(path: Path, spec: ScenarioSpec, located: Any, readings: Perception
+                   ) -> tuple[SensorModel, list]:
+    """A sensor model of the paper's two readings fitted to the recordings the sensor names,
+    and the warnings of the bad rows set aside."""
     where = ("sensor", "recordings")
-    assert spec.sensor.recordings is not None
-    needed = [(MATERIAL_COLUMN, "M"), ("texture", "E"), ("compliance", "C")]
-    file, frame, _, _ = _recordings_frame(path, spec.sensor.recordings, _sensor_columns(spec),
-                                          needed, located, where, perception.variables,
-                                          on_bad_lines=spec.sensor.on_bad_lines)
-    found = sorted({str(m) for m in frame["M"]})
-    lacking = [m for m in materials if m not in found]
+    name = spec.sensor.recordings
+    assert name is not None
+    needed = [(MATERIAL_COLUMN, readings.material),
+              *[(n, readings.reading(n).variable) for n in MODEL_READINGS]]
+    file, frame, _, bad = _recordings_frame(path, name, _sensor_columns(spec), needed,
+                                            located, where, readings.program.variables,
+                                            on_bad_lines=spec.sensor.on_bad_lines)
+    frame = frame.rename(columns={v: k for k, (_, v) in zip(("M", "E", "C"), needed,
+                                                             strict=True) if k != v})
+    found = sorted({str(m) for m in frame["M"].dropna()})
+    lacking = [m for m in readings.materials if m not in found]
     if lacking:
-        raise SpecError([located.diagnostic(where, f"recordings {spec.sensor.recordings!r} hold "
-                                            f"no probe of {', '.join(lacking)}: the simulated "
-                                            "sensor needs each material of the perception "
-                                            "program")])
+        raise SpecError([located.diagnostic(where, f"recordings {name!r} hold no probe of "
+                                            f"{', '.join(lacking)}: the simulated sensor needs "
+                                            "each material of the perception program")])
     try:
-        return SensorModel.from_recordings(frame, materials, file)
+        return (SensorModel.from_recordings(frame, readings.materials, file),
+                _set_aside(located, where, name, bad))
     except ValueError as exc:
-        raise SpecError([located.diagnostic(where, f"recordings {spec.sensor.recordings!r}: "
-                                            f"{exc}")]) from None
+        raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}")]) from None
 
 
 def _resampled_sensor(path: Path, spec: ScenarioSpec, located: Any, readings: Perception
-                      ) -> Pooled:
-    """Probes resampled per material from the recordings the sensor names."""
+                      ) -> tuple[Pooled, list]:
+    """Probes resampled per material from the recordings the sensor names, and the warnings
+    of the bad rows set aside."""
     where = ("sensor", "resample")
     name = spec.sensor.resample
     assert name is not None
     needed = _needed_columns(readings.material, [(r.name, r.variable)
                                                  for r in readings.readings])
-    file, frame, _, _ = _recordings_frame(path, name, _sensor_columns(spec), needed, located,
-                                          where, readings.program.variables,
-                                          on_bad_lines=spec.sensor.on_bad_lines)
+    file, frame, _, bad = _recordings_frame(path, name, _sensor_columns(spec), needed, located,
+                                            where, readings.program.variables,
+                                            on_bad_lines=spec.sensor.on_bad_lines)
     laid = {spec.background, *(o.material for o in spec.objects)}
-    found = {str(m) for m in frame[readings.material]}
-    lacking = [m for m in readings.materials if m in laid and m not in found]
-    if lacking:
-        raise SpecError([located.diagnostic(where, f"recordings {name!r} hold no probe of "
-                                            f"{', '.join(lacking)}: the simulated sensor "
-                                            "resamples each material the layout lays")])
     try:
-        return Pooled.from_recordings(frame, readings, readings.material, f"recordings {name}",
-                                      file)
+        pooled = Pooled.from_recordings(frame, readings, readings.material,
+                                        f"recordings {name}", file)
     except (ValueError, ReadingError) as exc:
         raise SpecError([located.diagnostic(where, f"recordings {name!r}: {exc}")]) from None
+    lacking = [m for m, pool in zip(readings.materials, pooled.pools, strict=True)
+               if m in laid and np.isnan(pool).all()]
+    if lacking:
+        raise SpecError([located.diagnostic(where, f"recordings {name!r} hold no probe of "
+                                            f"{', '.join(lacking)} with a reading: the "
+                                            "simulated sensor resamples each material the "
+                                            "layout lays")])
+    return pooled, _set_aside(located, where, name, bad)
 
 
 def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ...],

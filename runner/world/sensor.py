@@ -262,6 +262,8 @@ class Pooled:
         self.names = tuple(names)
         self.pools = [np.asarray(p, float).reshape(-1, len(self.names)) for p in pools]
         self.real = ~np.asarray(discrete, bool)
+        #: each reading's support, that white noise keeps to (None: unbounded)
+        self.supports: list[tuple[float, float]] = [(-np.inf, np.inf)] * len(self.names)
         self.source = source
         #: the file the pool was read from, if any (kept with an experiment's files)
         self.path: Path | None = None
@@ -283,8 +285,10 @@ class Pooled:
                 columns.append(np.array([r.states.index(str(v)) for v in column], float)
                                if r.states is not None else np.asarray(column, float))
             pools.append(np.stack(columns, axis=1))
-        return cls(perception.names, pools, [r.discrete for r in perception.readings],
-                   perception.materials, f"draws of {program.name} given each material")
+        pooled = cls(perception.names, pools, [r.discrete for r in perception.readings],
+                     perception.materials, f"draws of {program.name} given each material")
+        pooled.supports = [r.support for r in perception.readings]
+        return pooled
 
     @classmethod
     def from_recordings(cls, frame: Any, perception: Perception, material_column: str,
@@ -302,7 +306,7 @@ class Pooled:
             pools.append(pool if len(pool) else np.full((1, len(columns)), np.nan))
         pooled = cls(perception.names, pools, [r.discrete for r in perception.readings],
                      perception.materials, source)
-        pooled.path = path
+        pooled.path, pooled.supports = path, [r.support for r in perception.readings]
         return pooled
 
     def readings(self, materials: np.ndarray, z: np.ndarray, extra_noise: float) -> Readings:
@@ -316,7 +320,10 @@ class Pooled:
             pool = self.pools[int(m)]
             pick = np.minimum((u[rows] * len(pool)).astype(np.int64), len(pool) - 1)
             out[rows] = pool[pick]
-        out[:, self.real] += extra_noise * z[:, 1:][:, self.real]
+        if extra_noise:  # kept within each reading's support, as a sensor's range is
+            out[:, self.real] += extra_noise * z[:, 1:][:, self.real]
+            low, high = np.array(self.supports, float).T
+            out = np.clip(out, low, high)
         return Readings(self.names, out)
 
     def held_out(self, per_material: int, seed: int, extra_noise: float = 0.0

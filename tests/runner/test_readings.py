@@ -327,3 +327,52 @@ def test_a_session_log_learns_pi_per_again(tmp_path, fingertip):
     assert main(["learn", str(MODELS / "fingertip" / "fingertip_per.yaml"), str(tmp_path / "log.csv"),
                  "--column", "material=M", "--states-from-data", "M", "-o",
                  str(tmp_path / "refused.yaml")]) == 2  # its cells are no variable's
+
+
+def test_the_paper_readings_under_other_names_read_a_tab_separated_file_with_a_bom(tmp_path):
+    """A lab's program names its material and features its own way; its recordings are a
+    spreadsheet's export: tab-separated, with a byte-order mark."""
+    program = (MODELS / "pi_per.yaml").read_text().replace("  M:\n", "  Mat:\n").replace(
+        "  E: {", "  T: {").replace("  C: {", "  K: {").replace("| M)", "| Mat)").replace(
+        "P(E |", "P(T |").replace("P(C |", "P(K |").replace("P(M)", "P(Mat)").replace(
+        "P(M | E, C)", "P(Mat | T, K)")
+    (tmp_path / "lab_per.yaml").write_text(program)
+    frame = pd.read_csv(MODELS / "data" / "lab_recordings.csv")
+    (tmp_path / "lab.tsv").write_text("\ufeff" + frame.to_csv(sep="\t", index=False))
+    scenario = (MODELS / "scenarios" / "lab_recorded.yaml").read_text().replace(
+        "../pi_obj.yaml", str(MODELS / "pi_obj.yaml")).replace(
+        "../pi_tar.yaml", str(MODELS / "pi_tar.yaml")).replace(
+        "perception: {recordings: ../data/lab_recordings.csv}",
+        "perception: {recordings: lab.tsv, program: lab_per.yaml, material: Mat, "
+        "readings: {texture: T, compliance: K}}").replace(
+        "recordings: ../data/lab_recordings.csv", "recordings: lab.tsv")
+    (tmp_path / "lab.yaml").write_text(scenario)
+    lab = load_scenario(tmp_path / "lab.yaml")
+    assert lab.readings.names == ("texture", "compliance") and lab.readings.material == "Mat"
+    mean = lab.perception.term("P(T | Mat)").params["mean"].array  # type: ignore[union-attr]
+    states = list(lab.perception.variables["Mat"].states)  # type: ignore[union-attr]
+    for m, rows in frame.groupby("material"):
+        assert mean[states.index(m)] == pytest.approx(rows["texture"].mean(), rel=1e-12)
+    assert lab.sensor_model is not None and lab.sensor_model.materials == tuple(states)
+
+
+def test_ranges_cover_every_data_set_a_continued_fit_learned_from(tmp_path):
+    frame = pd.read_csv(MODELS / "data" / "fingertip_presses.csv")
+    columns = ["material", *load_scenario(FINGERTIP).readings.names]
+    first, second = frame.iloc[::2][columns], frame.iloc[1::2][columns]
+    first.to_csv(tmp_path / "a.csv", index=False)
+    second.to_csv(tmp_path / "b.csv", index=False)
+    once = bayesprog.load(MODELS / "fingertip" / "fingertip_per.yaml").fit(
+        str(tmp_path / "a.csv"), columns={"material": "M"}, states_from_data=["M"]).program
+    twice = once.fit(str(tmp_path / "b.csv"), columns={"material": "M"}).program
+    ranges = Perception(twice).ranges["pdc"]
+    assert ranges["*"] == (frame["pdc"].min(), frame["pdc"].max())
+    for m, rows in frame.groupby("material"):
+        assert ranges[m] == (rows["pdc"].min(), rows["pdc"].max())
+
+
+def test_validate_refuses_two_readings_of_one_variable(tmp_path, capsys):
+    path = write_scenario(tmp_path, "readings: [pdc, pac_rms, tdc, electrode_var, slip]",
+                          "readings: {a: pdc, b: pdc}")
+    assert main(["validate", str(path)]) == 2
+    assert "readings 'a' and 'b' are both the variable 'pdc'" in capsys.readouterr().err
