@@ -391,6 +391,10 @@ class Session:
         if self.expected is not None and cell != self.expected:
             warnings.append(f"probed {cell}, not the cell asked for, {self.expected} (a missed "
                             "target?): the reading is taken where it was made")
+        readings, outside = explorer.readings.within_support(readings)
+        if readings.missing.all():
+            raise ValueError("nothing to perceive: " + "; ".join(outside))
+        warnings += outside
         before = dict(explorer.timings)
         nxt = explorer.observe(cell, readings)
         missing = readings.missing_names()

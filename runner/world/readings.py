@@ -291,6 +291,22 @@ class Perception:
                                                for r in self.readings]]))
 
     # what a reading says about the sensor --------------------------------------------------
+    def within_support(self, readings: Readings, run: int = 0) -> tuple[Readings, list[str]]:
+        """Run ``run``'s readings with each one outside the support its variable declares
+        made missing (the program gives it no density: it is summed out, not refused), and
+        the warnings that say so."""
+        values = self._ordered(readings)[run].copy()
+        out = []
+        for i, r in enumerate(self.readings):
+            low, high = r.support
+            if r.discrete or math.isnan(values[i]) or low <= values[i] <= high:
+                continue
+            out.append(f"{r.name} {values[i]:g} is outside [{low:g}, {high:g}], the support "
+                       f"the perception program declares for it ({r.variable}): taken as "
+                       "missing")
+            values[i] = math.nan
+        return Readings(self.names, values[None]), out
+
     def range_warnings(self, readings: Readings, run: int = 0) -> list[str]:
         """Readings outside the range the program declares (a bounded support) or observed
         when it was learned (over every material); never from a description's text."""

@@ -133,7 +133,7 @@ def test_a_description_is_not_a_range_but_a_reading_far_from_every_material_is_w
     assert "k" in stdio([probe([5, 7], texture=9.0)])[0]  # decided on all the same
 
 
-def test_a_reading_outside_a_bounded_support_is_refused_and_one_inside_is_not_warned(tmp_path):
+def test_a_reading_outside_a_bounded_support_is_taken_as_missing_with_a_warning(tmp_path):
     text = (ROOT / "models" / "pi_per.yaml").read_text().replace(
         'E: {continuous: [-.inf, .inf]', 'E: {continuous: [-1, 2]')
     (tmp_path / "pi_per.yaml").write_text(text)
@@ -144,8 +144,13 @@ def test_a_reading_outside_a_bounded_support_is_refused_and_one_inside_is_not_wa
     (tmp_path / "paper.yaml").write_text(scenario)
     session = Session(Explorer(load_scenario(tmp_path / "paper.yaml"), "T2"))
     reply = session.answer(json.dumps(probe([5, 7], texture=2.5)))
-    assert reply == {"error": "line 1: evidence E=2.5 is outside its support [-1, 2]"}
-    assert "warning" not in session.answer(json.dumps(probe([5, 8], texture=1.0)))
+    assert reply["missing"] == ["texture"] and reply["k"] == 0
+    assert ("texture 2.5 is outside [-1, 2], the support the perception program declares for "
+            "it (E): taken as missing") in reply["warning"]
+    second = session.answer(json.dumps(probe(reply["next"], texture=1.0)))
+    assert "warning" not in second and "missing" not in second
+    alone = session.answer(json.dumps({"cell": second["next"], "texture": 7.0}))
+    assert alone["error"].startswith("line 3: nothing to perceive: texture 7 is outside")
 
 
 @pytest.mark.parametrize("line, expected", [
