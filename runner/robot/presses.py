@@ -47,17 +47,19 @@ def record(scenario: Scenario, presses: int, seed: int, physics: ProbeSpec | Non
         seeds = [(seed, m, i) for i in range(presses)]
         sensor = make_sensor(scenario, seeds, physics)
         readings = sensor.probe(cells)
-        if set(readings.names) != set(names):
+        if not set(readings.names) <= set(names):
             raise BayesprogError(f"the fingertip gives the readings "
                                  f"{', '.join(readings.names)}, the perception program reads "
-                                 f"{', '.join(names)}: map each to a feature under the "
-                                 "scenario's sensor: physics: readings: {READING: FEATURE}")
+                                 f"{', '.join(names)}: map each of its readings to a feature "
+                                 "under the scenario's sensor: physics: readings: {READING: "
+                                 "FEATURE}")
         probes: list[Probe] = getattr(sensor, "last", [])
         index = np.unravel_index(cells, scenario.shape)
         table["material"] += [scenario.materials[m]] * presses
         for reading in scenario.readings.readings:
-            table[reading.name] += [_written(reading.shown(float(v)))
-                                    for v in readings[reading.name]]
+            given = (readings[reading.name] if reading.name in readings.names
+                     else np.full(presses, np.nan))  # a reading the fingertip does not give
+            table[reading.name] += [_written(reading.shown(float(v))) for v in given]
         table["ix"] += [int(i) for i in index[0]]
         table["iy"] += [int(i) for i in index[1]]
         for probe in probes:

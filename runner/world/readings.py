@@ -266,15 +266,19 @@ class Perception:
         return np.asarray(answer.probabilities, float)
 
     def _ordered(self, readings: Readings) -> np.ndarray:
+        """The values [runs, readings] in this perception's order of its readings; a reading
+        the sensor does not give is missing (NaN), one it gives that is not read, refused."""
         if readings.names == self.names:
             return readings.values
-        try:
-            index = [readings.names.index(n) for n in self.names]
-        except ValueError:
-            lacking = [n for n in self.names if n not in readings.names]
-            raise ReadingError(f"no reading {', '.join(lacking)}: the perception program reads "
-                               f"{', '.join(self.names)}") from None
-        return readings.values[:, index]
+        extra = [n for n in readings.names if n not in self._by_name]
+        if extra:
+            raise ReadingError(f"unknown reading(s) {', '.join(map(repr, extra))}: the "
+                               f"perception program reads {', '.join(self.names)}")
+        out = np.full((readings.runs, len(self.names)), np.nan)
+        for i, name in enumerate(self.names):
+            if name in readings.names:
+                out[:, i] = readings.values[:, readings.names.index(name)]
+        return out
 
     # readings as sent ----------------------------------------------------------------------
     def readings_of(self, sent: Mapping[str, object]) -> Readings:

@@ -597,7 +597,8 @@ def load_scenario(path: str | Path) -> Scenario:
                                                        strict=True)) if not cells.any()]
     if empty:
         raise SpecError(empty)
-    scenario.warnings = set_aside + _clipped(scenario, located)
+    scenario.warnings = (set_aside + _physics_warnings(spec, located, readings)
+                         + _clipped(scenario, located))
     return scenario
 
 
@@ -851,15 +852,31 @@ def _physics_problems(spec: ScenarioSpec, located: Any, materials: tuple[str, ..
                   for name in probe.readings
                   if name in readings.names and (r := readings.reading(name)).states]
         given, read = list(probe.readings), list(readings.names)
-        if set(given) != set(read):
-            lacking_features = [n for n in read if n not in given]
-            diags.append(located.diagnostic(
-                ("sensor", "physics"), f"the fingertip gives the readings {', '.join(given)}, "
-                f"but the perception program reads {', '.join(read)}: map "
-                + (f"{', '.join(lacking_features)} " if lacking_features else "each reading ")
-                + "to a feature under sensor: physics: readings: {READING: FEATURE} (features: "
-                + ", ".join(FEATURES) + ")", at_key=True))
+        unknown = [n for n in given if n not in read]
+        diags += [located.diagnostic(("sensor", "physics", "readings", name), f"reading "
+                                     f"{name!r}: the perception program reads no such reading"
+                                     + did_you_mean(name, read)
+                                     + f" (its readings: {', '.join(read)})", at_key=True)
+                  for name in unknown]
+        if not unknown and not set(given) & set(read):
+            diags.append(located.diagnostic(("sensor", "physics"), "the fingertip gives none "
+                                            f"of the readings {', '.join(read)}", at_key=True))
     return diags
+
+
+def _physics_warnings(spec: ScenarioSpec, located: Any, readings: Perception) -> list:
+    """The readings a physics fingertip does not give: missing on every probe (summed out)."""
+    if spec.sensor.physics is None:
+        return []
+    given = set(spec.sensor.physics.readings)
+    lacking = [n for n in readings.names if n not in given]
+    if not lacking or not given & set(readings.names):
+        return []
+    return [located.diagnostic(("sensor", "physics"), f"warning: the fingertip gives no "
+                               f"{', '.join(lacking)} (map a reading to a feature under "
+                               "sensor: physics: readings: {READING: FEATURE}; features: "
+                               + ", ".join(FEATURES) + "): missing on every probe, summed out",
+                               at_key=True)]
 
 
 def _extent(spec: ScenarioSpec) -> str:

@@ -233,9 +233,11 @@ def write_scenario(tmp_path: Path, old: str, new: str) -> Path:
     ("  resample: ../data/fingertip_presses.csv", "  model: ../sensors/biotac_proxy.yaml",
      "a sensor model gives the readings texture, compliance (the paper's), but the perception "
      "program reads pdc, pac_rms, tdc, electrode_var, slip"),
-    ("  resample: ../data/fingertip_presses.csv", "  physics: {readings: {pdc: pressure}}",
-     "the fingertip gives the readings pdc, but the perception program reads pdc, pac_rms, "
-     "tdc, electrode_var, slip: map pac_rms, tdc, electrode_var, slip to a feature"),
+    ("  resample: ../data/fingertip_presses.csv",
+     "  physics: {readings: {pdc: pressure, tcd: temperature_drop}}",
+     "reading 'tcd': the perception program reads no such reading: did you mean 'tdc'?"),
+    ("  resample: ../data/fingertip_presses.csv", "  physics: {readings: {slip: friction_ratio}}",
+     "reading 'slip' is discrete (states stick, slip): the fingertip's features are numbers"),
 ])
 def test_what_a_lab_gets_wrong_is_refused_at_its_line_before_anything_runs(
         tmp_path, capsys, old, new, expected):
@@ -376,3 +378,20 @@ def test_validate_refuses_two_readings_of_one_variable(tmp_path, capsys):
                           "readings: {a: pdc, b: pdc}")
     assert main(["validate", str(path)]) == 2
     assert "readings 'a' and 'b' are both the variable 'pdc'" in capsys.readouterr().err
+
+
+def test_a_fingertip_that_gives_some_readings_leaves_the_others_missing(tmp_path):
+    path = write_scenario(tmp_path, f"  resample: {MODELS}/data/fingertip_presses.csv",
+                          "  physics: {readings: {pdc: pressure, tdc: temperature_drop}}")
+    scenario = load_scenario(path)
+    warned = " ".join(str(w) for w in scenario.warnings)
+    assert "the fingertip gives no pac_rms, electrode_var, slip" in warned
+    sensor = make_sensor(scenario, [(0, 0, 1)])
+    readings = sensor.probe(np.array([5]))
+    assert readings.names == ("pdc", "tdc")
+    explorer = Explorer(scenario, "follow_felt")
+    explorer.reset(start=[0, 5], seed=0)
+    explorer.step(np.array([5]), readings)  # the others summed out
+    by_hand = scenario.readings.program.ask(
+        "P(M | pdc, tdc)", {"pdc": readings["pdc"], "tdc": readings["tdc"]}).probabilities
+    np.testing.assert_allclose(explorer.posterior[0, 5], by_hand[0], rtol=1e-12)
