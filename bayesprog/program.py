@@ -702,7 +702,9 @@ class Program:
                           ) -> Program:
         """This program with each variable of ``found`` taking the states found in its column
         of the data (sorted, as written), and the terms over it starting from neutral values
-        (uniform tables, means 0, spreads 1) that the fit then replaces."""
+        (uniform tables, means 0, spreads 1) that the fit then replaces. A term with a parameter
+        of no neutral value (a mixture's means) starts from its written values when the data
+        find the states as declared."""
         from bayesprog.forms.base import nonnegative, positive, real, simplex, unit_interval
 
         variables = dict(self.variables)
@@ -721,6 +723,15 @@ class Program:
                                     f"they are laid out by the states of {', '.join(over)}, "
                                     "which the data replace: learn it too")
             child = variables[t.child.name]
+            if all(tuple(found[v]) == tuple(getattr(self.variables[v], "states", ()))
+                   for v in over) and any(
+                    p.name in t.params and not (p.constraint is simplex or (
+                        p.constraint in neutral and p.event_ndim == 0))
+                    for p in t.form.params):
+                # laid out by the states the data find as declared, and with a parameter of no
+                # neutral value (a mixture's means): it starts from its values as written
+                terms.append(t)
+                continue
             params: dict[str, Any] = {}
             for p in t.form.params:
                 if p.name not in t.params:

@@ -395,3 +395,42 @@ def test_a_fingertip_that_gives_some_readings_leaves_the_others_missing(tmp_path
     by_hand = scenario.readings.program.ask(
         "P(M | pdc, tdc)", {"pdc": readings["pdc"], "tdc": readings["tdc"]}).probabilities
     np.testing.assert_allclose(explorer.posterior[0, 5], by_hand[0], rtol=1e-12)
+
+
+MIXTURE = """\
+bayesprog: 1
+name: mixture_per
+variables:
+  M: {states: [felt, pine, rubber, steel]}
+  pdc: {continuous: [-.inf, .inf]}
+  tdc: {continuous: [-.inf, .inf]}
+decomposition:
+  - {term: P(M), form: uniform}
+  - term: P(pdc | M)
+    form: gmm
+    means: {felt: [10.0, 14.0], pine: [28.0, 33.0], rubber: [19.0, 23.0], steel: [34.0, 38.0]}
+    sigma: 2.0
+    learn: {components: 2}
+  - {term: P(tdc | M), form: normal, mean: 1.0, sigma: 1.0}
+"""
+
+
+def test_a_mixture_per_material_learned_from_the_recordings_is_perceived_exactly(tmp_path):
+    (tmp_path / "mixture.yaml").write_text(MIXTURE)
+    path = write_scenario(tmp_path, "    program: ../fingertip/fingertip_per.yaml".replace(
+        "../", f"{MODELS}/"), f"    program: {tmp_path}/mixture.yaml")
+    path.write_text(path.read_text().replace(
+        "readings: [pdc, pac_rms, tdc, electrode_var, slip]", "readings: [pdc, tdc]"))
+    scenario = load_scenario(path)
+    assert scenario.readings.names == ("pdc", "tdc") and not scenario.readings.naive_normals
+    program = scenario.perception
+    mix = program.term("P(pdc | M)").params
+    means, sigma, weights = (np.asarray(mix[k].array) for k in ("means", "sigma", "weights"))  # type: ignore[union-attr]
+    normal = program.term("P(tdc | M)").params
+    mu, sd = (np.asarray(normal[k].array) for k in ("mean", "sigma"))  # type: ignore[union-attr]
+    explorer = Explorer(scenario, "follow_rubber")
+    explorer.reset(start=[0, 0], seed=0)
+    explorer.observe([0, 0], {"pdc": 20.0, "tdc": 1.2})
+    density = (weights * stats.norm(means, sigma[:, None]).pdf(20.0)).sum(axis=1)
+    density *= stats.norm(mu, sd).pdf(1.2)
+    np.testing.assert_allclose(explorer.posterior[0, 0], density / density.sum(), rtol=1e-10)
