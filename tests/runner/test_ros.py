@@ -895,3 +895,23 @@ def test_a_labs_driver_records_its_sensor_over_ros(tmp_path):
     assert list(table.columns)[:6] == ["material", "pdc", "pac_rms", "tdc", "electrode_var",
                                        "slip"]
     assert "press(es) recorded" in err
+
+
+def test_the_robots_log_has_every_probe_and_the_explorers_answer(explorer_node, paper, tmp_path):
+    """The explorer publishes a probe's next_target before its reply: the robot pairs each
+    reply with its probe by step, the last one's included, whatever the order."""
+    client, _ = explorer_node
+    log = tmp_path / "robot.csv"
+    out = subprocess.run([BAYESPROG, "robot", str(PAPER), "--ros", "--task", "T2", "--steps",
+                          "12", "--namespace", client.ns, "--json", "--log", str(log)],
+                         capture_output=True, text=True, cwd=ROOT, timeout=120,
+                         env={**os.environ, **ROS_ENV})
+    assert out.returncode == 0, out.stderr
+    table = pd.read_csv(log)
+    sim = simulate(paper, "T2", "full", start_cells(paper.shape, 1, 0), np.arange(1), 0, 12)
+    assert list(table["step"]) == list(range(12))
+    cells = np.ravel_multi_index((table["ix"], table["iy"]), paper.shape)
+    assert cells.tolist() == sim["paths"][0].tolist()
+    assert (table["next_ix"].iloc[:-1].to_numpy() == table["ix"].iloc[1:].to_numpy()).all()
+    assert (table["total_ms"] > 0).all()
+    assert json.loads(log.with_suffix(".json").read_text())["task"] == "T2"

@@ -84,9 +84,9 @@ class RobotNode(Node):
         self.create_subscription(PointStamped, "next_target", self.on_next_target, STREAM)
         self.create_subscription(String, "reply", self.on_reply, STREAM)
         self._reset_sent: float | None = None
-        self._sent: tuple[list[int], Readings] | None = None  # our last probe, for the log
+        #: our probes not answered yet, by step: the cell, its readings and when it was sent
+        self._pending: dict[int, tuple[list[int], Readings, float]] = {}
         self._ready = False  # the explorer answered the reset
-        self._answered = True  # the explorer has taken our last probe
         self._waiting_since = time.monotonic()
         self._created = time.monotonic()
         self.done = False
@@ -100,11 +100,14 @@ class RobotNode(Node):
         :data:`POSE_LINGER` seconds, :data:`POSE_DELIVERY` once a viewer is there."""
         if not self.done:
             return False
-        if self.fingertip is None:
-            return True
         now = time.monotonic()
         if self._done_at is None:
             self._done_at = now
+        if self.options.log is not None and self._pending and \
+                now - self._done_at < POSE_LINGER:
+            return False  # the last probes' answers, for the log (the explorer sends them last)
+        if self.fingertip is None:
+            return True
         if self.fingertip.get_subscription_count() > 0:
             if self._matched_at is None:
                 self._matched_at = now
@@ -153,7 +156,14 @@ class RobotNode(Node):
             reply = json.loads(msg.data)
         except ValueError:
             return
-        if not isinstance(reply, dict) or self.done:
+        if not isinstance(reply, dict):
+            return
+        k = reply.get("k")
+        if isinstance(k, int) and not isinstance(k, bool) and k in self._pending:
+            # the answer to one of our probes (its next_target may have come first)
+            self.write_log(reply, *self._pending.pop(k))
+            return
+        if self.done:
             return
         if not self._ready:
             if reply.get("reset") is True and reply.get("seed") == self.options.seed \
@@ -161,10 +171,7 @@ class RobotNode(Node):
                 self._ready = True
                 self.probe_cell(self.start)
             return
-        if "k" in reply and reply["k"] == len(self.outcome.cells) - 1:
-            self._answered = True  # our last probe was taken
-            self.write_log(reply)
-        elif "error" in reply and not self._answered:
+        if "error" in reply and self._pending:
             self.fail(f"the explorer refused a probe: {reply['error']}")
 
     def on_next_target(self, msg: PointStamped) -> None:
@@ -184,24 +191,22 @@ class RobotNode(Node):
     def probe_cell(self, cell: np.ndarray) -> None:
         flat = int(np.ravel_multi_index(tuple(int(i) for i in cell), self.scenario.shape))
         readings = self.sensor.probe(np.array([flat]))
-        self._sent = ([int(i) for i in cell], readings)
         self.publish_fingertip()
         self.gamma.probe(np.array([flat]))
         self.outcome.cells.append(flat)
-        self._answered = False
+        k = len(self.outcome.cells) - 1
         # the step it answers: a late or repeated message is refused, never taken as another
-        self.send(json.dumps(probe_line([int(i) for i in cell], readings,
-                                        k=len(self.outcome.cells) - 1,
+        self.send(json.dumps(probe_line([int(i) for i in cell], readings, k=k,
                                         perception=self.scenario.readings)))
         self._waiting_since = time.monotonic()
+        self._pending[k] = ([int(i) for i in cell], readings, self._waiting_since)
 
-    def write_log(self, reply: dict) -> None:
-        """Our last probe and the explorer's answer as a row of the log (the explorer's own
+    def write_log(self, reply: dict, cell: list[int], readings: Readings, sent: float) -> None:
+        """A probe of ours and the explorer's answer as a row of the log (the explorer's own
         phases are its to time: here only the round trip)."""
         log = self.options.log
-        if log is None or self._sent is None:
+        if log is None:
             return
-        cell, readings = self._sent
         perception = self.scenario.readings
         if log.columns is None:
             log.start(perception, self.scenario.dims, {
@@ -214,7 +219,7 @@ class RobotNode(Node):
                   shown(perception, readings), list(reply.get("missing", [])),
                   [reply["warning"]] if "warning" in reply else [], truth,
                   str(probed.get("material", "")), float(probed.get("probability", np.nan)),
-                  reply.get("next"), {}, time.monotonic() - self._waiting_since)
+                  reply.get("next"), {}, time.monotonic() - sent)
 
     def publish_fingertip(self) -> None:
         """Where the fingertip pressed last (its positioning error included), on the surface."""
