@@ -52,12 +52,10 @@ def closed_loop(scenario: Scenario, task: str, count: int, seed: int = 0, run: i
         if log is not None:
             at = [int(i) for i in np.unravel_index(cell, scenario.shape)]
             belief = explorer.posterior[0, cell]
-            warnings = perception.range_warnings(step.readings)
-            far = perception.far_warning(step.readings)
             now = time.perf_counter()
             log.write(step.k, at, [(i + 0.5) * scenario.cell for i in at],
                       shown(perception, step.readings), step.readings.missing_names(),
-                      warnings + ([far] if far else []), scenario.materials[int(truth[cell])],
+                      perception.warnings(step.readings), scenario.materials[int(truth[cell])],
                       scenario.materials[int(np.argmax(belief))], float(np.max(belief)),
                       None if step.next is None else
                       [int(i) for i in np.unravel_index(int(step.next[0]), scenario.shape)],

@@ -25,7 +25,7 @@ from typing import IO
 import numpy as np
 
 from bayesprog import BayesprogError, short_repr
-from runner.robot.session import json_object
+from runner.robot.session import checked_cell, json_object
 from runner.world.readings import ReadingError, shown
 from runner.world.scenario import Scenario
 
@@ -96,15 +96,7 @@ class Recorder:
     def _where(self, obj: dict) -> tuple[str, list[int] | None]:
         materials = self.perception.materials
         shape = self.scenario.shape
-        cell = None
-        if "cell" in obj:
-            cell = obj["cell"]
-            if (not isinstance(cell, list) or len(cell) != len(shape)
-                    or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
-                raise ValueError(f"expected 'cell' as {len(shape)} integers, found "
-                                 f"{short_repr(cell, 40)}")
-            if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
-                raise ValueError(f"cell {cell} is outside the {' x '.join(map(str, shape))} grid")
+        cell = checked_cell(obj["cell"], shape) if "cell" in obj else None
         if "material" in obj:
             material = obj["material"]
             if not isinstance(material, str) or material not in materials:

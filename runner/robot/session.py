@@ -322,16 +322,7 @@ class Session:
         self.explorer = self._by_task[task]
 
     def _cell(self, cell: object, what: str) -> list[int]:
-        shape = self.explorer.scenario.shape
-        axes = ("ix", "iy", "iz")[:len(shape)]
-        if (not isinstance(cell, list) or len(cell) != len(shape)
-                or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
-            raise ValueError(f"expected {what!r} as {len(shape)} integers "
-                             f"[{', '.join(axes)}], found {_short(cell)}")
-        if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
-            raise ValueError(f"cell {_short(cell)} is outside the "
-                             f"{' x '.join(map(str, shape))} grid")
-        return list(cell)
+        return checked_cell(cell, self.explorer.scenario.shape, what)
 
     def _readings(self, obj: dict) -> Readings:
         """The probe's readings: under ``"readings"``, or beside the cell as the paper's lines
@@ -406,10 +397,7 @@ class Session:
         if self.holder is not None:
             reply["session"] = self.holder
         perception = explorer.readings
-        warnings += perception.range_warnings(readings)
-        far = perception.far_warning(readings)
-        if far:
-            warnings.append(far)
+        warnings += perception.warnings(readings)
         if warnings:
             reply["warning"] = "; ".join(warnings)
         self.expected = list(nxt)
@@ -427,6 +415,20 @@ class Session:
         self.k += 1
         self.stepped = True
         return reply
+
+
+def checked_cell(cell: object, shape: tuple[int, ...], what: str = "cell") -> list[int]:
+    """``cell`` as a line gives it: as many integers as the grid has axes, inside the grid
+    (ValueError saying what was found otherwise)."""
+    axes = ("ix", "iy", "iz")[:len(shape)]
+    if (not isinstance(cell, list) or len(cell) != len(shape)
+            or not all(isinstance(i, int) and not isinstance(i, bool) for i in cell)):
+        raise ValueError(f"expected {what!r} as {len(shape)} integers "
+                         f"[{', '.join(axes)}], found {_short(cell)}")
+    if not all(0 <= i < n for i, n in zip(cell, shape, strict=True)):
+        raise ValueError(f"cell {_short(cell)} is outside the {' x '.join(map(str, shape))} "
+                         "grid")
+    return list(cell)
 
 
 def json_object(line: str) -> dict:

@@ -134,12 +134,6 @@ class Readings:
     def __getitem__(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
 
-    def __len__(self) -> int:
-        return self.runs
-
-    def take(self, rows: Any) -> Readings:
-        return Readings(self.names, self.values[rows])
-
     @property
     def missing(self) -> np.ndarray:
         """[runs, names]: True where a reading is missing."""
@@ -193,7 +187,7 @@ class Perception:
         self._by_name = {r.name: r for r in self.readings}
         self._questions: dict[tuple[bool, ...], str] = {}
         self.ranges = learned_ranges(self.program, self.material, self.readings)
-        self._normals = {r.name: _normal_of(self.program, r.variable, self.material)
+        self._normals = {r.name: normal_of(self.program, r.variable, self.material)
                          for r in self.readings if not r.discrete}
 
     def with_program(self, program: Program) -> Perception:
@@ -328,6 +322,12 @@ class Perception:
                            f"perception program {source} ({r.variable})")
         return out
 
+    def warnings(self, readings: Readings, run: int = 0) -> list[str]:
+        """What run ``run``'s readings say about the sensor: :meth:`range_warnings` and
+        :meth:`far_warning`."""
+        far = self.far_warning(readings, run)
+        return self.range_warnings(readings, run) + ([far] if far else [])
+
     def far_warning(self, readings: Readings, run: int = 0) -> str | None:
         """Why a reading is far from every material the program knows, per reading in its own
         units: more than :data:`FAR` standard deviations from each material's mean (a Normal
@@ -452,7 +452,7 @@ def learned_ranges(program: Program, material: str, readings: Sequence[Reading]
     return {name: per for name, per in out.items() if "*" in per}
 
 
-def _normal_of(program: Program, variable: str, material: str
+def normal_of(program: Program, variable: str, material: str
                ) -> tuple[np.ndarray, np.ndarray] | None:
     """Mean and standard deviation per material of ``P(variable | material)`` when it is a
     mean plus Gaussian noise (a Normal) of literal parameters, else None."""

@@ -11,8 +11,8 @@ from typing import Any, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from bayesprog import ParamValue, Program, SpecError, load_document
-from runner.world.readings import Perception, Readings
+from bayesprog import Program, SpecError, load_document
+from runner.world.readings import Perception, Readings, normal_of
 
 #: the readings a sensor model of the paper's kind gives (models/sensors/*.yaml)
 MODEL_READINGS = ("texture", "compliance")
@@ -33,15 +33,11 @@ class HapticSensor(Protocol):
 def material_normals(perception: Program) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Mean and sigma per material of the perception program's ``P(E | M)`` and ``P(C | M)``."""
     out = {}
-    card = perception.variables["M"].card  # type: ignore[union-attr]
     for feature in ("E", "C"):
-        term = perception.term(f"P({feature} | M)")
-        values = []
-        for name in ("mean", "sigma"):
-            p = term.params[name]
-            assert isinstance(p, ParamValue), f"P({feature} | M) {name} must be a literal"
-            values.append(np.broadcast_to(p.array, (card,)).astype(float))
-        out[feature] = (values[0], values[1])
+        normal = normal_of(perception, feature, "M")
+        if normal is None:
+            raise ValueError(f"P({feature} | M) must be a Normal of literal parameters")
+        out[feature] = normal
     return out
 
 
