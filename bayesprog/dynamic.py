@@ -11,8 +11,10 @@ with time as the first axis (``{"Y": [y1, ..., yT]}``, batch axes after it).
 * ``smooth``: ``P(X_t | y_1..T)``, by the forward and the backward recursion (the backward
   message of a step is a question of the step program on ``PREV`` with soft evidence on ``X``).
 * ``sequence``: the most likely sequence ``argmax P(x_1..T | y_1..T)`` (Viterbi; the state
-  before the first step summed out), from the step program's joint ``P(PREV X | y_t)``; ties
-  go to the first state. Its ``probability`` is ``P(x_1..T | y_1..T)`` of that sequence.
+  before the first step summed out), from the step program's joint ``P(PREV X | y_t)``; the
+  sequences that tie are counted and one of them is drawn by ``rng``, as a MAP question's tied
+  assignments are (:mod:`bayesprog.inference.viterbi`). Its ``probability`` is
+  ``P(x_1..T | y_1..T)`` of that sequence.
 
 Every step's question is asked of the engine for all sequences of the batch at once.
 """
@@ -29,6 +31,7 @@ from bayesprog.errors import QuestionError, expect_mapping
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
+from bayesprog.inference.viterbi import most_likely_sequence
 
 KINDS = ("filter", "smooth", "sequence")
 
@@ -136,39 +139,19 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         scale = (answer.log_evidence + np.log(card))[..., None, None]
         with np.errstate(divide="ignore"):
             logs.append(np.log(answer.probabilities) + scale)
-    path, log_best = _viterbi(log_first, logs)
+    path, log_best, ties = most_likely_sequence(log_first, logs, options.get("rng"))
     indices = path[..., None]  # [T, batch, 1]
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
-    return _sequence(program, expr, (state,), indices, log_best, total, marginals)
-
-
-def _viterbi(log_first: np.ndarray, logs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The most likely sequence of states, ``[T, batch...]``, and its log-probability with the
-    evidence, from the belief before the first step (``[batch..., states]``, logs) and each
-    step's ``log P(x_t, y_t | x_t-1)`` (``[batch..., before, after]``). The state before the
-    first step is not part of the sequence: summed out, not maximised; ties go to the first
-    state."""
-    delta = log_first
-    pointers = []
-    log_best = np.zeros(log_first.shape[:-1])
-    for t, log_step in enumerate(logs):
-        scores = delta[..., :, None] + log_step
-        pointers.append(np.argmax(scores, axis=-2))
-        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
-        top = np.max(delta, axis=-1, keepdims=True)
-        log_best = log_best + top[..., 0]
-        delta = delta - top
-    path = [np.argmax(delta, axis=-1)]
-    for t in range(len(logs) - 1, 0, -1):
-        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
-    return np.stack(path[::-1]), log_best
+    return _sequence(program, expr, (state,), indices, log_best, ties, total, marginals)
 
 
 def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
-              log_best: np.ndarray, total: np.ndarray, posterior: Posterior) -> MapResult:
+              log_best: np.ndarray, ties: np.ndarray, total: np.ndarray,
+              posterior: Posterior) -> MapResult:
     """The answer of a sequence question: the path's state indices ``[T, batch..., k]``, its
-    log-probability with the evidence and the evidence's (``total``), the smoothed marginals."""
+    log-probability with the evidence, the sequences that tie with it, the evidence's
+    log-probability (``total``), the smoothed marginals."""
     with np.errstate(over="ignore", invalid="ignore"):
         probability = np.exp(log_best - total)
     return MapResult(
@@ -177,7 +160,7 @@ def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indice
         names={v: program.variables[v].states for v in variables},
         indices=indices,
         probability=np.where(np.isfinite(total), probability, 0.0),
-        ties=np.ones(total.shape, int),
+        ties=ties,
         zero_evidence=~np.isfinite(total),
         posterior=posterior,
         ablated=program.ablated,
@@ -329,7 +312,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             method=kind,
         )
     # the most likely joint sequence
-    joint_path, log_best = _viterbi(log_first, logs)  # [T, batch...]
+    joint_path, log_best, ties = most_likely_sequence(log_first, logs, options.get("rng"))
     per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]
     order = [states.index(v) for v in searched]
     indices = per_variable[..., order]
@@ -338,7 +321,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
                                       kind="smooth"), per_step, steps, inputs, method, options,
                     soft_steps)
     assert isinstance(smooth, Posterior)
-    return _sequence(program, expr, tuple(searched), indices, log_best, total, smooth)
+    return _sequence(program, expr, tuple(searched), indices, log_best, ties, total, smooth)
 
 
 def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,

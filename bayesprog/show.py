@@ -293,7 +293,7 @@ def format_result(result: Posterior | MapResult | Density | Joint | Probability,
             label = f"[{', '.join(map(str, pos))}] " if pos else ""
             assignment = ", ".join(f"{v}={s}" for v, s in zip(result.variables, names, strict=False))
             out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
-                       + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
+                       + _tied(result.ties[pos]))
         return "\n".join(out)
     out = [f"{result.question}" + _ablated(result.ablated) + _approximate(result)]
     over_time = result.method in ("filter", "smooth")
@@ -344,8 +344,13 @@ def _format_sequence(result: MapResult) -> str:
             out.append(f"{indent}the evidence has probability zero: no sequence is likelier")
         else:
             out.append(f"{indent}probability of the sequence: "
-                       f"{_fmt(float(result.probability[row]))}")
+                       f"{_fmt(float(result.probability[row]))}" + _tied(result.ties[row]))
     return "\n".join(out)
+
+
+def _tied(ties: Any) -> str:
+    """How many assignments (or sequences) share the maximum, when more than one do."""
+    return f"   ({int(ties)} tied)" if ties > 1 else ""
 
 
 def _approximate(result: Posterior) -> str:

@@ -127,7 +127,8 @@ class MapResult:
 
     ``kind`` is ``"sequence"`` for the most likely sequence of a program over time steps: then
     ``indices`` has time as its first axis, and ``probability``, ``ties`` and ``zero_evidence``
-    are one per sequence (the batch shape), ``probability`` that of the whole sequence.
+    are one per sequence (the batch shape), ``probability`` that of the whole sequence and
+    ``ties`` the number of sequences as probable (drawn among as a MAP's tied assignments).
     """
 
     question: str
@@ -184,8 +185,7 @@ class MapResult:
             "ablated": list(self.ablated),
             **self.posterior._method_json(),
         }
-        if self.kind == "sequence":  # one path per sequence: its probability once, no ties
-            del out["ties"]
+        if self.kind == "sequence":  # one path per sequence: its probability, its ties
             out["method"] = "sequence"
         return out
 
@@ -219,6 +219,16 @@ def generator_of(rng: Any) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(seed_of(rng))
 
 
+def row_generators(rng: Any, rows: int) -> list[np.random.Generator]:
+    """One generator per batch row: ``rng`` shared by the rows (a seed or a generator; None is
+    seed 0), or a sequence of one per row."""
+    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
+        if len(rng) != rows:
+            raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
+        return [generator_of(r) for r in rng]
+    return [generator_of(0 if rng is None else rng)] * rows
+
+
 def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:
     """Joint argmax per batch row; ties (relative 1e-12) broken uniformly by ``rng``.
 
@@ -229,12 +239,7 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     cards = posterior.probabilities.shape[len(shape) :]
     flat = posterior.probabilities.reshape((-1, int(np.prod(cards))))
     rows = flat.shape[0]
-    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
-        if len(rng) != rows:
-            raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
-        gens = [generator_of(r) for r in rng]
-    else:
-        gens = [generator_of(rng)] * rows
+    gens = row_generators(rng, rows)
     best = flat.max(axis=1)
     tied = flat >= (best * (1 - TIE_RTOL))[:, None]
     counts = tied.sum(axis=1)
