@@ -14,7 +14,7 @@ import numpy as np
 
 from bayesprog import rich
 from bayesprog.errors import ArgumentError, QuestionError, ZeroEvidenceError, short_repr
-from bayesprog.inference.density import Density
+from bayesprog.inference.density import Density, per_row
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
 TIE_RTOL = 1e-12
@@ -22,17 +22,21 @@ TIE_RTOL = 1e-12
 
 class Deferred:
     """A dataclass field that may be given as a function of no arguments, called at its first
-    read (a value the answer can give but seldom needs)."""
+    read (a value the answer can give but seldom needs); ``shaped``: the value read is one
+    number per row, shaped as the answer's batch (:func:`~bayesprog.inference.density.per_row`)."""
 
-    def __init__(self, name: str) -> None:
-        self.name, self.slot = name, "_" + name
+    def __init__(self, name: str, shaped: bool = False) -> None:
+        self.name, self.slot, self.shaped = name, "_" + name, shaped
 
     def __get__(self, obj: Any, owner: type | None = None) -> Any:
         if obj is None:
             return self
         value = obj.__dict__[self.slot]
         if callable(value):
-            value = obj.__dict__[self.slot] = value()
+            value = value()
+            if self.shaped:
+                value = per_row(value, obj.batch_shape)
+            obj.__dict__[self.slot] = value
         return value
 
     def __set__(self, obj: Any, value: Any) -> None:
@@ -73,6 +77,11 @@ class Posterior:
     #: the rows without an answer (the evidence that bears on it has probability zero), when
     #: ``log_evidence`` is not computed yet; None: the rows where it is -inf
     impossible: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        given = self.__dict__["_log_evidence"]
+        if not callable(given):  # (computed at its first read: shaped then)
+            self.__dict__["_log_evidence"] = per_row(given, self.batch_shape)
 
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
@@ -115,7 +124,7 @@ class Posterior:
         return out
 
 
-Posterior.log_evidence = Deferred("log_evidence")  # type: ignore[assignment]
+Posterior.log_evidence = Deferred("log_evidence", shaped=True)  # type: ignore[assignment]
 
 
 @dataclass
@@ -141,6 +150,19 @@ class MapResult:
     posterior: Posterior
     ablated: tuple[str, ...] = ()
     kind: str = "map"
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The rows of evidence: one assignment each (one sequence each, for a sequence)."""
+        return tuple(self.probability.shape)
+
+    @property
+    def log_evidence(self) -> np.ndarray:
+        """The log-probability of the evidence per row; for a sequence, of all its steps'
+        evidence, ``log P(y_1..T)`` (the posterior's are per step, ``log P(y_t | y_1..t-1)``)."""
+        if self.kind == "sequence":
+            return per_row(np.sum(self.posterior.log_evidence, axis=0), self.batch_shape)
+        return self.posterior.log_evidence
 
     @property
     def steps(self) -> int | None:
@@ -181,12 +203,13 @@ class MapResult:
             "probability": self.probability.tolist(),
             "ties": self.ties.tolist(),
             "zero_evidence": self.zero_evidence.tolist(),
-            "log_evidence": _floats(self.posterior.log_evidence),
+            "log_evidence": _floats(self.log_evidence),
             "ablated": list(self.ablated),
             **self.posterior._method_json(),
         }
         if self.kind == "sequence":  # one path per sequence: its probability, its ties
             out["method"] = "sequence"
+            out["log_evidence_per_step"] = _floats(self.posterior.log_evidence)
         return out
 
 

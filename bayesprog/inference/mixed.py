@@ -20,7 +20,7 @@ from bayesprog import rich
 from bayesprog.errors import QuestionError
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.density import Density
+from bayesprog.inference.density import Density, per_row
 
 #: the most configurations of the searched discrete variables a mixed question answers
 MAX_CONFIGURATIONS = 4096
@@ -41,6 +41,9 @@ class Joint:
     log_evidence: np.ndarray
     batch_shape: tuple[int, ...]
     ablated: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        self.log_evidence = per_row(self.log_evidence, self.batch_shape)
 
     @property
     def variables(self) -> tuple[str, ...]:
