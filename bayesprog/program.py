@@ -589,7 +589,7 @@ class Program:
         return evidence(self, data, score=score, equivalent_sample_size=equivalent_sample_size,
                         columns=columns)
 
-    def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
+    def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 10_000,
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
             states_from_data: Sequence[str] = (), on_bad_lines: str = "error",
             other_columns: str = "refuse") -> Fit:
@@ -615,8 +615,12 @@ class Program:
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
         term's Dirichlet pseudo-counts), by EM where discrete values are missing or a variable
-        has no column, and by EM for mixtures. A program fitted before continues from its
-        fit's statistics. Returns a :class:`Fit`; its ``program`` is the fitted program.
+        has no column, and by EM for mixtures. EM stops once the log-likelihood per row is
+        estimated within ``tol`` of its limit (Aitken's acceleration,
+        :func:`~bayesprog.learning.fit.stopping`), or after ``max_iter`` iterations
+        (``fit.converged`` False; ``fit.stopped`` says why it stopped). A program fitted before
+        continues from its fit's statistics. Returns a :class:`Fit`; its ``program`` is the
+        fitted program.
 
         >>> import bayesprog
         >>> p = bayesprog.loads('''
@@ -783,6 +787,18 @@ class Fit:
     @property
     def converged(self) -> bool:
         return self.estimate.converged
+
+    @property
+    def iterations(self) -> int:
+        """The EM iterations made (1: one pass over complete rows)."""
+        return self.estimate.iterations
+
+    @property
+    def stopped(self) -> str:
+        """Why the fit stopped: converged (the log-likelihood per row within ``tol`` of its
+        limit, or no longer changing), or the ``max_iter`` iterations allowed were made, with
+        the last change and how far the limit is estimated to be."""
+        return self.estimate.stopped
 
     @property
     def set_aside(self) -> list[BadRow]:
