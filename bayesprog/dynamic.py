@@ -96,11 +96,15 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     step = program.ablate(str(program.term_of(previous).expression))
     card = program.variables[state].card
 
+    steps_by = _StepMethod()
+
     def ask(searched: tuple[str, ...], t: int, soft_on: dict[str, np.ndarray]) -> Posterior:
         q = Question(Expression(searched, known, dict(expr.values)))
-        return step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
-                        soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
-                        method=method, samples=options.get("samples"))
+        answer = step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
+                          soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
+                          method=method, samples=options.get("samples"))
+        assert isinstance(answer, Posterior)
+        return steps_by.seen(answer, question.kind)
 
     first = program.ask(f"P({previous})").probabilities  # the belief before the first step
     forward, log_evidence = [], []
@@ -113,8 +117,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         log_evidence.append(answer.log_evidence + np.log(card))
     batch = forward[0].shape[:-1]
     if question.kind == "filter":
-        return _posterior(question, program, state, np.stack(forward), np.stack(log_evidence),
-                          "filter")
+        return steps_by.mark(_posterior(question, program, state, np.stack(forward),
+                                        np.stack(log_evidence), "filter"))
 
     def smoothed() -> Posterior:
         backward = np.ones_like(forward[-1])
@@ -123,8 +127,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
             backward = ask((previous,), t, {state: backward}).probabilities
             joint = forward[t - 1] * backward
             marginals.append(joint / joint.sum(axis=-1, keepdims=True))
-        return _posterior(question, program, state, np.stack(marginals[::-1]),
-                          np.stack(log_evidence), "smooth")
+        return steps_by.mark(_posterior(question, program, state, np.stack(marginals[::-1]),
+                                        np.stack(log_evidence), "smooth"))
 
     if question.kind == "smooth":
         return smoothed()
@@ -144,6 +148,36 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
     return _sequence(program, expr, (state,), indices, log_best, ties, total, marginals)
+
+
+class _StepMethod:
+    """The method that answered the steps' questions, kept for the answer over steps: an
+    approximate one is named there (``steps_method``, with how it estimated the evidence)."""
+
+    def __init__(self) -> None:
+        self.method = ""
+        self.evidence: str | None = None
+
+    def seen(self, answer: Any, kind: str | None) -> Any:
+        if kind == "sequence" and np.isnan(answer.log_evidence).any():
+            raise QuestionError(f"method {answer.method!r} does not estimate the probability "
+                                "of evidence, which the most likely sequence needs: leave out "
+                                "the method (an exact one answers) or use lw")
+        if not _exact(answer.method):
+            self.method, self.evidence = answer.method, answer.evidence
+        return answer
+
+    def mark(self, answer: Posterior) -> Posterior:
+        answer.steps_method = self.method
+        answer.evidence = answer.evidence or self.evidence
+        return answer
+
+
+def _exact(method: str) -> bool:
+    from bayesprog.inference.methods.base import method_named
+
+    known = method_named(method)
+    return known is None or known.exact
 
 
 def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
@@ -240,6 +274,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     size = int(np.prod(cards))
     expr = question.expression
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
+    steps_by = _StepMethod()
     index = np.unravel_index(np.arange(size), cards)  # each joint state's indices
     first = program.ask(f"P({' '.join(previous)})").probabilities.reshape(-1)
     batch: tuple[int, ...] | None = None
@@ -257,8 +292,9 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
                                 dict(expr.values)))
         likelihoods = {k: np.broadcast_to(v[t], shape + v[t].shape[-1:])
                        for k, v in (soft_steps or {}).items()}
-        answer = step.ask(q, given, inputs=inputs, method=method, soft=likelihoods or None,
-                          samples=options.get("samples"))
+        answer = steps_by.seen(step.ask(q, given, inputs=inputs, method=method,
+                                        soft=likelihoods or None,
+                                        samples=options.get("samples")), question.kind)
         with np.errstate(divide="ignore"):
             # log P(x, y_t | x_before) = log P(x | x_before, y_t) + log P(x_before, y_t) + log S
             logm = (np.log(answer.probabilities.reshape(shape + (size,)))
@@ -299,7 +335,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             [1 + len(batch) + j for j in range(len(keep))])
         shape = probabilities.shape[:1 + len(batch)]
         kind = question.kind
-        return Posterior(
+        return steps_by.mark(Posterior(
             question=f"{expr}   ({'filtered' if kind == 'filter' else 'smoothed'}, "
                      f"{_steps_text(steps)})",
             variables=tuple(searched),
@@ -310,7 +346,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             batch_shape=shape,
             ablated=program.ablated,
             method=kind,
-        )
+        ))
     # the most likely joint sequence
     joint_path, log_best, ties = most_likely_sequence(log_first, logs, options.get("rng"))
     per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]

@@ -66,14 +66,25 @@ class Posterior:
     values: dict[str, tuple[Any, ...]] | None = None
     #: the inference method that answered (``table``, ``contraction``: exact; ``lbp``, ``lw``)
     method: str = ""
-    #: approximate answers: the standard error of each probability (``lw``), the effective
-    #: sample size per row (``lw``), the sweeps made and the last change of a message (``lbp``)
+    #: approximate answers: the standard error of each probability (``lw``, ``gibbs``), the
+    #: effective sample size per row (``lw``, ``gibbs``), the sweeps made and the last change
+    #: of a message (``lbp``)
     stderr: np.ndarray | None = None
     ess: np.ndarray | None = None
     iterations: int | None = None
     residual: float | None = None
     #: how ``log_evidence`` was computed when it is not exact (``lbp``: "Bethe approximation")
     evidence: str | None = None
+    #: an estimated bound of each probability's error, not a standard error (``grid``: the
+    #: change from half its bins), and the bins of each unknown real variable
+    error: np.ndarray | None = None
+    resolution: dict[str, int] = field(default_factory=dict)
+    #: what the +- of an approximate answer is: ``"stderr"`` (``stderr``), ``"bound"``
+    #: (``error``); None when it has none
+    uncertainty: str | None = None
+    #: a question over steps whose steps an approximate method answered: that method (its
+    #: answer gives no error estimate)
+    steps_method: str = ""
     #: the rows without an answer (the evidence that bears on it has probability zero), when
     #: ``log_evidence`` is not computed yet; None: the rows where it is -inf
     impossible: np.ndarray | None = field(default=None, repr=False)
@@ -112,8 +123,16 @@ class Posterior:
 
     def _method_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"method": self.method} if self.method else {}
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty
         if self.stderr is not None:
             out["stderr"] = self.stderr.tolist()
+        if self.error is not None:
+            out["error"] = self.error.tolist()
+        if self.resolution:
+            out["bins"] = dict(self.resolution)
+        if self.steps_method:
+            out["steps_method"] = self.steps_method
         if self.ess is not None:
             out["ess"] = self.ess.tolist()
         if self.iterations is not None:

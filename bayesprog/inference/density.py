@@ -74,6 +74,9 @@ class Density:
     error: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     #: a particle filter's effective sample size per row (step), before it resampled
     ess: np.ndarray | None = None
+    #: what the +- of an approximate answer is (``"bound"``: ``error``, an estimated bound of
+    #: each summary's error); None when it has none
+    uncertainty: str | None = None
 
     def __post_init__(self) -> None:
         self.batch_shape = tuple(self.batch_shape)
@@ -270,6 +273,8 @@ class Density:
         }
         if self.ess is not None:
             out["ess"] = _plain(self.ess.reshape(self.batch_shape))
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty
         if self.resolution:
             out["bins"] = dict(self.resolution)
             out["error"] = {k: {v: _plain(e) for v, e in by.items()}

@@ -33,7 +33,12 @@ EXPECTED_ITERATIONS = 25
 @register_method
 class LoopyBeliefPropagation(Method):
     name = "lbp"
+    title = "loopy belief propagation"
     exact = False
+
+    def describe(self, answer: Any) -> str:
+        return (f"{self.title}: {answer.iterations} sweeps, last change "
+                f"{answer.residual:.2g}; no error estimate")
     ablates_rows = True
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
