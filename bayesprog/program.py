@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import errno
 import numbers
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -1008,11 +1009,17 @@ def _replace_variables(located: Located, variables: Mapping[str, Any],
 def load(path: str | Path, variables: Mapping[str, Any] | None = None,
          terms: Mapping[str, Mapping[str, Any]] | None = None) -> Program:
     """Load and check the program file at ``path`` (``variables``, ``terms``: see
-    :func:`loads`)."""
+    :func:`loads`). Where no file of that name exists, a bundled program of that name is
+    loaded, as the command line does (``load("student")``: ``bayesprog examples`` lists them);
+    a file always wins.
+
+    >>> load("student").name
+    'student'
+    """
     if not isinstance(path, (str, os.PathLike)):
         raise ArgumentError(f"load: expected a path (a string or pathlib.Path), found "
                             f"{type(path).__name__} {short_repr(path)}")
-    path = Path(path)
+    path = _existing_or_bundled(Path(path))
     # programs name others (sub-programs, soft evidence): one that comes back to a file still
     # being loaded is a cycle, reported where it is named instead of recursing without end
     chain = _LOADING.get()
@@ -1041,6 +1048,22 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None,
         return program
     finally:
         _LOADING.reset(token)
+
+
+def _existing_or_bundled(path: Path) -> Path:
+    """``path`` when it exists; else the bundled program of that name; else a
+    ``FileNotFoundError`` that says neither is there."""
+    if path.exists():
+        return path
+    from bayesprog.bundled import find
+
+    found = find(str(path), "program")
+    if found is not None:
+        return found
+    if path.is_absolute():  # a file named by another (a sub-program), never a bundled name
+        raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
+    raise FileNotFoundError(errno.ENOENT, "no such file, and no bundled program of that name "
+                            "(bayesprog examples lists them)", str(path))
 
 
 def _replace_terms(located: Located, terms: Mapping[str, Mapping[str, Any]]
