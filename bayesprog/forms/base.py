@@ -30,24 +30,100 @@ class FormulaParam:
     formula per cell of a table keyed by discrete parents (``axes``; none for one formula).
 
     The formulas' variables are continuous parents (their values come from the evidence, or
-    the Gaussian method treats them as unknowns) and numeric discrete parents (a range's
-    integers, a discretised variable's bin midpoints)."""
+    the Gaussian method treats them as unknowns) and discrete parents: numbers for a range (its
+    integers), states named by integers and a discretised variable (its bins' midpoints), the
+    index of the state for named states (which formulas only compare, see
+    :meth:`~bayesprog.formula.Formula.with_states`)."""
 
     axes: tuple[str, ...]
     #: object array of :class:`~bayesprog.formula.Formula`, one axis per entry of ``axes``
+    #: (then, with ``event``, one over the child's states)
     formulas: np.ndarray
+    #: the formulas give the child's probabilities (its states on the last axis of
+    #: ``formulas``, or, with ``child``, as the value of the child's name), normalised per
+    #: configuration of the parents
+    event: bool = False
+    #: the child, when the formulas name it: each gives the weight of every child state
+    child: str | None = None
+    #: the text as written, where it differs from the formulas (a two-state child's one
+    #: formula, its second state's probability)
+    written: str = ""
 
     @property
     def names(self) -> tuple[str, ...]:
+        """The parents and inputs the formulas name (not the child)."""
         seen: dict[str, None] = {}
         for f in self.formulas.flat:
             seen.update(dict.fromkeys(f.names))
+        seen.pop(self.child, None)  # type: ignore[arg-type]
         return tuple(seen)
 
     def __str__(self) -> str:
-        if not self.axes:
+        if self.written:
+            return f'"{self.written}"'
+        if not self.axes and (not self.event or self.child):
             return f'"{self.formulas.flat[0]}"'
         return "{" + ", ".join(f'"{f}"' for f in self.formulas.flat) + "}"
+
+    def evaluate(self, variables: Mapping[str, Variable], known: Mapping[str, np.ndarray],
+                 rows: int) -> tuple[tuple[str, ...], np.ndarray]:
+        """``(axes, values)``: the formulas over the table's axes and the discrete variables
+        they name (appended to ``axes``), for ``rows`` rows of the values ``known`` of the
+        others (each ``[rows or 1]``); ``[rows, *axes]``, then the child's states with
+        ``event``. Probabilities are not yet normalised (:meth:`normalised`)."""
+        from bayesprog.variables import Discrete
+
+        named = self.names + ((self.child,) if self.child else ())
+        extra = tuple(n for n in named
+                      if isinstance(variables.get(n), Discrete) and n not in self.axes)
+        cards = [variables[a].card for a in extra]  # type: ignore[union-attr]
+        values: dict[str, np.ndarray] = {}
+        for name in named:
+            var = variables.get(name)
+            if isinstance(var, Discrete) and name in extra:
+                shape = [1] * (1 + len(extra))
+                shape[1 + extra.index(name)] = var.card
+                values[name] = formula_values(var).reshape(shape)
+            else:
+                values[name] = np.asarray(known[name], float).reshape((-1,) + (1,) * len(extra))
+        table = self.formulas
+        out = np.empty((rows,) + table.shape + tuple(cards))
+        for index in np.ndindex(*table.shape):
+            formula = table.item(index)
+            result = formula.evaluate({n: values[n] for n in formula.names})
+            out[(slice(None),) + index] = np.broadcast_to(result, (rows, *cards))
+        if self.child:  # the child's states last
+            out = np.moveaxis(out, 1 + table.ndim + extra.index(self.child), -1)
+            extra = tuple(n for n in extra if n != self.child)
+        elif self.event:
+            out = np.moveaxis(out, 1 + len(self.axes), -1)
+        return self.axes + extra, out
+
+    def normalised(self, axes: tuple[str, ...], values: np.ndarray,
+                   variables: Mapping[str, Variable]) -> np.ndarray:
+        """Probabilities ``values`` (from :meth:`evaluate`) normalised over the child's states;
+        a ValueError names the first parent configuration whose values are negative, not
+        finite, or all zero."""
+        total = values.sum(axis=-1, keepdims=True)
+        bad = ~(np.isfinite(values).all(-1) & (values >= 0).all(-1) & (total[..., 0] > 0))
+        if bad.any():
+            index = tuple(int(i) for i in np.argwhere(bad)[0])
+            row = values[index]
+            at = ", ".join(f"{a}={variables[a].states[i]}"  # type: ignore[union-attr]
+                           for a, i in zip(axes, index[1:], strict=True))
+            found = ", ".join(f"{v:.6g}" for v in row[:8]) + (", ..." if row.size > 8 else "")
+            why = ("sum to 0" if np.isfinite(row).all() and (row >= 0).all()
+                   else "are not all finite and >= 0")
+            raise ValueError(f"the probabilities {self} {why}"
+                             f"{' for ' + at if at else ''} (found [{found}]); expected "
+                             "values >= 0 with a positive sum, normalised over the states")
+        return values / total
+
+
+def formula_values(var: Discrete) -> np.ndarray:
+    """What a formula reads for each state of a discrete variable: its number (a range's
+    integer, an integer-named state's, a bin's midpoint), else the state's index."""
+    return np.asarray(var.values if var.values is not None else np.arange(var.card), float)
 
 
 def is_binned(var: Any) -> bool:

@@ -28,6 +28,7 @@ from bayesprog.forms import (
     get_form,
 )
 from bayesprog.forms.base import nonnegative, real
+from bayesprog.forms.standard import deterministic_problem
 from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
@@ -393,6 +394,9 @@ class _Checker:
             return self.input_ref(term, param, raw["input"], path, event_ndim, keyable, what)
         if _has_text(raw) and event_ndim == 0:
             return self.formula_param(term, param, raw, path, keyable, what)
+        if (_has_text(raw) and event_ndim == 1 and param.keyed_by_child_states
+                and isinstance(child, Discrete)):
+            return self.formula_param(term, param, raw, path, keyable, what, event=True)
         spec = _LiteralSpec(param, child, event_ndim, form.event_shape(param, child), what)
         try:
             axes, array = self._literal(raw, spec, keyable, path)
@@ -402,14 +406,28 @@ class _Checker:
         return ParamValue(axes, array)
 
     def formula_param(self, term: Term, param: Param, raw: Any, path: YPath, keyable: list,
-                      what: str) -> FormulaParam | ParamValue | None:
+                      what: str, event: bool = False) -> FormulaParam | ParamValue | None:
         """A parameter given as formulas of the parents and the runtime inputs
         (``mean: "gain*X + 1"``), possibly one per state of discrete parents
-        (``mean: {a: "X", b: "-X"}``); numbers are formulas too."""
+        (``mean: {a: "X", b: "-X"}``); numbers are formulas too. With ``event``, the child's
+        probabilities: one formula per child state (a list, or a mapping by the child's
+        states), or for a two-state child one formula, the probability of its second state;
+        normalised per parent configuration."""
         formulas: list[Formula] = []
+        child = term.child
         parents = {p.name: p for p in term.parents}
         inputs = {n: d for n, d in self.inputs.items() if n not in parents}
+        own = [child.name] if event else []  # a formula may name the child: its weights
+        named = {v.name: v.states for v in (*parents.values(), *([child] if event else []))
+                 if isinstance(v, Discrete) and v.values is None and v.kind == "states"}
         failed = False
+
+        def located(where: YPath, value: Any, exc: FormulaError) -> None:
+            # at the offending character of the formula, inside its string
+            line, column = self.located.where(where)
+            if isinstance(value, str) and "\\" not in value:
+                column += exc.offset + (1 if tuple(where) in self.located.quoted else 0)
+            self.problems.append(Diagnostic(self.located.file, line, column, f"{what}: {exc}"))
 
         def leaf(value: Any, where: YPath) -> Any:
             nonlocal failed
@@ -423,17 +441,15 @@ class _Checker:
                 failed = True
                 return 0.0
             try:
-                formula = parse_formula(str(value), names=list(parents) + list(inputs))
+                formula = parse_formula(str(value), names=list(parents) + list(inputs) + own)
+                formula = formula.with_states({n: named[n] for n in formula.names if n in named})
             except FormulaError as exc:
-                # at the offending character of the formula, inside its string
-                line, column = self.located.where(where)
-                if isinstance(value, str) and "\\" not in value:
-                    column += exc.offset + (1 if tuple(where) in self.located.quoted else 0)
-                self.problems.append(Diagnostic(self.located.file, line, column,
-                                                f"{what}: {exc}"))
+                located(where, value, exc)
                 failed = True
                 return 0.0
             for name in formula.names:
+                if name in own:
+                    continue
                 if name in inputs:
                     if inputs[name].ndim:
                         self.error(where, f"{what}: formula {str(value)!r} uses the input "
@@ -442,13 +458,13 @@ class _Checker:
                         failed = True
                     continue
                 var = parents[name]
-                if isinstance(var, Discrete) and var.kind not in ("range", "bins"):
-                    self.error(where, f"{what}: formula {str(value)!r} uses {name}, whose "
-                               f"states are not numbers; expected real parents, integer "
-                               f"ranges or discretised variables (key a table by {name}'s "
-                               "states instead)")
+                if isinstance(var, Discrete) and var.kind == "grid":
+                    self.error(where, f"{what}: formula {str(value)!r} uses the grid {name}, "
+                               f"whose states are cells; expected real parents, integer "
+                               f"ranges, named states or discretised variables (key a table "
+                               f"by {name}'s states instead)")
                     failed = True
-            if formula.is_constant and not failed:
+            if formula.is_constant and not failed and not event:
                 number = np.asarray(formula.evaluate({}), float)
                 if not param.constraint.ok(number):
                     self.error(where, f"{what} must be {param.constraint}, got "
@@ -457,10 +473,31 @@ class _Checker:
             formulas.append(formula)
             return float(len(formulas) - 1)
 
-        indices = leaf(raw, path)
+        indices: Any = leaf(raw, path)
         if failed:
             return None
-        spec = _LiteralSpec(Param(param.name, real), term.child, 0, None, what)
+        weights = event and any(child.name in f.names for f in formulas)
+        written = ""
+        if event and not weights and isinstance(raw, str):
+            if child.card != 2:  # type: ignore[union-attr]
+                self.error(path, f"{what}: one formula that does not name {child.name} is the "
+                           f"probability of the second of two states, but {child.name} has "
+                           f"{child.card}: name {child.name} in the formula (the weight of "  # type: ignore[union-attr]
+                           "each of its states) or give one formula per state")
+                return None
+            # one formula for a two-state child: its second state's probability
+            first = parse_formula(f"1 - ({raw})", names=list(parents) + list(inputs))
+            formulas.append(first.with_states({n: named[n] for n in first.names if n in named}))
+            indices = [1.0, 0.0]
+            written = raw
+        if (event and isinstance(indices, dict) and isinstance(child, Discrete)
+                and {str(k) for k in indices} == set(child.states)):
+            by_state = {str(k): v for k, v in indices.items()}  # one row by the child's states
+            indices = [by_state[state] for state in child.states]
+        spec = (_LiteralSpec(Param(param.name, real, event_ndim=1, keyed_by_child_states=True),
+                             child, 1, (child.card,), what)  # type: ignore[union-attr]
+                if event and not weights
+                else _LiteralSpec(Param(param.name, real), child, 0, None, what))
         try:
             axes, array = self._literal(indices, spec, keyable, path)
         except _LiteralError as exc:
@@ -469,10 +506,27 @@ class _Checker:
         table = np.empty(array.shape, dtype=object)
         for index in np.ndindex(*array.shape):
             table[index] = formulas[int(array[index])]
-        if all(f.is_constant for f in formulas):  # numbers only, written as text
-            return ParamValue(axes, np.vectorize(lambda f: float(f.evaluate({})),
-                                                 otypes=[float])(table))
-        return FormulaParam(axes, table)
+        found = FormulaParam(axes, table, event=event, child=child.name if weights else None,
+                             written=written)
+        if any(n in inputs or not parents[n].is_discrete for n in found.names):
+            return found  # evaluated with each question's evidence and inputs
+        # of discrete parents only: checked once, on every configuration of the parents
+        variables = {p.name: p for p in (*term.parents, child)}
+        every, values = found.evaluate(variables, {}, 1)
+        if event:
+            try:
+                values = found.normalised(every, values, variables)
+            except ValueError as exc:
+                self.error(path, f"{what}: {exc}")
+                return None
+        elif term.form.deterministic and isinstance(child, Discrete):
+            problem = deterministic_problem(child, every, values[0], variables)
+            if problem:
+                self.error(path, f"{what}: {problem}")
+                return None
+        if all(f.is_constant for f in formulas) and not weights:  # numbers, written as text
+            return ParamValue(every, values[0])
+        return found
 
     def input_ref(self, term: Term, param: Param, name: Any, path: YPath, event_ndim: int,
                   keyable: list, what: str) -> InputRef | None:

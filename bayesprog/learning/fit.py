@@ -241,6 +241,8 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
     for term in model:
         if term.learn is None or term.label in freeze or not term.form.params:
             continue
+        if term.form.deterministic and term.form.scale_param is None and len(term.params) == 1:
+            continue  # the child is a function of its parents: nothing to learn
         formulas = [k for k, v in term.params.items() if isinstance(v, FormulaParam)]
         if formulas:
             raise DataError(f"term {term.label}: its {formulas[0]!r} is a formula of its parents, "
