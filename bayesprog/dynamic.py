@@ -19,7 +19,7 @@ Every step's question is asked of the engine for all sequences of the batch at o
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -99,7 +99,7 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
                         soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
                         method=method, samples=options.get("samples"))
 
-    first = program.ask(f"P({previous})").probabilities  # the belief before the first step
+    first = _before(program, [previous]).probabilities  # the belief before the first step
     forward, log_evidence = [], []
     belief: np.ndarray = first
     for t in range(steps):
@@ -141,6 +141,17 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
     return _sequence(program, expr, (state,), indices, log_best, total, marginals)
+
+
+def _before(program: Any, previous: list[str], inputs: Mapping[str, Any] | None = None,
+            method: str | None = None) -> Any:
+    """The belief before the first step, ``P(previous)``. The terms of the states one step
+    earlier depend on nothing else: it is asked of the engine without the variables that have
+    no term, which every question of the program gives and which this one does not read."""
+    from bayesprog.inference import dispatch
+
+    question = Question(Expression(tuple(previous)))
+    return dispatch.ask(program, question, None, inputs, None, None, method, {})
 
 
 def _viterbi(log_first: np.ndarray, logs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -258,7 +269,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     expr = question.expression
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
     index = np.unravel_index(np.arange(size), cards)  # each joint state's indices
-    first = program.ask(f"P({' '.join(previous)})").probabilities.reshape(-1)
+    first = _before(program, previous).probabilities.reshape(-1)
     batch: tuple[int, ...] | None = None
     logs = []
     for t in range(steps):
@@ -359,16 +370,19 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
                             "means (ask a smooth question)")
     previous = [p for p, _ in program.time]
     states = [s for _, s in program.time]
-    observed = list(expr.right)
+    # a control (a variable without a term, given at every step) is not observed: the step's
+    # model is read at its value of each step
+    controls = [name for name in expr.right if name in program.conditioning]
+    observed = [name for name in expr.right if name not in program.conditioning]
     for name in observed:
         if program.variables[name].is_discrete:
             raise QuestionError(f"a Kalman filter observes real variables: {name} is discrete "
                                 "(ask a particle filter, method='pf')")
     d, m = len(states), len(observed)
 
-    def gaussian(question_text: str, evidence: dict[str, Any], program_: Any) -> Density:
+    def gaussian(asked: Callable[[], Any]) -> Density:
         try:
-            answer = program_.ask(question_text, evidence, inputs=inputs, method="gaussian")
+            answer = asked()
         except QuestionError as exc:
             raise QuestionError(f"a Kalman filter needs a linear-Gaussian step (normal terms, "
                                 f"means affine in their parents; else ask a particle filter, "
@@ -379,7 +393,7 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
                                 "discrete variable of the step mixes several")
         return answer
 
-    start = gaussian(f"P({' '.join(previous)})", {}, program)
+    start = gaussian(lambda: _before(program, previous, inputs, "gaussian"))
     assert start.means is not None and start.covariances is not None
     m0 = start.means[0, 0]
     p0 = start.covariances[0, 0]
@@ -388,30 +402,46 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
     # the step is linear in them (a formula such as sin(X_before) is not)
     probes = np.random.default_rng(0).normal(scale=3.0, size=(3, d))
     rows = np.vstack([np.zeros(d), np.eye(d), probes])
-    given = {p: rows[:, i] for i, p in enumerate(previous)}
-    model = gaussian(f"P({' '.join(states + observed)} | {', '.join(previous)})", given, step)
-    means = model.means[:, 0]  # type: ignore[index]
-    c = means[0]
-    g = (means[1:d + 1] - c).T  # (d + m) x d
-    noise = model.covariances[0, 0]  # type: ignore[index]
+    # with controls, one model per step and sequence: [steps, batch..., rows] probes
+    values = {name: np.asarray(per_step[name]) for name in controls}
+    lead = np.broadcast_shapes(*(v.shape for v in values.values())) if controls else ()
+    given = {p: np.broadcast_to(rows[:, i], lead + (len(rows),))
+             for i, p in enumerate(previous)}
+    given.update({name: np.broadcast_to(v[..., None], lead + (len(rows),))
+                  for name, v in values.items()})
+    model = gaussian(lambda: step.ask(
+        f"P({' '.join(states + observed)} | {', '.join(previous + controls)})", given,
+        inputs=inputs, method="gaussian"))
+    k = d + m
+    means = model.means[:, 0].reshape(lead + (len(rows), k))  # type: ignore[index]
+    covariances = model.covariances[:, 0].reshape(lead + (len(rows), k, k))  # type: ignore[index]
+    c = means[..., 0, :]
+    g = np.swapaxes(means[..., 1:d + 1, :] - c[..., None, :], -1, -2)  # ... (d + m) x d
+    noise = covariances[..., 0, :, :]
     scale = 1.0 + np.abs(means).max()
-    if (np.abs(means[d + 1:] - (c + probes @ g.T)).max() > 1e-9 * scale
-            or np.abs(model.covariances[:, 0] - noise).max() > 1e-9 * (1 + np.abs(noise).max())):  # type: ignore[index]
+    linear = c[..., None, :] + np.einsum("pj,...ij->...pi", probes, g)
+    if (np.abs(means[..., d + 1:, :] - linear).max() > 1e-9 * scale
+            or np.abs(covariances - noise[..., None, :, :]).max()
+            > 1e-9 * (1 + np.abs(noise).max())):
         raise QuestionError("a Kalman filter needs a linear-Gaussian step: the means of "
                             f"{', '.join(states + observed)} are not affine in "
                             f"{', '.join(previous)} (a non-linear formula): ask a particle "
                             "filter, method='pf' (--method pf)")
-    y_all = np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
-    batch = y_all.shape[1:-1]
+    y_all = (np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
+             if observed else np.zeros((steps, 0)))
+    batch = np.broadcast_shapes(y_all.shape[1:-1], lead[1:])
+    extra = (1,) * (len(batch) - (y_all.ndim - 2))  # the batch axes the commands add
+    y_all = np.broadcast_to(y_all.reshape((steps, *extra) + y_all.shape[1:]), (steps, *batch, m))
     mean = np.broadcast_to(m0, batch + (d,)).copy()
     cov = np.broadcast_to(p0, batch + (d, d)).copy()
     filtered, joints, log_evidence = [], [], []
     y_index = np.arange(2 * d, 2 * d + m)
     for t in range(steps):
+        c_t, g_t, noise_t = (c[t], g[t], noise[t]) if controls else (c, g, noise)
         # the joint of (x_t-1, x_t, y_t) given y_1..t-1
-        mu = np.concatenate([mean, c + np.einsum("ij,...j->...i", g, mean)], axis=-1)
-        cross = np.einsum("...ij,kj->...ik", cov, g)  # cov(x_t-1, (x_t, y_t))
-        lower = np.einsum("ij,...jk,lk->...il", g, cov, g) + noise
+        mu = np.concatenate([mean, c_t + np.einsum("...ij,...j->...i", g_t, mean)], axis=-1)
+        cross = np.einsum("...ij,...kj->...ik", cov, g_t)  # cov(x_t-1, (x_t, y_t))
+        lower = np.einsum("...ij,...jk,...lk->...il", g_t, cov, g_t) + noise_t
         sigma = _blocks(cov, cross, lower)
         keep = np.arange(2 * d)
         s_yy = sigma[..., y_index[:, None], y_index]
@@ -512,9 +542,17 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     known = {name: np.asarray(per_step[name], dtype=object) for name in observed}
     batch = np.broadcast_shapes(*(a.shape[1:] for a in known.values())) if known else ()
     sequences = int(np.prod(batch))
+    # the controls (variables without a term) given at the first step: the states one step
+    # earlier do not depend on them, but the program is drawn given them
+    controls = [name for name in observed if name in program.conditioning]
+
+    def first_step(b: int) -> dict[str, Any]:
+        return {name: np.broadcast_to(known[name][0], batch).reshape(-1)[b]
+                for name in controls}
+
     particles = np.stack([
         np.stack([first[p].to_numpy(dtype=float) for p in previous], axis=-1)
-        for first in (program.sample(n, rng=np.random.default_rng([seed, 0, b]))
+        for first in (program.sample(n, first_step(b), rng=np.random.default_rng([seed, 0, b]))
                       for b in range(sequences))])  # [sequences, n, states]
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
     terms = list(step.active_terms)

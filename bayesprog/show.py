@@ -173,6 +173,8 @@ def render(program: Program) -> str:
     width = max(len(n) for n in program.variables)
     for name, var in program.variables.items():
         note = f"  -- {var.description}" if var.description else ""
+        if name in program.conditioning:
+            note = "  (no term: every question gives it)" + note
         lines.append(f"      {name:<{width}} : {_domain(var)}{note}")
     if program.inputs:
         lines.append("    Runtime inputs")
@@ -183,7 +185,10 @@ def render(program: Program) -> str:
         earlier = ", ".join(f"{previous} is {state}" for previous, state in program.time)
         lines.append(f"    Time: one step of a sequence; {earlier} one step earlier")
     terms = [t for t in program.terms if not t.soft]
-    joint = " ".join(program.variables)
+    given = program.conditioning  # no term: the program is conditioned on them
+    joint = " ".join(n for n in program.variables if n not in given)
+    if given:
+        joint += " | " + ", ".join(given)
     lines += ["    Decomposition",
               f"      P({joint}) = " + " ".join(str(t.expression) for t in terms)]
     lines.append("    Parametric forms")

@@ -309,14 +309,27 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
 
     evidence = expect_mapping(evidence, "evidence", "variable names to values")
     variables = program.variables
+    unknown = [name for name in program.conditioning if name not in evidence]
+    if unknown:
+        names = ", ".join(unknown)
+        one = len(unknown) == 1
+        raise QuestionError(f"sampling the program needs {names}: "
+                            f"{'it has' if one else 'they have'} no term in the decomposition "
+                            f"(the program is conditioned on {'it' if one else 'them'}), so "
+                            "the draws are made given "
+                            f"{'its value' if one else 'their values'}: give "
+                            f"{'it' if one else 'them'} as evidence ("
+                            + ", ".join(f"{n}=..." for n in unknown) + ")")
     drawn = tuple(name for name, var in variables.items()
                   if name not in evidence and getattr(var, "index", None) is None)
-    method = method or ("lw" if evidence else "forward")
-    if method == "forward" and evidence:
+    # the variables without a term are not drawn but given: ancestral sampling takes them
+    observed = [name for name in evidence if name not in program.conditioning]
+    method = method or ("lw" if observed else "forward")
+    if method == "forward" and observed:
         raise QuestionError("forward sampling ignores evidence: use method='lw' or "
                             "'rejection' to condition on it")
     if method == "rejection":
-        continuous = [k for k in evidence if k in variables and not variables[k].is_discrete]
+        continuous = [k for k in observed if k in variables and not variables[k].is_discrete]
         if continuous:
             raise QuestionError(f"rejection sampling needs discrete evidence; "
                                 f"{', '.join(continuous)} is continuous: use method='lw'")
@@ -329,7 +342,11 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
     gen = generators(rng, 1)
     weights = None
     if method == "rejection":
-        free = Bound(bound.batch_shape, inputs=bound.inputs)
+        given = set(program.conditioning)
+        free = Bound(bound.batch_shape,
+                     {k: v for k, v in bound.discrete.items() if k in given},
+                     {k: v for k, v in bound.continuous.items() if k in given},
+                     inputs=bound.inputs)
         kept: dict[str, list[np.ndarray]] = {name: [] for name in drawn}
         found, tried = 0, 0
         while found < n:
@@ -340,7 +357,8 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
             d = draw(program, terms, free, batch, gen)
             match = np.ones(batch, bool)
             for name, idx in bound.discrete.items():
-                match &= d.values[name][0] == int(np.asarray(idx).reshape(-1)[0])
+                if name not in given:
+                    match &= d.values[name][0] == int(np.asarray(idx).reshape(-1)[0])
             for name in drawn:
                 kept[name].append(d.values[name][0][match])
             found += int(match.sum())

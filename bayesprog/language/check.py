@@ -9,7 +9,7 @@ from __future__ import annotations
 import graphlib
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -95,6 +95,10 @@ class _Checker:
         self.problems: list[Diagnostic] = []
         self.variables: dict[str, Variable] = {}
         self.inputs: dict[str, InputDecl] = {}
+        #: the variables without a term (not one that failed to be read), and those of them
+        #: that condition a term: every question gives them
+        self.untermed: list[str] = []
+        self.conditioning: tuple[str, ...] = ()
 
     def error(self, path: YPath, message: str, at_key: bool = False) -> None:
         self.problems.append(self.located.diagnostic(path, message, at_key=at_key))
@@ -165,18 +169,31 @@ class _Checker:
                 terms.append(term)
         missing = [n for n in self.variables if n not in defined]
         failed_children = self._failed_children()
-        for name in missing:
-            if name not in failed_children:
+        # a variable without a term that conditions one (a control, a known input) is given by
+        # every question; one that conditions nothing is a term forgotten (and a state over
+        # time without a term is refused by check_time)
+        parents = self._named_parents()
+        over_time = self._time_names()
+        self.untermed = [n for n in missing if n not in failed_children]
+        self.conditioning = tuple(n for n in self.untermed if n in parents and n not in over_time)
+        for name in self.untermed:
+            if name not in parents and name not in over_time:
                 self.error(
                     ("variables", name),
                     f"variable {name!r} has no term in the decomposition: expected one "
-                    f"P({name} | ...)",
+                    f"P({name} | ...), or {name} as a parent of a term (a variable that "
+                    "every question gives)",
                 )
         for i, soft in enumerate(self.doc.soft_evidence):
             path = ("soft_evidence", i)
             term = self.check_term(path + ("variable",), f"P({soft.variable})", soft.form,
                                    soft.parameters, path)
             if term is not None:
+                if term.child.name in self.conditioning:
+                    self.error(path + ("variable",), f"soft evidence on {soft.variable}: it "
+                               "has no term in the decomposition, so every question gives its "
+                               "value; expected soft evidence on a variable with a term")
+                    continue
                 if not term.child.is_discrete:
                     self.error(path + ("variable",), f"soft evidence needs a discrete "
                                f"variable, found continuous {soft.variable!r}")
@@ -248,6 +265,22 @@ class _Checker:
                 self.error(path + ("shared",), f"{what}: shared names {name!r}, expected "
                            f"parameters of form {form!r} ({', '.join(names) or 'none'})")
         return LearnOptions(pseudo, components, tuple(spec.shared))
+
+    def _named_parents(self) -> set[str]:
+        """Variables named as parents in a term, even in a term whose form is wrong."""
+        names: set[str] = set()
+        for spec in self.doc.decomposition:
+            try:
+                names.update(parse_expression(spec.term).right)
+            except ExpressionError:
+                pass
+        return names
+
+    def _time_names(self) -> set[str]:
+        """The states over time and their copies one step earlier, as the time section names
+        them."""
+        spec = self.doc.time
+        return set() if spec is None else {n for pair in spec.previous.items() for n in pair}
 
     def _failed_children(self) -> set[str]:
         """Variables named first in a term, even in a term too broken to parse."""
@@ -657,7 +690,7 @@ class _Checker:
             except ExpressionError as exc:
                 self.error(path, f"question {name!r}: {exc}")
                 continue
-            problem = question_problem(expr, self.variables)
+            problem = question_problem(expr, self.variables, self.conditioning)
             kind = "probability" if expr.event and spec.kind == "posterior" else spec.kind
             if not problem and expr.event and kind != "probability":
                 problem = (f"{expr} asks the probability of an event, not a {kind} question "
@@ -692,6 +725,10 @@ class _Checker:
                 var = self.variables.get(name)
                 if var is None:
                     problems.append(f"expected a declared variable, found nothing named {name!r}")
+                elif name in self.untermed:
+                    problems.append(f"{name} has no term in the decomposition: expected one, "
+                                    + ("the belief before the first step" if name == previous
+                                       else "the transition"))
             if state in previous_names:
                 problems.append(f"{state} is a state one step earlier itself: expected a state "
                                 "of this step")
@@ -791,12 +828,18 @@ class _Checker:
                    f"{' -> '.join(loop)}; expected a directed acyclic graph")
 
 
-def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | None:
-    """Why ``expr`` cannot be asked of these variables (None if it can)."""
+def question_problem(expr: Expression, variables: dict[str, Variable],
+                     conditioning: Collection[str] = ()) -> str | None:
+    """Why ``expr`` cannot be asked of these variables (None if it can), of a program
+    conditioned on the variables ``conditioning`` (which have no term)."""
     for name in expr.left + expr.right:
         if name not in variables:
             return (f"undeclared variable {name!r} in {expr}{did_you_mean(name, variables)} "
                     f"(declared: {', '.join(variables)})")
+    if conditioning:
+        problem = conditioning_problem(expr, conditioning)
+        if problem:
+            return problem
     for name in expr.left:
         var = variables[name]
         if isinstance(var, Continuous) and var.index is not None:
@@ -826,6 +869,35 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
                 f"{MAX_TERM_VARIABLES} (its answer has one axis per variable, and numpy's "
                 "arrays take 32 axes, one of them for a batch)")
     return None
+
+
+def conditioning_problem(expr: Expression, conditioning: Collection[str]) -> str | None:
+    """Why ``expr`` cannot be asked of a program conditioned on ``conditioning`` (None if it
+    can): a variable without a term has no distribution, so a question gives its value; it
+    is neither searched nor summed out.
+
+    >>> problem = conditioning_problem(parse_expression("P(X | Y=y0)"), ["U"])
+    >>> problem.startswith("P(X | Y=y0) leaves U unknown, but U has no term"), problem[-23:]
+    (True, 'expected P(X | Y=y0, U)')
+    """
+    searched = [n for n in conditioning if n in expr.left]
+    unknown = [n for n in conditioning if n not in expr.left and n not in expr.right]
+    if not searched and not unknown:
+        return None
+    names = searched + unknown
+    listed = ", ".join(names)
+    has = "have no term" if len(names) > 1 else "has no term"
+    what = (f"searches {', '.join(searched)}" if searched else "") + (
+        " and " if searched and unknown else "") + (
+        f"leaves {', '.join(unknown)} unknown" if unknown else "")
+    left = tuple(n for n in expr.left if n not in searched)
+    fix = ""
+    if left:
+        given = Expression(left, expr.right + tuple(names), expr.values)
+        fix = f": expected {given}"
+    return (f"{expr} {what}, but {listed} {has} in the decomposition (the program is "
+            f"conditioned on {'them' if len(names) > 1 else 'it'}), so every question gives "
+            f"{'their values' if len(names) > 1 else 'its value'}{fix}")
 
 
 def _has_text(raw: Any) -> bool:
