@@ -331,9 +331,16 @@ def test_learning_leaves_a_deterministic_term_as_written():
 
 
 def test_exported_as_bif_pyagrum_fuses_the_same(tmp_path):
-    """The tables the formulas give, written out, answer the same in another engine."""
+    """The tables the formulas give, written out, answer the same in another engine (the
+    readings given a uniform prior: a network has no variable without a table)."""
     gum = pytest.importorskip("pyagrum")
-    path = bundled.find("coherence", "program")
+    text = bundled.find("coherence", "program").read_text()
+    text = text.replace("  - {term: P(Position), form: uniform}\n",
+                        "  - {term: P(Position), form: uniform}\n"
+                        "  - {term: P(Sonar), form: uniform}\n"
+                        "  - {term: P(Camera), form: uniform}\n")
+    path = tmp_path / "with_priors.yaml"
+    path.write_text(text)
     bif = tmp_path / "coherence.bif"
     done = subprocess.run([sys.executable, "-m", "bayesprog", "export", str(path), "-o", str(bif)],
                           capture_output=True, text=True)
@@ -344,5 +351,59 @@ def test_exported_as_bif_pyagrum_fuses_the_same(tmp_path):
     inference.makeInference()
     theirs = inference.posterior("Position").toarray()
     # (BIF holds the tables' numbers to about 8 significant digits)
-    np.testing.assert_allclose(bayesprog.load(path).ask("fused").probabilities, theirs,
-                               rtol=1e-6, atol=1e-12)
+    ours = bayesprog.load(bundled.find("coherence", "program")).ask("fused").probabilities
+    np.testing.assert_allclose(ours, theirs, rtol=1e-6, atol=1e-12)
+
+
+# the bundled corridor: a formula kernel and a command with no term ------------------------------
+def corridor_by_hand(doors: list[str], commands: list[int]) -> tuple[np.ndarray, np.ndarray,
+                                                                       np.ndarray, list]:
+    """Forward and backward recursions of the corridor, written out: the filtered and smoothed
+    beliefs, each step's log P(door_t | doors before, commands), and the likeliest path."""
+    at_door = np.where(np.isin(np.arange(10), [1, 4, 7]), 0.9, 0.1)
+    seen = [at_door if d == "yes" else 1 - at_door for d in doors]
+    kernels = []
+    for u in commands:
+        k = np.zeros((10, 10))
+        for x0 in range(10):
+            k[x0, min(max(x0 + u, 0), 9)] += 0.8
+            k[x0, x0] += 0.2
+        kernels.append(k)
+    belief, filtered, log_z = np.full(10, 0.1), [], []
+    for k, lik in zip(kernels, seen, strict=True):
+        joint = (belief @ k) * lik
+        log_z.append(np.log(joint.sum()))
+        belief = joint / joint.sum()
+        filtered.append(belief)
+    back, smoothed = np.ones(10), [filtered[-1]]
+    for t in range(len(doors) - 1, 0, -1):
+        back = kernels[t] @ (seen[t] * back)
+        s = filtered[t - 1] * back
+        smoothed.insert(0, s / s.sum())
+    best, best_p = None, -1.0
+    for path in np.ndindex(*(10,) * len(doors)):  # every path, by brute force
+        p, before = 0.0, np.full(10, 0.1)
+        prob = float(before @ kernels[0][:, path[0]]) * seen[0][path[0]]
+        for t in range(1, len(doors)):
+            prob *= kernels[t][path[t - 1], path[t]] * seen[t][path[t]]
+        p = prob
+        if p > best_p:
+            best, best_p = list(path), p
+    return np.array(filtered), np.array(smoothed), np.array(log_z), best
+
+
+def test_the_bundled_corridor_filters_its_commands_through_its_formula_kernel():
+    p = bayesprog.load(bundled.find("corridor", "program"))
+    assert p.conditioning == ("U",)
+    doors, commands = ["yes", "no", "no", "yes"], [1, 1, 1, 0]
+    filtered, smoothed, log_z, path = corridor_by_hand(doors, commands)
+    evidence = {"Door": doors, "U": commands}
+    answer = p.ask("where", evidence)
+    np.testing.assert_allclose(answer.probabilities, filtered, rtol=1e-12, atol=1e-15)
+    # no log P(U): the evidence is the doors' alone, given the commands
+    np.testing.assert_allclose(np.reshape(answer.log_evidence, -1), log_z, rtol=1e-12)
+    np.testing.assert_allclose(p.ask("looking_back", evidence).probabilities, smoothed,
+                               rtol=1e-12, atol=1e-15)
+    assert p.ask("path", evidence).assignment["X"].tolist() == path
+    with pytest.raises(QuestionError, match="missing evidence for U"):
+        p.ask("where", {"Door": doors})
