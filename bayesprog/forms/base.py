@@ -334,6 +334,13 @@ class Form:
         raise NotImplementedError(f"form {self.name!r} cannot draw a continuous child: give "
                                   f"{child.name} as evidence, or use a form that can")
 
+    def draw(self, ctx: TermContext, u: np.ndarray) -> np.ndarray:
+        """Values of a continuous child, one per draw, where sampling draws them: :meth:`sample`
+        of the parameters at each draw (``ctx.params[k].array``: ``draws + event``) and of the
+        uniforms ``u``. A form whose draws read more than its parameters (what it resolved with
+        the term, ``ctx.extra``: the ``program`` form's sub-program) gives them here."""
+        return self.sample({k: v.array for k, v in ctx.params.items()}, ctx.child, u)
+
 
 _REGISTRY: dict[str, Form] = {}
 
