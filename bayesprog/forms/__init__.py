@@ -20,6 +20,7 @@ from bayesprog.forms.base import (
     register_form,
     simplex,
     unit_interval,
+    unknown_form,
 )
 
 __all__ = [
@@ -39,4 +40,5 @@ __all__ = [
     "register_form",
     "simplex",
     "unit_interval",
+    "unknown_form",
 ]
