@@ -70,6 +70,8 @@ def _grids(program: Program, term: Term) -> list[str]:
     """The parameters shown as ``below``: a table of the states of the variables the
     parameter varies over (rows) by its values (columns: the states of the term's variable for
     a table), elided beyond a screen and saying so."""
+    if term.form.subprogram:
+        return []  # what it passes to the sub-question, shown by that question
     out = []
     for name, value in term.params.items():
         if not isinstance(value, ParamValue) or value.batched:

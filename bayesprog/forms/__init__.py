@@ -21,6 +21,7 @@ from bayesprog.forms.base import (
     register_form,
     simplex,
     unit_interval,
+    unknown_form,
 )
 
 __all__ = [
@@ -41,4 +42,5 @@ __all__ = [
     "register_form",
     "simplex",
     "unit_interval",
+    "unknown_form",
 ]

@@ -410,6 +410,13 @@ class Form:
         raise NotImplementedError(f"form {self.name!r} cannot draw a continuous child: give "
                                   f"{child.name} as evidence, or use a form that can")
 
+    def draw(self, ctx: TermContext, u: np.ndarray) -> np.ndarray:
+        """Values of a continuous child, one per draw, where sampling draws them: :meth:`sample`
+        of the parameters at each draw (``ctx.params[k].array``: ``draws + event``) and of the
+        uniforms ``u``. A form whose draws read more than its parameters (what it resolved with
+        the term, ``ctx.extra``: the ``program`` form's sub-program) gives them here."""
+        return self.sample({k: v.array for k, v in ctx.params.items()}, ctx.child, u)
+
 
 _REGISTRY: dict[str, Form] = {}
 
@@ -433,9 +440,64 @@ def register_form(form: type[Form] | Form) -> type[Form] | Form:
     return form
 
 
+#: why a form an installed package declares could not be registered, by the form's name
+_PLUGIN_PROBLEMS: dict[str, str] = {}
+
+
 def get_form(name: str) -> Form | None:
-    return _REGISTRY.get(name)
+    """The form registered as ``name``; a name that is not registered is looked for among the
+    forms of installed packages (the ``bayesprog.forms`` entry points, read only then: see
+    :mod:`bayesprog.forms.plugins`), and registered when found."""
+    form = _REGISTRY.get(name)
+    if form is None and name not in _PLUGIN_PROBLEMS:
+        form = _plugin_form(name)
+    return form
 
 
 def available_forms() -> list[str]:
+    """The registered forms (an installed package's form is registered at its first use)."""
     return sorted(_REGISTRY)
+
+
+def unknown_form(name: str) -> str:
+    """Why there is no form ``name`` (for a message that names it): the installed package
+    that declares it cannot give it, or no form has that name, with the closest of the
+    registered forms and the installed packages'."""
+    if name in _PLUGIN_PROBLEMS:
+        return _PLUGIN_PROBLEMS[name]
+    from bayesprog.errors import did_you_mean
+    from bayesprog.forms.plugins import installed
+
+    names = sorted(set(_REGISTRY) | set(installed()))
+    return (f"unknown form {name!r}{did_you_mean(name, names)} (expected one of "
+            f"{', '.join(names)})")
+
+
+def _plugin_form(name: str) -> Form | None:
+    """The form of the installed package whose entry point is named ``name``, registered; None
+    when there is none, or when it cannot be loaded (the reason kept for
+    :func:`unknown_form`)."""
+    from bayesprog.forms.plugins import installed
+
+    plugin = installed().get(name)
+    if plugin is None:
+        return None
+    try:
+        found = plugin.load()
+        form = found() if isinstance(found, type) and issubclass(found, Form) else found
+    except Exception as exc:  # whatever the package raises: it must not take a program down
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which cannot be "
+                                  f"loaded: {type(exc).__name__}: {exc}")
+        return None
+    if not isinstance(form, Form):
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which gives "
+                                  f"{type(found).__name__} {found!r:.60}: expected a subclass "
+                                  "of bayesprog.Form (or an instance of one)")
+        return None
+    if form.name != name:
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which gives the "
+                                  f"form {form.name!r}: expected an entry point named after "
+                                  f"its form ({form.name} = {plugin.value})")
+        return None
+    register_form(form)
+    return form

@@ -9,11 +9,11 @@ Every term is used as a factor over its discrete variables (:func:`term_factor`,
 own): a discrete child is drawn from the term's row at its drawn parents, normalised, and the
 draw is weighted by the row's total (one for a normalised term; a potential's mass else); a
 known variable is not drawn, and the draw is weighted by its term's factor at the drawn parents.
-Continuous variables that are not known are drawn by their form's :meth:`Form.sample`, inside
-their declared support: a bounded variable is drawn from its term truncated to the support
-(the density at its drawn parents, renormalised there), by the quantile function between the
-CDF at the bounds where the form has one (``quantile_sample``), by drawing again the values
-that fell outside otherwise.
+Continuous variables that are not known are drawn by their form (:meth:`Form.draw`: for most
+forms :meth:`Form.sample` of the parameters at each draw), inside their declared support: a
+bounded variable is drawn from its term truncated to the support (the density at its drawn
+parents, renormalised there), by the quantile function between the CDF at the bounds where the
+form has one (``quantile_sample``), by drawing again the values that fell outside otherwise.
 """
 
 from __future__ import annotations
@@ -194,16 +194,17 @@ def _draw_within(program: ProgramLike, term: Term, child: Continuous,
     """``n`` values of ``child`` per row from its term at each draw's ``params``, inside the
     child's support (see the module)."""
     form, low, high = term.form, child.low, child.high
+    values = {k: ParamValue((), v, True) for k, v in params.items()}
+    at_draws = TermContext(child, (), (), (), values, None, program.variables, term.extra)
     u = _uniforms(gens, n, 2)
     if not (np.isfinite(low) or np.isfinite(high)):
-        return form.sample(params, child, u)
+        return form.draw(at_draws, u)
     where = f"[{low:g}, {high:g}]"
     if form.quantile_sample:
-        values = {k: ParamValue((), v, True) for k, v in params.items()}
 
         def cdf(x: float) -> np.ndarray:
             at = ParamValue((), np.full(u.shape[:-1], x), True)
-            ctx = TermContext(child, (), (), (), values, at, program.variables)
+            ctx = TermContext(child, (), (), (), values, at, program.variables, term.extra)
             return np.broadcast_to(np.asarray(form.cdf(ctx), float), u.shape[:-1])
 
         below = cdf(low) if np.isfinite(low) else np.zeros(u.shape[:-1])
@@ -215,13 +216,13 @@ def _draw_within(program: ProgramLike, term: Term, child: Continuous,
                                 "support declared)")
         u = u.copy()
         u[..., 0] = below + u[..., 0] * inside
-        return np.clip(form.sample(params, child, u), low, high)  # (rounding at a bound)
-    drawn = form.sample(params, child, u)
+        return np.clip(form.draw(at_draws, u), low, high)  # (rounding at a bound)
+    drawn = form.draw(at_draws, u)
     for _ in range(REDRAWS):
         outside = (drawn < low) | (drawn > high)
         if not outside.any():
             return drawn
-        drawn = np.where(outside, form.sample(params, child, _uniforms(gens, n, 2)), drawn)
+        drawn = np.where(outside, form.draw(at_draws, _uniforms(gens, n, 2)), drawn)
     raise QuestionError(f"term {term.label} puts little or no probability inside the support "
                         f"{where} of {child.name}: {REDRAWS} draws in a row fell outside it "
                         "(check the term's parameters or the support declared)")

@@ -26,6 +26,7 @@ from bayesprog.forms import (
     ParamValue,
     available_forms,
     get_form,
+    unknown_form,
 )
 from bayesprog.forms.base import nonnegative, real
 from bayesprog.forms.standard import deterministic_problem
@@ -322,8 +323,7 @@ class _Checker:
                 ok = False
         form = get_form(form_name)
         if form is None:
-            self.error(path + ("form",), f"unknown form {form_name!r}: expected one of "
-                       f"{', '.join(available_forms())}")
+            self.error(path + ("form",), unknown_form(form_name))
             ok = False
         if not ok or form is None:
             return None
