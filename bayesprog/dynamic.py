@@ -29,6 +29,7 @@ from bayesprog.errors import QuestionError, expect_mapping
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
+from bayesprog.limits import check_size, limit
 
 KINDS = ("filter", "smooth", "sequence")
 
@@ -518,8 +519,12 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     by the step program's density of the pair of states (the transition and what the next
     step observes, :func:`_pair_log_density`),
     ``w_t|T(i) = w_t(i) sum_j w_t+1|T(j) psi(x_t^i, x_t+1^j) / sum_k w_t(k) psi(x_t^k, x_t+1^j)``,
-    ``n^2`` densities a step: no randomness beyond the filter's, so the same seed gives the
-    same answer.
+    the marginal smoother (each step's marginal, not drawn paths): ``n^2`` densities a step,
+    computed a block of pairs at a time (:func:`_smoothed_weights`), so that its memory grows
+    as ``n``: every step's particles and weights are kept, never the ``n x n`` densities. No
+    randomness beyond the filter's, so the same seed gives the same answer, bit for bit,
+    whatever the batch, the blocks and the limits. A filter or smoother past the entries limit
+    is refused before anything is drawn, with its estimate (:func:`_check_particles`).
 
     The answer gives each step's weighted mean and covariance of the particles (its density
     and quantiles are those of the Gaussian with these moments), the effective sample size of
@@ -542,6 +547,7 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     known = {name: np.asarray(per_step[name], dtype=object) for name in observed}
     batch = np.broadcast_shapes(*(a.shape[1:] for a in known.values())) if known else ()
     sequences = int(np.prod(batch))
+    _check_particles(n, sequences, steps, len(states), question.kind == "smooth")
     # the controls (variables without a term) given at the first step: the states one step
     # earlier do not depend on them, but the program is drawn given them
     controls = [name for name in observed if name in program.conditioning]
@@ -627,9 +633,33 @@ def _weighted_covariance(w: np.ndarray, particles: np.ndarray, mean: np.ndarray)
     return np.einsum("bn,bnd,bne->bde", w, dev, dev)
 
 
-#: most pairs of particles whose density one call of the engine computes (a smoother's step
-#: has n^2 per sequence)
-PAIRS_PER_CALL = 1 << 20
+#: pairs of particles whose densities one block of the smoother's backward pass holds (512 KB of
+#: float64; fewer under a low BAYESPROG_MAX_ENTRIES, never less than one particle's row): the
+#: pass needs memory in n, not n^2, and the block's size does not change its answer
+PAIRS_PER_BLOCK = 1 << 16
+#: float64 entries a block holds per pair: the densities, the kernel's row and what one call of
+#: the engine allocates for it (the pairs' states, each term's log-factor)
+BLOCK_ENTRIES_PER_PAIR = 16
+#: float64 entries one particle's random stream takes (a numpy Generator, about 1 KB)
+STREAM_ENTRIES = 128
+
+
+def _check_particles(n: int, sequences: int, steps: int, dims: int, smooth: bool) -> None:
+    """Refuse a particle filter or smoother past the entries limit, before anything is drawn:
+    each particle's stream, states and weights at a step and, for the smoother, every step's
+    particles, weights and smoothing weights (kept for the backward pass), and the backward
+    pass's block (which shrinks to fit the limit, to one row of ``n`` pairs at least)."""
+    per_particle = STREAM_ENTRIES + 4 * dims + 4
+    if smooth:
+        per_particle += steps * (dims + 2)
+    entries = float(n) * sequences * per_particle
+    if smooth:
+        entries += float(BLOCK_ENTRIES_PER_PAIR) * n
+    check_size(entries, f"a particle {'smoother' if smooth else 'filter'} of {n:,} particles "
+               f"x {sequences:,} sequence{'s' if sequences > 1 else ''} x {steps:,} step"
+               f"{'s' if steps > 1 else ''}",
+               hint="; or ask fewer particles (samples=... in Python, --samples on the "
+                    "command line), or fewer sequences or steps at once")
 
 
 def _smoothed_weights(step: Any, kept: list[tuple[np.ndarray, np.ndarray]],
@@ -637,61 +667,77 @@ def _smoothed_weights(step: Any, kept: list[tuple[np.ndarray, np.ndarray]],
                       known: dict[str, np.ndarray], batch: tuple[int, ...],
                       inputs: Mapping[str, Any] | None) -> list[np.ndarray]:
     """The smoothing weights ``[sequences, n]`` of each step's filter particles (FFBSm, see
-    :func:`_particles`), from the last step back, in logarithms."""
+    :func:`_particles`), from the last step back.
+
+    ``w_t|T(i) = sum_j w_t+1|T(j) K_t(j, i)``, where ``K_t(j, i) = w_t(i) psi(x_t^i, x_t+1^j)
+    / sum_k w_t(k) psi(x_t^k, x_t+1^j)`` is the backward kernel: each particle after's row is
+    computed, normalised and added in, then dropped. The rows go by blocks of at most
+    :data:`PAIRS_PER_BLOCK` pairs, each row's sum over all ``n`` particles before at once, and
+    the rows are added in their order, one by one: the answer is the same, bit for bit,
+    whatever the block's size."""
     steps = len(kept)
     sequences, n = kept[0][1].shape
-    with np.errstate(divide="ignore"):
-        log_smooth = np.log(kept[-1][1])
-    out = [kept[-1][1]]
+    rows = max(1, min(PAIRS_PER_BLOCK, limit("entries") // BLOCK_ENTRIES_PER_PAIR) // n)
+    smooth = kept[-1][1]
+    out = [smooth]
     for t in range(steps - 2, -1, -1):
         before, w_before = kept[t]
         after = kept[t + 1][0]
         with np.errstate(divide="ignore"):
             log_w = np.log(w_before)
-        new = np.empty((sequences, n))
+        new = np.zeros((sequences, n))
         for b in range(sequences):
             values = {name: np.broadcast_to(known[name][t + 1], batch).reshape(-1)[b]
                       for name in observed}
-            log_psi = _pair_log_density(step, before[b], after[b], previous, states, values,
-                                        inputs)  # [n before, n after]
-            # sum_k w_t(k) psi(x_t^k, x_t+1^j): each particle after's predictive density
-            log_predictive = scipy.special.logsumexp(log_w[b][:, None] + log_psi, axis=0)
-            with np.errstate(invalid="ignore"):
-                terms = log_psi + (log_smooth[b] - log_predictive)[None, :]
-            terms = np.where(np.isfinite(log_smooth[b])[None, :], terms, -np.inf)
-            new[b] = log_w[b] + scipy.special.logsumexp(terms, axis=1)
-        new -= scipy.special.logsumexp(new, axis=1, keepdims=True)
-        log_smooth = new
-        out.append(np.exp(new))
+            for start in range(0, n, rows):
+                stop = min(n, start + rows)
+                kernel = _backward_kernel(log_w[b], _pair_log_density(
+                    step, before[b], after[b, start:stop], previous, states, values, inputs))
+                for weight, row in zip(smooth[b, start:stop], kernel, strict=True):
+                    new[b] += weight * row
+        new /= new.sum(axis=1, keepdims=True)
+        smooth = new
+        out.append(new)
     return out[::-1]
+
+
+def _backward_kernel(log_w: np.ndarray, log_psi: np.ndarray) -> np.ndarray:
+    """``[m, n]``: for each particle after (a row of ``log_psi``, ``[m, n]``, the pair's
+    log-density at each particle before), the probability of each particle before, ``w(i)
+    psi(i, j)`` normalised over ``i``. A row where no particle before leads is zeros. Computed
+    in place of ``log_psi``."""
+    kernel = log_psi
+    kernel += log_w[None, :]
+    top = np.max(kernel, axis=1, keepdims=True)
+    top[~np.isfinite(top)] = 0.0
+    kernel -= top
+    np.exp(kernel, out=kernel)
+    total = kernel.sum(axis=1, keepdims=True)
+    total[total == 0] = 1.0
+    kernel /= total
+    return kernel
 
 
 def _pair_log_density(step: Any, before: np.ndarray, after: np.ndarray, previous: list[str],
                       states: list[str], observed: dict[str, Any],
                       inputs: Mapping[str, Any] | None) -> np.ndarray:
-    """``[n, m]``: the log-density of the step program (the states before's own term
-    uniform) at each pair of the states before ``before`` ``[n, d]`` and after ``after``
-    ``[m, d]``, with what the step after observes: the transition's density times the
-    likelihood of the observations (which may read the states before), the step's other
-    unknown variables summed or integrated out by the engine."""
+    """``[m, n]``: the log-density of the step program (the states before's own term
+    uniform) at each pair of a state after ``after`` ``[m, d]`` (a row) and a state before
+    ``before`` ``[n, d]`` (a column), with what the step after observes: the transition's
+    density times the likelihood of the observations (which may read the states before), the
+    step's other unknown variables summed or integrated out by the engine, in one call."""
     from bayesprog.inference.binding import bind
     from bayesprog.inference.dispatch import compute_posterior
 
     n, m = len(before), len(after)
     question = Question(Expression((), (*previous, *states, *observed)))
-    out = np.empty((n, m))
-    rows_per_call = max(1, PAIRS_PER_CALL // m)
-    for start in range(0, n, rows_per_call):
-        stop = min(n, start + rows_per_call)
-        evidence: dict[str, Any] = {
-            p: np.repeat(before[start:stop, i], m) for i, p in enumerate(previous)}
-        evidence.update({s: np.tile(after[:, i], stop - start) for i, s in enumerate(states)})
-        evidence.update(observed)
-        bound = bind(step, question, evidence, inputs, None)
-        try:
-            answer = compute_posterior(step, question, bound, None, {})
-        except QuestionError as exc:
-            raise QuestionError(f"a particle smoother needs the step's density at a pair of "
-                                f"states before and after: {exc}") from None
-        out[start:stop] = np.asarray(answer.log_evidence, float).reshape(stop - start, m)
-    return out
+    evidence: dict[str, Any] = {p: np.tile(before[:, i], m) for i, p in enumerate(previous)}
+    evidence.update({s: np.repeat(after[:, i], n) for i, s in enumerate(states)})
+    evidence.update(observed)
+    bound = bind(step, question, evidence, inputs, None)
+    try:
+        answer = compute_posterior(step, question, bound, None, {})
+    except QuestionError as exc:
+        raise QuestionError(f"a particle smoother needs the step's density at a pair of "
+                            f"states before and after: {exc}") from None
+    return np.asarray(answer.log_evidence, float).reshape(m, n)
