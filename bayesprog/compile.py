@@ -31,6 +31,10 @@ def to_bayesian_network(program: Program) -> Any:
     if not program.is_discrete:
         raise QuestionError(f"{program.name} has continuous variables: a Bayesian network (and so BIF, XMLBIF or "
                             "UAI export) needs a discrete program")
+    if program.conditioning:
+        raise QuestionError(f"{', '.join(program.conditioning)} has no term in {program.name} "
+                            "(the program is conditioned on it): a Bayesian network (and so BIF, "
+                            "XMLBIF or UAI export) gives every variable a table")
     model = DiscreteBayesianNetwork()
     model.add_nodes_from(program.variables)
     cpds = []

@@ -21,7 +21,7 @@ Every step's question is asked of the engine for all sequences of the batch at o
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -32,6 +32,7 @@ from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
 from bayesprog.inference.viterbi import most_likely_sequence
+from bayesprog.limits import check_size, limit
 
 KINDS = ("filter", "smooth", "sequence")
 
@@ -106,7 +107,7 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         assert isinstance(answer, Posterior)
         return steps_by.seen(answer, question.kind)
 
-    first = program.ask(f"P({previous})").probabilities  # the belief before the first step
+    first = _before(program, [previous]).probabilities  # the belief before the first step
     forward, log_evidence = [], []
     belief: np.ndarray = first
     for t in range(steps):
@@ -178,6 +179,17 @@ def _exact(method: str) -> bool:
 
     known = method_named(method)
     return known is None or known.exact
+
+
+def _before(program: Any, previous: list[str], inputs: Mapping[str, Any] | None = None,
+            method: str | None = None) -> Any:
+    """The belief before the first step, ``P(previous)``. The terms of the states one step
+    earlier depend on nothing else: it is asked of the engine without the variables that have
+    no term, which every question of the program gives and which this one does not read."""
+    from bayesprog.inference import dispatch
+
+    question = Question(Expression(tuple(previous)))
+    return dispatch.ask(program, question, None, inputs, None, None, method, {})
 
 
 def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
@@ -276,7 +288,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
     steps_by = _StepMethod()
     index = np.unravel_index(np.arange(size), cards)  # each joint state's indices
-    first = program.ask(f"P({' '.join(previous)})").probabilities.reshape(-1)
+    first = _before(program, previous).probabilities.reshape(-1)
     batch: tuple[int, ...] | None = None
     logs = []
     for t in range(steps):
@@ -378,16 +390,19 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
                             "means (ask a smooth question)")
     previous = [p for p, _ in program.time]
     states = [s for _, s in program.time]
-    observed = list(expr.right)
+    # a control (a variable without a term, given at every step) is not observed: the step's
+    # model is read at its value of each step
+    controls = [name for name in expr.right if name in program.conditioning]
+    observed = [name for name in expr.right if name not in program.conditioning]
     for name in observed:
         if program.variables[name].is_discrete:
             raise QuestionError(f"a Kalman filter observes real variables: {name} is discrete "
                                 "(ask a particle filter, method='pf')")
     d, m = len(states), len(observed)
 
-    def gaussian(question_text: str, evidence: dict[str, Any], program_: Any) -> Density:
+    def gaussian(asked: Callable[[], Any]) -> Density:
         try:
-            answer = program_.ask(question_text, evidence, inputs=inputs, method="gaussian")
+            answer = asked()
         except QuestionError as exc:
             raise QuestionError(f"a Kalman filter needs a linear-Gaussian step (normal terms, "
                                 f"means affine in their parents; else ask a particle filter, "
@@ -398,7 +413,7 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
                                 "discrete variable of the step mixes several")
         return answer
 
-    start = gaussian(f"P({' '.join(previous)})", {}, program)
+    start = gaussian(lambda: _before(program, previous, inputs, "gaussian"))
     assert start.means is not None and start.covariances is not None
     m0 = start.means[0, 0]
     p0 = start.covariances[0, 0]
@@ -407,30 +422,46 @@ def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], st
     # the step is linear in them (a formula such as sin(X_before) is not)
     probes = np.random.default_rng(0).normal(scale=3.0, size=(3, d))
     rows = np.vstack([np.zeros(d), np.eye(d), probes])
-    given = {p: rows[:, i] for i, p in enumerate(previous)}
-    model = gaussian(f"P({' '.join(states + observed)} | {', '.join(previous)})", given, step)
-    means = model.means[:, 0]  # type: ignore[index]
-    c = means[0]
-    g = (means[1:d + 1] - c).T  # (d + m) x d
-    noise = model.covariances[0, 0]  # type: ignore[index]
+    # with controls, one model per step and sequence: [steps, batch..., rows] probes
+    values = {name: np.asarray(per_step[name]) for name in controls}
+    lead = np.broadcast_shapes(*(v.shape for v in values.values())) if controls else ()
+    given = {p: np.broadcast_to(rows[:, i], lead + (len(rows),))
+             for i, p in enumerate(previous)}
+    given.update({name: np.broadcast_to(v[..., None], lead + (len(rows),))
+                  for name, v in values.items()})
+    model = gaussian(lambda: step.ask(
+        f"P({' '.join(states + observed)} | {', '.join(previous + controls)})", given,
+        inputs=inputs, method="gaussian"))
+    k = d + m
+    means = model.means[:, 0].reshape(lead + (len(rows), k))  # type: ignore[index]
+    covariances = model.covariances[:, 0].reshape(lead + (len(rows), k, k))  # type: ignore[index]
+    c = means[..., 0, :]
+    g = np.swapaxes(means[..., 1:d + 1, :] - c[..., None, :], -1, -2)  # ... (d + m) x d
+    noise = covariances[..., 0, :, :]
     scale = 1.0 + np.abs(means).max()
-    if (np.abs(means[d + 1:] - (c + probes @ g.T)).max() > 1e-9 * scale
-            or np.abs(model.covariances[:, 0] - noise).max() > 1e-9 * (1 + np.abs(noise).max())):  # type: ignore[index]
+    linear = c[..., None, :] + np.einsum("pj,...ij->...pi", probes, g)
+    if (np.abs(means[..., d + 1:, :] - linear).max() > 1e-9 * scale
+            or np.abs(covariances - noise[..., None, :, :]).max()
+            > 1e-9 * (1 + np.abs(noise).max())):
         raise QuestionError("a Kalman filter needs a linear-Gaussian step: the means of "
                             f"{', '.join(states + observed)} are not affine in "
                             f"{', '.join(previous)} (a non-linear formula): ask a particle "
                             "filter, method='pf' (--method pf)")
-    y_all = np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
-    batch = y_all.shape[1:-1]
+    y_all = (np.stack([np.asarray(per_step[name], dtype=float) for name in observed], axis=-1)
+             if observed else np.zeros((steps, 0)))
+    batch = np.broadcast_shapes(y_all.shape[1:-1], lead[1:])
+    extra = (1,) * (len(batch) - (y_all.ndim - 2))  # the batch axes the commands add
+    y_all = np.broadcast_to(y_all.reshape((steps, *extra) + y_all.shape[1:]), (steps, *batch, m))
     mean = np.broadcast_to(m0, batch + (d,)).copy()
     cov = np.broadcast_to(p0, batch + (d, d)).copy()
     filtered, joints, log_evidence = [], [], []
     y_index = np.arange(2 * d, 2 * d + m)
     for t in range(steps):
+        c_t, g_t, noise_t = (c[t], g[t], noise[t]) if controls else (c, g, noise)
         # the joint of (x_t-1, x_t, y_t) given y_1..t-1
-        mu = np.concatenate([mean, c + np.einsum("ij,...j->...i", g, mean)], axis=-1)
-        cross = np.einsum("...ij,kj->...ik", cov, g)  # cov(x_t-1, (x_t, y_t))
-        lower = np.einsum("ij,...jk,lk->...il", g, cov, g) + noise
+        mu = np.concatenate([mean, c_t + np.einsum("...ij,...j->...i", g_t, mean)], axis=-1)
+        cross = np.einsum("...ij,...kj->...ik", cov, g_t)  # cov(x_t-1, (x_t, y_t))
+        lower = np.einsum("...ij,...jk,...lk->...il", g_t, cov, g_t) + noise_t
         sigma = _blocks(cov, cross, lower)
         keep = np.arange(2 * d)
         s_yy = sigma[..., y_index[:, None], y_index]
@@ -507,8 +538,12 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     by the step program's density of the pair of states (the transition and what the next
     step observes, :func:`_pair_log_density`),
     ``w_t|T(i) = w_t(i) sum_j w_t+1|T(j) psi(x_t^i, x_t+1^j) / sum_k w_t(k) psi(x_t^k, x_t+1^j)``,
-    ``n^2`` densities a step: no randomness beyond the filter's, so the same seed gives the
-    same answer.
+    the marginal smoother (each step's marginal, not drawn paths): ``n^2`` densities a step,
+    computed a block of pairs at a time (:func:`_smoothed_weights`), so that its memory grows
+    as ``n``: every step's particles and weights are kept, never the ``n x n`` densities. No
+    randomness beyond the filter's, so the same seed gives the same answer, bit for bit,
+    whatever the batch, the blocks and the limits. A filter or smoother past the entries limit
+    is refused before anything is drawn, with its estimate (:func:`_check_particles`).
 
     The answer gives each step's weighted mean and covariance of the particles (its density
     and quantiles are those of the Gaussian with these moments), the effective sample size of
@@ -531,9 +566,18 @@ def _particles(program: Any, question: Question, per_step: dict[str, list[Any]],
     known = {name: np.asarray(per_step[name], dtype=object) for name in observed}
     batch = np.broadcast_shapes(*(a.shape[1:] for a in known.values())) if known else ()
     sequences = int(np.prod(batch))
+    _check_particles(n, sequences, steps, len(states), question.kind == "smooth")
+    # the controls (variables without a term) given at the first step: the states one step
+    # earlier do not depend on them, but the program is drawn given them
+    controls = [name for name in observed if name in program.conditioning]
+
+    def first_step(b: int) -> dict[str, Any]:
+        return {name: np.broadcast_to(known[name][0], batch).reshape(-1)[b]
+                for name in controls}
+
     particles = np.stack([
         np.stack([first[p].to_numpy(dtype=float) for p in previous], axis=-1)
-        for first in (program.sample(n, rng=np.random.default_rng([seed, 0, b]))
+        for first in (program.sample(n, first_step(b), rng=np.random.default_rng([seed, 0, b]))
                       for b in range(sequences))])  # [sequences, n, states]
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
     terms = list(step.active_terms)
@@ -608,9 +652,33 @@ def _weighted_covariance(w: np.ndarray, particles: np.ndarray, mean: np.ndarray)
     return np.einsum("bn,bnd,bne->bde", w, dev, dev)
 
 
-#: most pairs of particles whose density one call of the engine computes (a smoother's step
-#: has n^2 per sequence)
-PAIRS_PER_CALL = 1 << 20
+#: pairs of particles whose densities one block of the smoother's backward pass holds (512 KB of
+#: float64; fewer under a low BAYESPROG_MAX_ENTRIES, never less than one particle's row): the
+#: pass needs memory in n, not n^2, and the block's size does not change its answer
+PAIRS_PER_BLOCK = 1 << 16
+#: float64 entries a block holds per pair: the densities, the kernel's row and what one call of
+#: the engine allocates for it (the pairs' states, each term's log-factor)
+BLOCK_ENTRIES_PER_PAIR = 16
+#: float64 entries one particle's random stream takes (a numpy Generator, about 1 KB)
+STREAM_ENTRIES = 128
+
+
+def _check_particles(n: int, sequences: int, steps: int, dims: int, smooth: bool) -> None:
+    """Refuse a particle filter or smoother past the entries limit, before anything is drawn:
+    each particle's stream, states and weights at a step and, for the smoother, every step's
+    particles, weights and smoothing weights (kept for the backward pass), and the backward
+    pass's block (which shrinks to fit the limit, to one row of ``n`` pairs at least)."""
+    per_particle = STREAM_ENTRIES + 4 * dims + 4
+    if smooth:
+        per_particle += steps * (dims + 2)
+    entries = float(n) * sequences * per_particle
+    if smooth:
+        entries += float(BLOCK_ENTRIES_PER_PAIR) * n
+    check_size(entries, f"a particle {'smoother' if smooth else 'filter'} of {n:,} particles "
+               f"x {sequences:,} sequence{'s' if sequences > 1 else ''} x {steps:,} step"
+               f"{'s' if steps > 1 else ''}",
+               hint="; or ask fewer particles (samples=... in Python, --samples on the "
+                    "command line), or fewer sequences or steps at once")
 
 
 def _smoothed_weights(step: Any, kept: list[tuple[np.ndarray, np.ndarray]],
@@ -618,61 +686,77 @@ def _smoothed_weights(step: Any, kept: list[tuple[np.ndarray, np.ndarray]],
                       known: dict[str, np.ndarray], batch: tuple[int, ...],
                       inputs: Mapping[str, Any] | None) -> list[np.ndarray]:
     """The smoothing weights ``[sequences, n]`` of each step's filter particles (FFBSm, see
-    :func:`_particles`), from the last step back, in logarithms."""
+    :func:`_particles`), from the last step back.
+
+    ``w_t|T(i) = sum_j w_t+1|T(j) K_t(j, i)``, where ``K_t(j, i) = w_t(i) psi(x_t^i, x_t+1^j)
+    / sum_k w_t(k) psi(x_t^k, x_t+1^j)`` is the backward kernel: each particle after's row is
+    computed, normalised and added in, then dropped. The rows go by blocks of at most
+    :data:`PAIRS_PER_BLOCK` pairs, each row's sum over all ``n`` particles before at once, and
+    the rows are added in their order, one by one: the answer is the same, bit for bit,
+    whatever the block's size."""
     steps = len(kept)
     sequences, n = kept[0][1].shape
-    with np.errstate(divide="ignore"):
-        log_smooth = np.log(kept[-1][1])
-    out = [kept[-1][1]]
+    rows = max(1, min(PAIRS_PER_BLOCK, limit("entries") // BLOCK_ENTRIES_PER_PAIR) // n)
+    smooth = kept[-1][1]
+    out = [smooth]
     for t in range(steps - 2, -1, -1):
         before, w_before = kept[t]
         after = kept[t + 1][0]
         with np.errstate(divide="ignore"):
             log_w = np.log(w_before)
-        new = np.empty((sequences, n))
+        new = np.zeros((sequences, n))
         for b in range(sequences):
             values = {name: np.broadcast_to(known[name][t + 1], batch).reshape(-1)[b]
                       for name in observed}
-            log_psi = _pair_log_density(step, before[b], after[b], previous, states, values,
-                                        inputs)  # [n before, n after]
-            # sum_k w_t(k) psi(x_t^k, x_t+1^j): each particle after's predictive density
-            log_predictive = scipy.special.logsumexp(log_w[b][:, None] + log_psi, axis=0)
-            with np.errstate(invalid="ignore"):
-                terms = log_psi + (log_smooth[b] - log_predictive)[None, :]
-            terms = np.where(np.isfinite(log_smooth[b])[None, :], terms, -np.inf)
-            new[b] = log_w[b] + scipy.special.logsumexp(terms, axis=1)
-        new -= scipy.special.logsumexp(new, axis=1, keepdims=True)
-        log_smooth = new
-        out.append(np.exp(new))
+            for start in range(0, n, rows):
+                stop = min(n, start + rows)
+                kernel = _backward_kernel(log_w[b], _pair_log_density(
+                    step, before[b], after[b, start:stop], previous, states, values, inputs))
+                for weight, row in zip(smooth[b, start:stop], kernel, strict=True):
+                    new[b] += weight * row
+        new /= new.sum(axis=1, keepdims=True)
+        smooth = new
+        out.append(new)
     return out[::-1]
+
+
+def _backward_kernel(log_w: np.ndarray, log_psi: np.ndarray) -> np.ndarray:
+    """``[m, n]``: for each particle after (a row of ``log_psi``, ``[m, n]``, the pair's
+    log-density at each particle before), the probability of each particle before, ``w(i)
+    psi(i, j)`` normalised over ``i``. A row where no particle before leads is zeros. Computed
+    in place of ``log_psi``."""
+    kernel = log_psi
+    kernel += log_w[None, :]
+    top = np.max(kernel, axis=1, keepdims=True)
+    top[~np.isfinite(top)] = 0.0
+    kernel -= top
+    np.exp(kernel, out=kernel)
+    total = kernel.sum(axis=1, keepdims=True)
+    total[total == 0] = 1.0
+    kernel /= total
+    return kernel
 
 
 def _pair_log_density(step: Any, before: np.ndarray, after: np.ndarray, previous: list[str],
                       states: list[str], observed: dict[str, Any],
                       inputs: Mapping[str, Any] | None) -> np.ndarray:
-    """``[n, m]``: the log-density of the step program (the states before's own term
-    uniform) at each pair of the states before ``before`` ``[n, d]`` and after ``after``
-    ``[m, d]``, with what the step after observes: the transition's density times the
-    likelihood of the observations (which may read the states before), the step's other
-    unknown variables summed or integrated out by the engine."""
+    """``[m, n]``: the log-density of the step program (the states before's own term
+    uniform) at each pair of a state after ``after`` ``[m, d]`` (a row) and a state before
+    ``before`` ``[n, d]`` (a column), with what the step after observes: the transition's
+    density times the likelihood of the observations (which may read the states before), the
+    step's other unknown variables summed or integrated out by the engine, in one call."""
     from bayesprog.inference.binding import bind
     from bayesprog.inference.dispatch import compute_posterior
 
     n, m = len(before), len(after)
     question = Question(Expression((), (*previous, *states, *observed)))
-    out = np.empty((n, m))
-    rows_per_call = max(1, PAIRS_PER_CALL // m)
-    for start in range(0, n, rows_per_call):
-        stop = min(n, start + rows_per_call)
-        evidence: dict[str, Any] = {
-            p: np.repeat(before[start:stop, i], m) for i, p in enumerate(previous)}
-        evidence.update({s: np.tile(after[:, i], stop - start) for i, s in enumerate(states)})
-        evidence.update(observed)
-        bound = bind(step, question, evidence, inputs, None)
-        try:
-            answer = compute_posterior(step, question, bound, None, {})
-        except QuestionError as exc:
-            raise QuestionError(f"a particle smoother needs the step's density at a pair of "
-                                f"states before and after: {exc}") from None
-        out[start:stop] = np.asarray(answer.log_evidence, float).reshape(stop - start, m)
-    return out
+    evidence: dict[str, Any] = {p: np.tile(before[:, i], m) for i, p in enumerate(previous)}
+    evidence.update({s: np.repeat(after[:, i], n) for i, s in enumerate(states)})
+    evidence.update(observed)
+    bound = bind(step, question, evidence, inputs, None)
+    try:
+        answer = compute_posterior(step, question, bound, None, {})
+    except QuestionError as exc:
+        raise QuestionError(f"a particle smoother needs the step's density at a pair of "
+                            f"states before and after: {exc}") from None
+    return np.asarray(answer.log_evidence, float).reshape(m, n)

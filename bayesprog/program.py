@@ -37,7 +37,7 @@ from bayesprog.extras import LazyModule
 from bayesprog.files import atomic_write
 from bayesprog.forms import ParamValue, get_form
 from bayesprog.inference.core import InferenceCache
-from bayesprog.language.check import check_document, question_problem
+from bayesprog.language.check import check_document, conditioning_problem, question_problem
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.language.plain import PlainDocument, read_plain
 from bayesprog.model import InputDecl, Term
@@ -166,6 +166,25 @@ class Program:
             out.append(t)
         return out
 
+    @cached_property
+    def conditioning(self) -> tuple[str, ...]:
+        """The variables the decomposition gives no term (a control, a known input), in their
+        order of declaration: the program is the conditional distribution of the others given
+        them, ``P(X Y | U)``, and every question gives their values.
+
+        >>> import bayesprog
+        >>> p = bayesprog.loads('''
+        ... bayesprog: 1
+        ... variables: {X: {states: [x0, x1]}, U: {states: [u0, u1]}}
+        ... decomposition:
+        ...   - {term: "P(X | U)", form: table, table: {u0: [0.9, 0.1], u1: [0.2, 0.8]}}
+        ... ''')
+        >>> p.conditioning, p.ask("P(X | U=u1)").probabilities.tolist()
+        (('U',), [0.2, 0.8])
+        """
+        defined = {t.child.name for t in self.terms if not t.soft}
+        return tuple(name for name in self.variables if name not in defined)
+
     @property
     def is_discrete(self) -> bool:
         return all(v.is_discrete for v in self.variables.values())
@@ -276,6 +295,10 @@ class Program:
                                     f"{kind} question: ask P(searched | known) without values "
                                     "on the left for a distribution")
             q = Question(q.expression, kind, q.name, q.description)
+        if self.conditioning:
+            problem = conditioning_problem(q.expression, self.conditioning)
+            if problem:
+                raise QuestionError(problem)
         return q
 
     def ask(
@@ -345,6 +368,12 @@ class Program:
             if found is not None:
                 return found
         q = self.question(question, kind)
+        if soft and self.conditioning and isinstance(soft, Mapping):
+            given = [name for name in soft if name in self.conditioning]
+            if given:
+                raise QuestionError(f"soft evidence on {', '.join(given)}: it has no term in "
+                                    "the decomposition, so the question gives its value; "
+                                    "expected soft evidence on a variable with a term")
         options: dict[str, Any] = {}
         if samples is not None:
             if isinstance(samples, bool) or not isinstance(samples, numbers.Integral) \
@@ -517,7 +546,9 @@ class Program:
         ``"lw"`` (likelihood weighting: the known variables fixed to their evidence, each draw
         with its normalised ``weight`` column; the default with evidence) or ``"rejection"``
         (forward draws kept where they match discrete evidence; unweighted). ``rng``: a seed
-        or a ``numpy.random.Generator`` (default seed 0).
+        or a ``numpy.random.Generator`` (default seed 0). A variable without a term
+        (:attr:`conditioning`) is given in ``evidence``, not drawn: the draws are then those
+        of the others given its value, forward (unweighted) when nothing else is known.
 
         >>> import bayesprog
         >>> p = bayesprog.loads('''
@@ -761,7 +792,8 @@ class Program:
         return rich.html("program", self)
 
     def __repr__(self) -> str:
-        extra = f", ablated={list(self.ablated)}" if self.ablated else ""
+        extra = f", conditioning={list(self.conditioning)}" if self.conditioning else ""
+        extra += f", ablated={list(self.ablated)}" if self.ablated else ""
         return (f"Program({self.name!r}, variables={list(self.variables)}, "
                 f"terms={[str(t.expression) for t in self.terms if not t.soft]}{extra})")
 

@@ -70,6 +70,8 @@ def _grids(program: Program, term: Term) -> list[str]:
     """The parameters shown as ``below``: a table of the states of the variables the
     parameter varies over (rows) by its values (columns: the states of the term's variable for
     a table), elided beyond a screen and saying so."""
+    if term.form.subprogram:
+        return []  # what it passes to the sub-question, shown by that question
     out = []
     for name, value in term.params.items():
         if not isinstance(value, ParamValue) or value.batched:
@@ -173,6 +175,8 @@ def render(program: Program) -> str:
     width = max(len(n) for n in program.variables)
     for name, var in program.variables.items():
         note = f"  -- {var.description}" if var.description else ""
+        if name in program.conditioning:
+            note = "  (no term: every question gives it)" + note
         lines.append(f"      {name:<{width}} : {_domain(var)}{note}")
     if program.inputs:
         lines.append("    Runtime inputs")
@@ -183,7 +187,10 @@ def render(program: Program) -> str:
         earlier = ", ".join(f"{previous} is {state}" for previous, state in program.time)
         lines.append(f"    Time: one step of a sequence; {earlier} one step earlier")
     terms = [t for t in program.terms if not t.soft]
-    joint = " ".join(program.variables)
+    given = program.conditioning  # no term: the program is conditioned on them
+    joint = " ".join(n for n in program.variables if n not in given)
+    if given:
+        joint += " | " + ", ".join(given)
     lines += ["    Decomposition",
               f"      P({joint}) = " + " ".join(str(t.expression) for t in terms)]
     lines.append("    Parametric forms")

@@ -51,14 +51,22 @@ def inputs_for(program: bayesprog.Program) -> dict[str, np.ndarray]:
 
 def values_of(program: bayesprog.Program, names, rows: int | None, seed: int = 0,
               inputs=None) -> dict:
-    """Values of ``names`` drawn from the program (a field: uniform inside its support), one
-    per row, or one value when ``rows`` is None."""
-    draws = program.sample(rows or 1, rng=seed, inputs=inputs or None)
+    """Values of ``names`` drawn from the program (a field: uniform inside its support; a
+    variable without a term: one of its states, or the middle of its support), one per row,
+    or one value when ``rows`` is None."""
     rng = np.random.default_rng(seed)
+    given = {}
+    for name in program.conditioning:
+        var = program.variables[name]
+        given[name] = (var.states[rng.integers(var.card)] if var.is_discrete
+                       else float(np.clip(0.0, var.low, var.high)))
+    draws = program.sample(rows or 1, given or None, rng=seed, inputs=inputs or None)
     out = {}
     for name in names:
         var = program.variables[name]
-        if getattr(var, "index", None) is not None:  # a field: one value per index state
+        if name in given:
+            column = np.array([given[name]] * (rows or 1), dtype=object)
+        elif getattr(var, "index", None) is not None:  # a field: one value per index state
             size = (rows or 1, program.variables[var.index].card)
             low, high = (max(var.low, -3.0), min(var.high, 3.0))
             column = rng.uniform(low + 0.1 * (high - low), high - 0.1 * (high - low), size)
@@ -76,10 +84,12 @@ def check(answer, batch: tuple[int, ...]) -> None:
 
 
 def questions_of(program: bayesprog.Program) -> list:
-    """The named questions, or one of the last variable given the others for a program that
-    names none."""
-    if program.questions:
-        return list(program.questions.values())
+    """The named questions of one step, or one of the last variable given the others for a
+    program that names none."""
+    named = [q for q in program.questions.values()
+             if q.kind not in ("filter", "smooth", "sequence")]
+    if named:
+        return named
     names = list(program.variables)
     return [program.question(f"P({names[-1]} | {', '.join(names[:-1])})")]
 
@@ -87,8 +97,9 @@ def questions_of(program: bayesprog.Program) -> list:
 @pytest.mark.parametrize("name", PROGRAMS)
 def test_every_answer_of_a_bundled_program_has_one_log_evidence_per_row(name):
     answered = walk(name)
-    assert answered >= ({"filter", "smooth", "sequence"} if "umbrella" in name
-                        else {"probability"}), answered
+    over_time = bayesprog.load(bundled.find(name, "program")).time is not None
+    assert answered >= {"posterior", "probability"} | (
+        {"filter", "smooth", "sequence"} if over_time else set()), answered
 
 
 def test_every_approximate_method_is_walked():
@@ -102,9 +113,9 @@ def walk(name: str) -> set[str]:
     kinds and methods that answered."""
     program = bayesprog.load(bundled.find(name, "program"))
     inputs = inputs_for(program) or None
-    if program.time is not None:
-        return ask_over_time(program, inputs)
     answered = set()
+    if program.time is not None:  # over steps, then the questions of one step
+        answered |= ask_over_time(program, inputs)
     for named in questions_of(program):
         # as written, asked once; and without its values, for a batch of rows
         left, right = named.expression.left, named.expression.right
@@ -137,10 +148,10 @@ def walk(name: str) -> set[str]:
                 answered.add(method)
             if all(program.variables[v].is_discrete for v in expr.left) and not soft_only(
                     program):
-                every = {k: v for k, v in evidence.items()
+                every = {k: v for k, v in {**expr.values, **evidence}.items()
                          if program.variables[k].is_discrete}
                 for marginal in program.marginals(every, inputs=inputs).values():
-                    check(marginal, batch if every else ())
+                    check(marginal, batch if set(every) - set(expr.values) else ())
     return answered
 
 

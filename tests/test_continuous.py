@@ -524,7 +524,7 @@ decomposition:
     ('"2*X +"', "syntax", None),  # where Python's parser puts it: inside the quotes
     ('"2*Q"', "unknown name 'Q'", 12 + 1 + 2),  # at Q
     ('"__import__(1)"', "function", 12 + 1),  # at the call
-    ('"M + X"', "states are not numbers", 12),  # the formula as a whole: at its value
+    ('"M + X"', "M has named states", 12 + 1),  # at M, which may only be compared
 ])
 def test_a_bad_formula_is_reported_at_its_place(tmp_path, mean, message, column):
     path = tmp_path / "bad.yaml"

@@ -12,6 +12,7 @@ from bayesprog.forms.base import (
     ParamValue,
     TermContext,
     available_forms,
+    formula_values,
     get_form,
     is_binned,
     nonnegative,
@@ -20,6 +21,7 @@ from bayesprog.forms.base import (
     register_form,
     simplex,
     unit_interval,
+    unknown_form,
 )
 
 __all__ = [
@@ -32,6 +34,7 @@ __all__ = [
     "TermContext",
     "available_forms",
     "get_form",
+    "formula_values",
     "is_binned",
     "nonnegative",
     "positive",
@@ -39,4 +42,5 @@ __all__ = [
     "register_form",
     "simplex",
     "unit_interval",
+    "unknown_form",
 ]

@@ -30,24 +30,100 @@ class FormulaParam:
     formula per cell of a table keyed by discrete parents (``axes``; none for one formula).
 
     The formulas' variables are continuous parents (their values come from the evidence, or
-    the Gaussian method treats them as unknowns) and numeric discrete parents (a range's
-    integers, a discretised variable's bin midpoints)."""
+    the Gaussian method treats them as unknowns) and discrete parents: numbers for a range (its
+    integers), states named by integers and a discretised variable (its bins' midpoints), the
+    index of the state for named states (which formulas only compare, see
+    :meth:`~bayesprog.formula.Formula.with_states`)."""
 
     axes: tuple[str, ...]
     #: object array of :class:`~bayesprog.formula.Formula`, one axis per entry of ``axes``
+    #: (then, with ``event``, one over the child's states)
     formulas: np.ndarray
+    #: the formulas give the child's probabilities (its states on the last axis of
+    #: ``formulas``, or, with ``child``, as the value of the child's name), normalised per
+    #: configuration of the parents
+    event: bool = False
+    #: the child, when the formulas name it: each gives the weight of every child state
+    child: str | None = None
+    #: the text as written, where it differs from the formulas (a two-state child's one
+    #: formula, its second state's probability)
+    written: str = ""
 
     @property
     def names(self) -> tuple[str, ...]:
+        """The parents and inputs the formulas name (not the child)."""
         seen: dict[str, None] = {}
         for f in self.formulas.flat:
             seen.update(dict.fromkeys(f.names))
+        seen.pop(self.child, None)  # type: ignore[arg-type]
         return tuple(seen)
 
     def __str__(self) -> str:
-        if not self.axes:
+        if self.written:
+            return f'"{self.written}"'
+        if not self.axes and (not self.event or self.child):
             return f'"{self.formulas.flat[0]}"'
         return "{" + ", ".join(f'"{f}"' for f in self.formulas.flat) + "}"
+
+    def evaluate(self, variables: Mapping[str, Variable], known: Mapping[str, np.ndarray],
+                 rows: int) -> tuple[tuple[str, ...], np.ndarray]:
+        """``(axes, values)``: the formulas over the table's axes and the discrete variables
+        they name (appended to ``axes``), for ``rows`` rows of the values ``known`` of the
+        others (each ``[rows or 1]``); ``[rows, *axes]``, then the child's states with
+        ``event``. Probabilities are not yet normalised (:meth:`normalised`)."""
+        from bayesprog.variables import Discrete
+
+        named = self.names + ((self.child,) if self.child else ())
+        extra = tuple(n for n in named
+                      if isinstance(variables.get(n), Discrete) and n not in self.axes)
+        cards = [variables[a].card for a in extra]  # type: ignore[union-attr]
+        values: dict[str, np.ndarray] = {}
+        for name in named:
+            var = variables.get(name)
+            if isinstance(var, Discrete) and name in extra:
+                shape = [1] * (1 + len(extra))
+                shape[1 + extra.index(name)] = var.card
+                values[name] = formula_values(var).reshape(shape)
+            else:
+                values[name] = np.asarray(known[name], float).reshape((-1,) + (1,) * len(extra))
+        table = self.formulas
+        out = np.empty((rows,) + table.shape + tuple(cards))
+        for index in np.ndindex(*table.shape):
+            formula = table.item(index)
+            result = formula.evaluate({n: values[n] for n in formula.names})
+            out[(slice(None),) + index] = np.broadcast_to(result, (rows, *cards))
+        if self.child:  # the child's states last
+            out = np.moveaxis(out, 1 + table.ndim + extra.index(self.child), -1)
+            extra = tuple(n for n in extra if n != self.child)
+        elif self.event:
+            out = np.moveaxis(out, 1 + len(self.axes), -1)
+        return self.axes + extra, out
+
+    def normalised(self, axes: tuple[str, ...], values: np.ndarray,
+                   variables: Mapping[str, Variable]) -> np.ndarray:
+        """Probabilities ``values`` (from :meth:`evaluate`) normalised over the child's states;
+        a ValueError names the first parent configuration whose values are negative, not
+        finite, or all zero."""
+        total = values.sum(axis=-1, keepdims=True)
+        bad = ~(np.isfinite(values).all(-1) & (values >= 0).all(-1) & (total[..., 0] > 0))
+        if bad.any():
+            index = tuple(int(i) for i in np.argwhere(bad)[0])
+            row = values[index]
+            at = ", ".join(f"{a}={variables[a].states[i]}"  # type: ignore[union-attr]
+                           for a, i in zip(axes, index[1:], strict=True))
+            found = ", ".join(f"{v:.6g}" for v in row[:8]) + (", ..." if row.size > 8 else "")
+            why = ("sum to 0" if np.isfinite(row).all() and (row >= 0).all()
+                   else "are not all finite and >= 0")
+            raise ValueError(f"the probabilities {self} {why}"
+                             f"{' for ' + at if at else ''} (found [{found}]); expected "
+                             "values >= 0 with a positive sum, normalised over the states")
+        return values / total
+
+
+def formula_values(var: Discrete) -> np.ndarray:
+    """What a formula reads for each state of a discrete variable: its number (a range's
+    integer, an integer-named state's, a bin's midpoint), else the state's index."""
+    return np.asarray(var.values if var.values is not None else np.arange(var.card), float)
 
 
 def is_binned(var: Any) -> bool:
@@ -334,6 +410,13 @@ class Form:
         raise NotImplementedError(f"form {self.name!r} cannot draw a continuous child: give "
                                   f"{child.name} as evidence, or use a form that can")
 
+    def draw(self, ctx: TermContext, u: np.ndarray) -> np.ndarray:
+        """Values of a continuous child, one per draw, where sampling draws them: :meth:`sample`
+        of the parameters at each draw (``ctx.params[k].array``: ``draws + event``) and of the
+        uniforms ``u``. A form whose draws read more than its parameters (what it resolved with
+        the term, ``ctx.extra``: the ``program`` form's sub-program) gives them here."""
+        return self.sample({k: v.array for k, v in ctx.params.items()}, ctx.child, u)
+
 
 _REGISTRY: dict[str, Form] = {}
 
@@ -357,9 +440,64 @@ def register_form(form: type[Form] | Form) -> type[Form] | Form:
     return form
 
 
+#: why a form an installed package declares could not be registered, by the form's name
+_PLUGIN_PROBLEMS: dict[str, str] = {}
+
+
 def get_form(name: str) -> Form | None:
-    return _REGISTRY.get(name)
+    """The form registered as ``name``; a name that is not registered is looked for among the
+    forms of installed packages (the ``bayesprog.forms`` entry points, read only then: see
+    :mod:`bayesprog.forms.plugins`), and registered when found."""
+    form = _REGISTRY.get(name)
+    if form is None and name not in _PLUGIN_PROBLEMS:
+        form = _plugin_form(name)
+    return form
 
 
 def available_forms() -> list[str]:
+    """The registered forms (an installed package's form is registered at its first use)."""
     return sorted(_REGISTRY)
+
+
+def unknown_form(name: str) -> str:
+    """Why there is no form ``name`` (for a message that names it): the installed package
+    that declares it cannot give it, or no form has that name, with the closest of the
+    registered forms and the installed packages'."""
+    if name in _PLUGIN_PROBLEMS:
+        return _PLUGIN_PROBLEMS[name]
+    from bayesprog.errors import did_you_mean
+    from bayesprog.forms.plugins import installed
+
+    names = sorted(set(_REGISTRY) | set(installed()))
+    return (f"unknown form {name!r}{did_you_mean(name, names)} (expected one of "
+            f"{', '.join(names)})")
+
+
+def _plugin_form(name: str) -> Form | None:
+    """The form of the installed package whose entry point is named ``name``, registered; None
+    when there is none, or when it cannot be loaded (the reason kept for
+    :func:`unknown_form`)."""
+    from bayesprog.forms.plugins import installed
+
+    plugin = installed().get(name)
+    if plugin is None:
+        return None
+    try:
+        found = plugin.load()
+        form = found() if isinstance(found, type) and issubclass(found, Form) else found
+    except Exception as exc:  # whatever the package raises: it must not take a program down
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which cannot be "
+                                  f"loaded: {type(exc).__name__}: {exc}")
+        return None
+    if not isinstance(form, Form):
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which gives "
+                                  f"{type(found).__name__} {found!r:.60}: expected a subclass "
+                                  "of bayesprog.Form (or an instance of one)")
+        return None
+    if form.name != name:
+        _PLUGIN_PROBLEMS[name] = (f"form {name!r} comes from the {plugin}, which gives the "
+                                  f"form {form.name!r}: expected an entry point named after "
+                                  f"its form ({form.name} = {plugin.value})")
+        return None
+    register_form(form)
+    return form

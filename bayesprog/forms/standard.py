@@ -13,6 +13,7 @@ from bayesprog.forms.base import (
     Param,
     ParamValue,
     TermContext,
+    formula_values,
     positive,
     real,
     register_form,
@@ -410,17 +411,35 @@ class GaussianMixture(Form):
 @register_form
 class Dirac(Form):
     """A deterministic term: ``X = value`` exactly, ``value`` usually a formula of the parents
-    (``value: "sqrt(X**2 + Y**2)"``). The variable is known once its parents are: it is not
-    given as evidence (a noisy sensor of it is)."""
+    (``value: "sqrt(X**2 + Y**2)"``).
+
+    A real child is known once its parents are: it is not given as evidence (a noisy sensor of
+    it is). A discrete child takes the state whose value the formula gives (a range's integer,
+    an integer-named state, else the index of the state: ``value: "A == B"`` gives the second
+    state of a two-state child where A and B agree): its term is a table of ones and zeros,
+    and evidence on it is evidence on its parents (a coherence variable)."""
 
     name = "dirac"
-    child_kinds = ("continuous",)
     params = (Param("value", real, doc="the value, a number or a formula of the parents"),)
     mean_param = "value"  # and no noise: deterministic
 
     def log_factor(self, ctx: TermContext) -> np.ndarray:
-        raise ValueError(f"{ctx.child.name} is deterministic (form dirac): give evidence on "
-                         "its parents, or on a noisy sensor of it, not on it")
+        child = ctx.child
+        if not isinstance(child, Discrete):
+            raise ValueError(f"{child.name} is deterministic (form dirac): give evidence on "
+                             "its parents, or on a noisy sensor of it, not on it")
+        value = ctx.param("value")  # [b, ..axes..], of size 1 along the child's
+        at = 1 + ctx.axes.index(child.name)
+        own = formula_values(child)
+        shape = [1] * value.ndim
+        shape[at] = child.card
+        hit = np.abs(value - own.reshape(shape)) <= 1e-9 * np.maximum(1.0, np.abs(own)).reshape(shape)
+        if not hit.any(axis=at).all():
+            row = int(np.argwhere(~hit.any(axis=at))[0][0])
+            rest = tuple(a for a in ctx.axes if a != child.name)
+            raise ValueError(deterministic_problem(child, rest, np.take(value[row], 0, at - 1),
+                                                   ctx.variables))
+        return np.where(hit, 0.0, -np.inf)
 
     def cdf(self, ctx: TermContext) -> np.ndarray:
         return (ctx.child_value() >= ctx.param("value")).astype(float)
@@ -428,6 +447,27 @@ class Dirac(Form):
     def sample(self, params: Mapping[str, np.ndarray], child: Variable,
                u: np.ndarray) -> np.ndarray:
         return np.broadcast_to(params["value"], u.shape[:-1]).astype(float)
+
+
+def deterministic_problem(child: Discrete, axes: tuple[str, ...], values: np.ndarray,
+                          variables: Mapping[str, Variable]) -> str:
+    """Why the values of a deterministic discrete term (over ``axes``) are not all values of
+    its child's states (see :func:`~bayesprog.forms.base.formula_values`), or ''. ``values``
+    may be of size 1 along axes it does not vary over."""
+    own = formula_values(child)
+    hit = np.abs(values[..., None] - own) <= 1e-9 * np.maximum(1.0, np.abs(own))
+    bad = ~hit.any(-1)
+    if not bad.any():
+        return ""
+    index = tuple(int(i) for i in np.argwhere(bad)[0])
+    at = ", ".join(f"{a}={variables[a].states[i]}"  # type: ignore[union-attr]
+                   for a, i, n in zip(axes, index, values.shape, strict=True) if n > 1)
+    shown = (f"{own[0]:g}, ..., {own[-1]:g}" if own.size > 6
+             else ", ".join(f"{v:g}" for v in own))
+    kind = ("the indices of its states" if child.values is None and child.kind != "grid"
+            else "its values")
+    return (f"the value {values[index]:g}{' for ' + at if at else ''} is not a state of "
+            f"{child.name}: expected one of {kind} ({shown})")
 
 
 def _support(var: Variable) -> tuple[float, float]:

@@ -33,6 +33,7 @@ special = LazyModule("scipy.special")
 #: The quantiles a summary reports.
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 _SQRT_2PI = float(np.sqrt(2 * np.pi))
+_LOG_2PI = float(np.log(2 * np.pi))
 
 
 def per_row(values: Any, batch_shape: tuple[int, ...]) -> np.ndarray:
@@ -155,11 +156,7 @@ class Density:
         """CDF at ``x`` ``[rows, m]``."""
         if self.weights is not None:
             w, m, s = self._gaussian(variable)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z = (x[:, :, None] - m[:, None, :]) / s[:, None, :]
-            z = np.where(s[:, None, :] > 0, z, np.where(x[:, :, None] >= m[:, None, :],
-                                                         np.inf, -np.inf))
-            return (w[:, None, :] * special.ndtr(z)).sum(-1)
+            return _mixture_cdf(w[:, None, :], m[:, None, :], s[:, None, :], x)
         edges, p = self._bins(variable)
         cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
         return np.stack([np.interp(x[r], edges, cum[r]) for r in range(p.shape[0])])
@@ -249,6 +246,73 @@ class Density:
             cov[:, i, i] += self._bins(self.variables[i])[1] @ (widths[i] ** 2 / 12)
         return self._shape(cov)
 
+    # one point per row: where another program's term reads this answer (form: program) -----
+    def log_pdf_at(self, variable: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The log of the marginal density of flat row ``rows[i]`` at ``x[i]`` (``x`` and
+        ``rows`` of one shape), computed in log space (a value far in the tail keeps its
+        logarithm where the density itself underflows).
+
+        >>> d = Density("P(X | S)", ("X",), (2,), np.zeros(2), weights=np.ones((2, 1)),
+        ...             means=np.array([0.0, 3.0]).reshape(2, 1, 1),
+        ...             covariances=np.ones((2, 1, 1, 1)))
+        >>> d.log_pdf_at("X", np.array([0.0, 40.0]), np.array([0, 1])).round(4).tolist()
+        [-0.9189, -685.4189]
+        """
+        x = np.asarray(x, float)
+        if self.weights is None:
+            edges, p = self._bins(variable)
+            k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+            inside = (x >= edges[0]) & (x <= edges[-1])
+            with np.errstate(divide="ignore"):
+                return np.where(inside, np.log(p[rows, k] / np.diff(edges)[k]), -np.inf)
+        w, m, s = (a[rows] for a in self._gaussian(variable))
+        at = x[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = (at - m) / s
+            log = np.where(s > 0, -0.5 * z * z - np.log(s) - 0.5 * _LOG_2PI,
+                           np.where(at == m, np.inf, -np.inf))  # sd 0: a point mass
+            log = np.where(w > 0, log + np.log(w), -np.inf)
+            top = log.max(axis=-1, keepdims=True)
+            top = np.where(np.isfinite(top), top, 0.0)
+            return np.log(np.exp(log - top).sum(-1)) + top[..., 0]
+
+    def cdf_at(self, variable: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``P(variable <= x[i])`` in flat row ``rows[i]`` (``x`` and ``rows`` of one shape)."""
+        x = np.asarray(x, float)
+        if self.weights is not None:
+            w, m, s = (a[rows] for a in self._gaussian(variable))
+            return _mixture_cdf(w, m, s, x)
+        edges, p = self._bins(variable)
+        cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
+        k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+        with np.errstate(invalid="ignore"):
+            within = np.clip((x - edges[k]) / np.diff(edges)[k], 0.0, 1.0)
+        return cum[rows, k] + within * p[rows, k]
+
+    def quantile_at(self, variable: str, q: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The ``q[i]``-quantile of flat row ``rows[i]`` (``q`` and ``rows`` of one shape, ``q``
+        in [0, 1]): the inverse of :meth:`cdf_at`, by which a draw is made from the answer."""
+        q = np.asarray(q, float)
+        if self.weights is None:
+            edges, p = self._bins(variable)
+            cum = np.concatenate([np.zeros((p.shape[0], 1)), np.cumsum(p, axis=1)], axis=1)
+            # the bin whose cumulative interval holds q (empty bins hold none)
+            k = (cum[rows, 1:-1] < q[..., None]).sum(-1)
+            mass = p[rows, k]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                within = np.where(mass > 0, (q - cum[rows, k]) / mass, 0.0)
+            return edges[k] + np.clip(within, 0.0, 1.0) * np.diff(edges)[k]
+        w, m, s = (a[rows] for a in self._gaussian(variable))
+        lo = (m - 40 * s).min(-1) - 1e-300
+        hi = (m + 40 * s).max(-1)
+        for _ in range(200):  # bisection to the float resolution of the interval
+            mid = (lo + hi) / 2
+            below = _mixture_cdf(w, m, s, mid) < q
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+            if np.all(hi - lo <= 4 * np.finfo(float).eps * np.maximum(1, np.abs(hi))):
+                break
+        return np.where(q >= 1, np.inf, np.where(q <= 0, -np.inf, (lo + hi) / 2))
+
     def summary(self, quantiles: tuple[float, ...] = QUANTILES) -> dict[str, dict[str, Any]]:
         """Mean, sd, quantiles and MAP of each searched variable (arrays over the batch)."""
         return {v: {"mean": self.mean(v), "sd": self.sd(v), "map": self.map(v),
@@ -292,6 +356,16 @@ def _plain(values: Any) -> Any:
 
 def _none(values: list) -> list:
     return [_none(v) if isinstance(v, list) else (None if v != v else v) for v in values]
+
+
+def _mixture_cdf(w: np.ndarray, m: np.ndarray, s: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``sum_k w_k Phi((x - m_k) / s_k)`` at ``x`` ``[...]`` for components ``[..., K]`` (a
+    component of standard deviation 0 is a step at its mean)."""
+    at = x[..., None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (at - m) / s
+    z = np.where(s > 0, z, np.where(at >= m, np.inf, -np.inf))
+    return (w * special.ndtr(z)).sum(-1)
 
 
 def _mixture_mode(w: np.ndarray, m: np.ndarray, s: np.ndarray) -> np.ndarray:

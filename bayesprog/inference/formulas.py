@@ -23,7 +23,6 @@ import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import Form, FormulaParam, ParamValue, TermContext, is_binned
-from bayesprog.formula import Formula
 from bayesprog.inference.binding import Bound
 from bayesprog.variables import Discrete, Variable
 
@@ -32,37 +31,26 @@ def formula_value(variables: Mapping[str, Variable], param: FormulaParam, bound:
                   what: str) -> ParamValue:
     """The values of ``param`` for the question's evidence and inputs: over the table's axes
     and the discrete parents the formulas name, with a batch axis when an observed parent or an
-    input is batched. A name that is not a variable is a (scalar) runtime input.
+    input is batched; probabilities normalised per parent configuration. A name that is not a
+    variable is a (scalar) runtime input.
     """
-    extra = tuple(n for n in param.names
-                  if isinstance(variables.get(n), Discrete) and n not in param.axes)
-    axes = param.axes + extra
-    cards = [variables[a].card for a in extra]  # type: ignore[union-attr]
     known = {n: bound.continuous[n] if n in variables else bound.inputs[n]
              for n in param.names if n in bound.continuous or
              (n not in variables and n in bound.inputs)}
-    batched = any(pv.batched for pv in known.values())
-    rows = bound.size if batched else 1
-    values: dict[str, np.ndarray] = {}
     for name in param.names:
         var = variables.get(name)
         if var is None and name not in known:
             raise QuestionError(f"missing input {name!r}, needed by {what}")
-        if isinstance(var, Discrete):
-            shape = [1] * (1 + len(extra))
-            shape[1 + extra.index(name)] = var.card
-            values[name] = np.asarray(var.values, float).reshape(shape)
-        elif name in known:
-            pv = known[name]
-            values[name] = np.asarray(pv.array, float).reshape((-1,) + (1,) * len(extra))
-        else:
+        if not isinstance(var, Discrete) and name not in known:
             raise QuestionError(f"{what}: {name} is neither known nor summed out here")
-    table = param.formulas
-    out = np.empty((rows,) + table.shape + tuple(cards))
-    for index in np.ndindex(*table.shape):
-        formula: Formula = table.item(index)
-        result = formula.evaluate({n: values[n] for n in formula.names})
-        out[(slice(None),) + index] = np.broadcast_to(result, (rows, *cards))
+    batched = any(pv.batched for pv in known.values())
+    rows = bound.size if batched else 1
+    axes, out = param.evaluate(variables, {n: pv.array for n, pv in known.items()}, rows)
+    if param.event:
+        try:
+            out = param.normalised(axes, out, variables)
+        except ValueError as exc:
+            raise QuestionError(f"{what}: {exc}") from None
     return ParamValue(axes, out if batched else out[0], batched)
 
 

@@ -463,6 +463,14 @@ def all_marginals(program: ProgramLike, evidence: Mapping[str, Any] | None,
     """The posterior of each of ``variables`` (default: every discrete variable not observed)
     given ``evidence``, by one junction tree (see the module's text)."""
     evidence = dict(expect_mapping(evidence, "evidence", "variable names to values"))
+    unknown = [n for n in program.conditioning if n not in evidence]
+    if unknown:
+        raise QuestionError(f"all marginals are asked given {', '.join(unknown)}, which "
+                            f"{'have' if len(unknown) > 1 else 'has'} no term in the "
+                            "decomposition (the program is conditioned on "
+                            f"{'them' if len(unknown) > 1 else 'it'}): give "
+                            f"{'their values' if len(unknown) > 1 else 'its value'} in the "
+                            "evidence")
     observed = tuple(evidence)
     if variables is None:
         wanted = [n for n, v in program.variables.items()

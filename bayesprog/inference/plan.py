@@ -124,12 +124,15 @@ class Layout:
     def pruned(self) -> bool:
         """Whether the requisite terms leave out some the evidence depends on: the answer's
         normaliser is then not the evidence's probability, which is computed when asked.
-        (Every variable has a term: fewer variables are fewer terms.)"""
+        (Fewer variables with a term are fewer terms; a variable without one, given by every
+        question, adds nothing to the evidence's probability.)"""
         names = self.requisite_names
         if names is None:
             return False
-        return len(names) < len(self.ancestral_names) or any(
-            name not in self.touched for name in self.key[1] + self.key[2] + self.key[4])
+        given = set(self.program.conditioning)
+        return len(names - given) < len(self.ancestral_names - given) or any(
+            name not in self.touched and name not in given
+            for name in self.key[1] + self.key[2] + self.key[4])
 
     @once
     def constant(self) -> bool:

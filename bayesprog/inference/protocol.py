@@ -21,4 +21,9 @@ class ProgramLike(Protocol):
     @property
     def active_terms(self) -> list[Term]: ...
 
+    @property
+    def conditioning(self) -> tuple[str, ...]:
+        """The variables without a term, which every question gives."""
+        ...
+
     def ancestors(self, name: str) -> set[str]: ...

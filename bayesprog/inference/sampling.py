@@ -9,11 +9,11 @@ Every term is used as a factor over its discrete variables (:func:`term_factor`,
 own): a discrete child is drawn from the term's row at its drawn parents, normalised, and the
 draw is weighted by the row's total (one for a normalised term; a potential's mass else); a
 known variable is not drawn, and the draw is weighted by its term's factor at the drawn parents.
-Continuous variables that are not known are drawn by their form's :meth:`Form.sample`, inside
-their declared support: a bounded variable is drawn from its term truncated to the support
-(the density at its drawn parents, renormalised there), by the quantile function between the
-CDF at the bounds where the form has one (``quantile_sample``), by drawing again the values
-that fell outside otherwise.
+Continuous variables that are not known are drawn by their form (:meth:`Form.draw`: for most
+forms :meth:`Form.sample` of the parameters at each draw), inside their declared support: a
+bounded variable is drawn from its term truncated to the support (the density at its drawn
+parents, renormalised there), by the quantile function between the CDF at the bounds where the
+form has one (``quantile_sample``), by drawing again the values that fell outside otherwise.
 """
 
 from __future__ import annotations
@@ -194,16 +194,17 @@ def _draw_within(program: ProgramLike, term: Term, child: Continuous,
     """``n`` values of ``child`` per row from its term at each draw's ``params``, inside the
     child's support (see the module)."""
     form, low, high = term.form, child.low, child.high
+    values = {k: ParamValue((), v, True) for k, v in params.items()}
+    at_draws = TermContext(child, (), (), (), values, None, program.variables, term.extra)
     u = _uniforms(gens, n, 2)
     if not (np.isfinite(low) or np.isfinite(high)):
-        return form.sample(params, child, u)
+        return form.draw(at_draws, u)
     where = f"[{low:g}, {high:g}]"
     if form.quantile_sample:
-        values = {k: ParamValue((), v, True) for k, v in params.items()}
 
         def cdf(x: float) -> np.ndarray:
             at = ParamValue((), np.full(u.shape[:-1], x), True)
-            ctx = TermContext(child, (), (), (), values, at, program.variables)
+            ctx = TermContext(child, (), (), (), values, at, program.variables, term.extra)
             return np.broadcast_to(np.asarray(form.cdf(ctx), float), u.shape[:-1])
 
         below = cdf(low) if np.isfinite(low) else np.zeros(u.shape[:-1])
@@ -215,13 +216,13 @@ def _draw_within(program: ProgramLike, term: Term, child: Continuous,
                                 "support declared)")
         u = u.copy()
         u[..., 0] = below + u[..., 0] * inside
-        return np.clip(form.sample(params, child, u), low, high)  # (rounding at a bound)
-    drawn = form.sample(params, child, u)
+        return np.clip(form.draw(at_draws, u), low, high)  # (rounding at a bound)
+    drawn = form.draw(at_draws, u)
     for _ in range(REDRAWS):
         outside = (drawn < low) | (drawn > high)
         if not outside.any():
             return drawn
-        drawn = np.where(outside, form.sample(params, child, _uniforms(gens, n, 2)), drawn)
+        drawn = np.where(outside, form.draw(at_draws, _uniforms(gens, n, 2)), drawn)
     raise QuestionError(f"term {term.label} puts little or no probability inside the support "
                         f"{where} of {child.name}: {REDRAWS} draws in a row fell outside it "
                         "(check the term's parameters or the support declared)")
@@ -309,14 +310,27 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
 
     evidence = expect_mapping(evidence, "evidence", "variable names to values")
     variables = program.variables
+    unknown = [name for name in program.conditioning if name not in evidence]
+    if unknown:
+        names = ", ".join(unknown)
+        one = len(unknown) == 1
+        raise QuestionError(f"sampling the program needs {names}: "
+                            f"{'it has' if one else 'they have'} no term in the decomposition "
+                            f"(the program is conditioned on {'it' if one else 'them'}), so "
+                            "the draws are made given "
+                            f"{'its value' if one else 'their values'}: give "
+                            f"{'it' if one else 'them'} as evidence ("
+                            + ", ".join(f"{n}=..." for n in unknown) + ")")
     drawn = tuple(name for name, var in variables.items()
                   if name not in evidence and getattr(var, "index", None) is None)
-    method = method or ("lw" if evidence else "forward")
-    if method == "forward" and evidence:
+    # the variables without a term are not drawn but given: ancestral sampling takes them
+    observed = [name for name in evidence if name not in program.conditioning]
+    method = method or ("lw" if observed else "forward")
+    if method == "forward" and observed:
         raise QuestionError("forward sampling ignores evidence: use method='lw' or "
                             "'rejection' to condition on it")
     if method == "rejection":
-        continuous = [k for k in evidence if k in variables and not variables[k].is_discrete]
+        continuous = [k for k in observed if k in variables and not variables[k].is_discrete]
         if continuous:
             raise QuestionError(f"rejection sampling needs discrete evidence; "
                                 f"{', '.join(continuous)} is continuous: use method='lw'")
@@ -329,7 +343,11 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
     gen = generators(rng, 1)
     weights = None
     if method == "rejection":
-        free = Bound(bound.batch_shape, inputs=bound.inputs)
+        given = set(program.conditioning)
+        free = Bound(bound.batch_shape,
+                     {k: v for k, v in bound.discrete.items() if k in given},
+                     {k: v for k, v in bound.continuous.items() if k in given},
+                     inputs=bound.inputs)
         kept: dict[str, list[np.ndarray]] = {name: [] for name in drawn}
         found, tried = 0, 0
         while found < n:
@@ -340,7 +358,8 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
             d = draw(program, terms, free, batch, gen)
             match = np.ones(batch, bool)
             for name, idx in bound.discrete.items():
-                match &= d.values[name][0] == int(np.asarray(idx).reshape(-1)[0])
+                if name not in given:
+                    match &= d.values[name][0] == int(np.asarray(idx).reshape(-1)[0])
             for name in drawn:
                 kept[name].append(d.values[name][0][match])
             found += int(match.sum())

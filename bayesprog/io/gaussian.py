@@ -338,6 +338,9 @@ def program_to_gaussian(program: Any) -> dict[str, Any]:
                             "real variables with normal terms, means affine in the parents "
                             "and literal sigmas")
 
+    if program.conditioning:
+        raise fail(f"{', '.join(program.conditioning)} has no term (the program is conditioned "
+                   "on it), and a network gives every variable one")
     original: dict[str, str] = {}
     for name, var in program.variables.items():
         if var.is_discrete:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import graphlib
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,8 +26,10 @@ from bayesprog.forms import (
     ParamValue,
     available_forms,
     get_form,
+    unknown_form,
 )
 from bayesprog.forms.base import nonnegative, real
+from bayesprog.forms.standard import deterministic_problem
 from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
@@ -94,6 +96,10 @@ class _Checker:
         self.problems: list[Diagnostic] = []
         self.variables: dict[str, Variable] = {}
         self.inputs: dict[str, InputDecl] = {}
+        #: the variables without a term (not one that failed to be read), and those of them
+        #: that condition a term: every question gives them
+        self.untermed: list[str] = []
+        self.conditioning: tuple[str, ...] = ()
 
     def error(self, path: YPath, message: str, at_key: bool = False) -> None:
         self.problems.append(self.located.diagnostic(path, message, at_key=at_key))
@@ -164,18 +170,31 @@ class _Checker:
                 terms.append(term)
         missing = [n for n in self.variables if n not in defined]
         failed_children = self._failed_children()
-        for name in missing:
-            if name not in failed_children:
+        # a variable without a term that conditions one (a control, a known input) is given by
+        # every question; one that conditions nothing is a term forgotten (and a state over
+        # time without a term is refused by check_time)
+        parents = self._named_parents()
+        over_time = self._time_names()
+        self.untermed = [n for n in missing if n not in failed_children]
+        self.conditioning = tuple(n for n in self.untermed if n in parents and n not in over_time)
+        for name in self.untermed:
+            if name not in parents and name not in over_time:
                 self.error(
                     ("variables", name),
                     f"variable {name!r} has no term in the decomposition: expected one "
-                    f"P({name} | ...)",
+                    f"P({name} | ...), or {name} as a parent of a term (a variable that "
+                    "every question gives)",
                 )
         for i, soft in enumerate(self.doc.soft_evidence):
             path = ("soft_evidence", i)
             term = self.check_term(path + ("variable",), f"P({soft.variable})", soft.form,
                                    soft.parameters, path)
             if term is not None:
+                if term.child.name in self.conditioning:
+                    self.error(path + ("variable",), f"soft evidence on {soft.variable}: it "
+                               "has no term in the decomposition, so every question gives its "
+                               "value; expected soft evidence on a variable with a term")
+                    continue
                 if not term.child.is_discrete:
                     self.error(path + ("variable",), f"soft evidence needs a discrete "
                                f"variable, found continuous {soft.variable!r}")
@@ -248,6 +267,22 @@ class _Checker:
                            f"parameters of form {form!r} ({', '.join(names) or 'none'})")
         return LearnOptions(pseudo, components, tuple(spec.shared))
 
+    def _named_parents(self) -> set[str]:
+        """Variables named as parents in a term, even in a term whose form is wrong."""
+        names: set[str] = set()
+        for spec in self.doc.decomposition:
+            try:
+                names.update(parse_expression(spec.term).right)
+            except ExpressionError:
+                pass
+        return names
+
+    def _time_names(self) -> set[str]:
+        """The states over time and their copies one step earlier, as the time section names
+        them."""
+        spec = self.doc.time
+        return set() if spec is None else {n for pair in spec.previous.items() for n in pair}
+
     def _failed_children(self) -> set[str]:
         """Variables named first in a term, even in a term too broken to parse."""
         names: set[str] = set()
@@ -288,8 +323,7 @@ class _Checker:
                 ok = False
         form = get_form(form_name)
         if form is None:
-            self.error(path + ("form",), f"unknown form {form_name!r}: expected one of "
-                       f"{', '.join(available_forms())}")
+            self.error(path + ("form",), unknown_form(form_name))
             ok = False
         if not ok or form is None:
             return None
@@ -393,6 +427,9 @@ class _Checker:
             return self.input_ref(term, param, raw["input"], path, event_ndim, keyable, what)
         if _has_text(raw) and event_ndim == 0:
             return self.formula_param(term, param, raw, path, keyable, what)
+        if (_has_text(raw) and event_ndim == 1 and param.keyed_by_child_states
+                and isinstance(child, Discrete)):
+            return self.formula_param(term, param, raw, path, keyable, what, event=True)
         spec = _LiteralSpec(param, child, event_ndim, form.event_shape(param, child), what)
         try:
             axes, array = self._literal(raw, spec, keyable, path)
@@ -402,14 +439,28 @@ class _Checker:
         return ParamValue(axes, array)
 
     def formula_param(self, term: Term, param: Param, raw: Any, path: YPath, keyable: list,
-                      what: str) -> FormulaParam | ParamValue | None:
+                      what: str, event: bool = False) -> FormulaParam | ParamValue | None:
         """A parameter given as formulas of the parents and the runtime inputs
         (``mean: "gain*X + 1"``), possibly one per state of discrete parents
-        (``mean: {a: "X", b: "-X"}``); numbers are formulas too."""
+        (``mean: {a: "X", b: "-X"}``); numbers are formulas too. With ``event``, the child's
+        probabilities: one formula per child state (a list, or a mapping by the child's
+        states), or for a two-state child one formula, the probability of its second state;
+        normalised per parent configuration."""
         formulas: list[Formula] = []
+        child = term.child
         parents = {p.name: p for p in term.parents}
         inputs = {n: d for n, d in self.inputs.items() if n not in parents}
+        own = [child.name] if event else []  # a formula may name the child: its weights
+        named = {v.name: v.states for v in (*parents.values(), *([child] if event else []))
+                 if isinstance(v, Discrete) and v.values is None and v.kind == "states"}
         failed = False
+
+        def located(where: YPath, value: Any, exc: FormulaError) -> None:
+            # at the offending character of the formula, inside its string
+            line, column = self.located.where(where)
+            if isinstance(value, str) and "\\" not in value:
+                column += exc.offset + (1 if tuple(where) in self.located.quoted else 0)
+            self.problems.append(Diagnostic(self.located.file, line, column, f"{what}: {exc}"))
 
         def leaf(value: Any, where: YPath) -> Any:
             nonlocal failed
@@ -423,17 +474,15 @@ class _Checker:
                 failed = True
                 return 0.0
             try:
-                formula = parse_formula(str(value), names=list(parents) + list(inputs))
+                formula = parse_formula(str(value), names=list(parents) + list(inputs) + own)
+                formula = formula.with_states({n: named[n] for n in formula.names if n in named})
             except FormulaError as exc:
-                # at the offending character of the formula, inside its string
-                line, column = self.located.where(where)
-                if isinstance(value, str) and "\\" not in value:
-                    column += exc.offset + (1 if tuple(where) in self.located.quoted else 0)
-                self.problems.append(Diagnostic(self.located.file, line, column,
-                                                f"{what}: {exc}"))
+                located(where, value, exc)
                 failed = True
                 return 0.0
             for name in formula.names:
+                if name in own:
+                    continue
                 if name in inputs:
                     if inputs[name].ndim:
                         self.error(where, f"{what}: formula {str(value)!r} uses the input "
@@ -442,13 +491,13 @@ class _Checker:
                         failed = True
                     continue
                 var = parents[name]
-                if isinstance(var, Discrete) and var.kind not in ("range", "bins"):
-                    self.error(where, f"{what}: formula {str(value)!r} uses {name}, whose "
-                               f"states are not numbers; expected real parents, integer "
-                               f"ranges or discretised variables (key a table by {name}'s "
-                               "states instead)")
+                if isinstance(var, Discrete) and var.kind == "grid":
+                    self.error(where, f"{what}: formula {str(value)!r} uses the grid {name}, "
+                               f"whose states are cells; expected real parents, integer "
+                               f"ranges, named states or discretised variables (key a table "
+                               f"by {name}'s states instead)")
                     failed = True
-            if formula.is_constant and not failed:
+            if formula.is_constant and not failed and not event:
                 number = np.asarray(formula.evaluate({}), float)
                 if not param.constraint.ok(number):
                     self.error(where, f"{what} must be {param.constraint}, got "
@@ -457,10 +506,31 @@ class _Checker:
             formulas.append(formula)
             return float(len(formulas) - 1)
 
-        indices = leaf(raw, path)
+        indices: Any = leaf(raw, path)
         if failed:
             return None
-        spec = _LiteralSpec(Param(param.name, real), term.child, 0, None, what)
+        weights = event and any(child.name in f.names for f in formulas)
+        written = ""
+        if event and not weights and isinstance(raw, str):
+            if child.card != 2:  # type: ignore[union-attr]
+                self.error(path, f"{what}: one formula that does not name {child.name} is the "
+                           f"probability of the second of two states, but {child.name} has "
+                           f"{child.card}: name {child.name} in the formula (the weight of "  # type: ignore[union-attr]
+                           "each of its states) or give one formula per state")
+                return None
+            # one formula for a two-state child: its second state's probability
+            first = parse_formula(f"1 - ({raw})", names=list(parents) + list(inputs))
+            formulas.append(first.with_states({n: named[n] for n in first.names if n in named}))
+            indices = [1.0, 0.0]
+            written = raw
+        if (event and isinstance(indices, dict) and isinstance(child, Discrete)
+                and {str(k) for k in indices} == set(child.states)):
+            by_state = {str(k): v for k, v in indices.items()}  # one row by the child's states
+            indices = [by_state[state] for state in child.states]
+        spec = (_LiteralSpec(Param(param.name, real, event_ndim=1, keyed_by_child_states=True),
+                             child, 1, (child.card,), what)  # type: ignore[union-attr]
+                if event and not weights
+                else _LiteralSpec(Param(param.name, real), child, 0, None, what))
         try:
             axes, array = self._literal(indices, spec, keyable, path)
         except _LiteralError as exc:
@@ -469,10 +539,27 @@ class _Checker:
         table = np.empty(array.shape, dtype=object)
         for index in np.ndindex(*array.shape):
             table[index] = formulas[int(array[index])]
-        if all(f.is_constant for f in formulas):  # numbers only, written as text
-            return ParamValue(axes, np.vectorize(lambda f: float(f.evaluate({})),
-                                                 otypes=[float])(table))
-        return FormulaParam(axes, table)
+        found = FormulaParam(axes, table, event=event, child=child.name if weights else None,
+                             written=written)
+        if any(n in inputs or not parents[n].is_discrete for n in found.names):
+            return found  # evaluated with each question's evidence and inputs
+        # of discrete parents only: checked once, on every configuration of the parents
+        variables = {p.name: p for p in (*term.parents, child)}
+        every, values = found.evaluate(variables, {}, 1)
+        if event:
+            try:
+                values = found.normalised(every, values, variables)
+            except ValueError as exc:
+                self.error(path, f"{what}: {exc}")
+                return None
+        elif term.form.deterministic and isinstance(child, Discrete):
+            problem = deterministic_problem(child, every, values[0], variables)
+            if problem:
+                self.error(path, f"{what}: {problem}")
+                return None
+        if all(f.is_constant for f in formulas) and not weights:  # numbers, written as text
+            return ParamValue(every, values[0])
+        return found
 
     def input_ref(self, term: Term, param: Param, name: Any, path: YPath, event_ndim: int,
                   keyable: list, what: str) -> InputRef | None:
@@ -603,7 +690,7 @@ class _Checker:
             except ExpressionError as exc:
                 self.error(path, f"question {name!r}: {exc}")
                 continue
-            problem = question_problem(expr, self.variables)
+            problem = question_problem(expr, self.variables, self.conditioning)
             kind = "probability" if expr.event and spec.kind == "posterior" else spec.kind
             if not problem and expr.event and kind != "probability":
                 problem = (f"{expr} asks the probability of an event, not a {kind} question "
@@ -638,6 +725,10 @@ class _Checker:
                 var = self.variables.get(name)
                 if var is None:
                     problems.append(f"expected a declared variable, found nothing named {name!r}")
+                elif name in self.untermed:
+                    problems.append(f"{name} has no term in the decomposition: expected one, "
+                                    + ("the belief before the first step" if name == previous
+                                       else "the transition"))
             if state in previous_names:
                 problems.append(f"{state} is a state one step earlier itself: expected a state "
                                 "of this step")
@@ -737,12 +828,18 @@ class _Checker:
                    f"{' -> '.join(loop)}; expected a directed acyclic graph")
 
 
-def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | None:
-    """Why ``expr`` cannot be asked of these variables (None if it can)."""
+def question_problem(expr: Expression, variables: dict[str, Variable],
+                     conditioning: Collection[str] = ()) -> str | None:
+    """Why ``expr`` cannot be asked of these variables (None if it can), of a program
+    conditioned on the variables ``conditioning`` (which have no term)."""
     for name in expr.left + expr.right:
         if name not in variables:
             return (f"undeclared variable {name!r} in {expr}{did_you_mean(name, variables)} "
                     f"(declared: {', '.join(variables)})")
+    if conditioning:
+        problem = conditioning_problem(expr, conditioning)
+        if problem:
+            return problem
     for name in expr.left:
         var = variables[name]
         if isinstance(var, Continuous) and var.index is not None:
@@ -772,6 +869,35 @@ def question_problem(expr: Expression, variables: dict[str, Variable]) -> str | 
                 f"{MAX_TERM_VARIABLES} (its answer has one axis per variable, and numpy's "
                 "arrays take 32 axes, one of them for a batch)")
     return None
+
+
+def conditioning_problem(expr: Expression, conditioning: Collection[str]) -> str | None:
+    """Why ``expr`` cannot be asked of a program conditioned on ``conditioning`` (None if it
+    can): a variable without a term has no distribution, so a question gives its value; it
+    is neither searched nor summed out.
+
+    >>> problem = conditioning_problem(parse_expression("P(X | Y=y0)"), ["U"])
+    >>> problem.startswith("P(X | Y=y0) leaves U unknown, but U has no term"), problem[-23:]
+    (True, 'expected P(X | Y=y0, U)')
+    """
+    searched = [n for n in conditioning if n in expr.left]
+    unknown = [n for n in conditioning if n not in expr.left and n not in expr.right]
+    if not searched and not unknown:
+        return None
+    names = searched + unknown
+    listed = ", ".join(names)
+    has = "have no term" if len(names) > 1 else "has no term"
+    what = (f"searches {', '.join(searched)}" if searched else "") + (
+        " and " if searched and unknown else "") + (
+        f"leaves {', '.join(unknown)} unknown" if unknown else "")
+    left = tuple(n for n in expr.left if n not in searched)
+    fix = ""
+    if left:
+        given = Expression(left, expr.right + tuple(names), expr.values)
+        fix = f": expected {given}"
+    return (f"{expr} {what}, but {listed} {has} in the decomposition (the program is "
+            f"conditioned on {'them' if len(names) > 1 else 'it'}), so every question gives "
+            f"{'their values' if len(names) > 1 else 'its value'}{fix}")
 
 
 def _has_text(raw: Any) -> bool:

@@ -191,6 +191,7 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
     if len(used) == 0:
         aside = f" ({len(data.set_aside)} bad rows set aside)" if data.set_aside else ""
         raise DataError(f"{data.source}: no row has a value in a column of the program{aside}")
+    _check_given(variables, model, data, used, columns or {})
     em = _Em(variables, model, todo, data, used)
     params = {t.label: {k: v for k, v in t.params.items() if isinstance(v, ParamValue)}
               for t in model}  # runtime inputs were refused above
@@ -253,6 +254,27 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
                     list(data.set_aside or ()), run.stop.why)
 
 
+def _check_given(variables: Mapping[str, Variable], model: Sequence[Term], data: Any,
+                 used: np.ndarray, columns: Mapping[str, str]) -> None:
+    """A variable without a term (the program is conditioned on it) is read as evidence,
+    never learned: every row used gives its value, as every question does."""
+    defined = {t.child.name for t in model}
+    column_of = {variable: column for column, variable in columns.items()}
+    for name, var in variables.items():
+        if name in defined:
+            continue
+        why = (f"{name} has no term in the decomposition (the program is conditioned on it), "
+               "so every row gives its value, as every question does")
+        coded = data.discrete.get(name) if var.is_discrete else data.continuous.get(name)
+        if coded is None:
+            raise DataError(f"{data.source}: no column {column_of.get(name, name)!r}: {why}")
+        missing = coded[used] < 0 if var.is_discrete else np.isnan(coded[used])
+        if missing.any():
+            row = int(used[np.argmax(missing)])
+            raise DataError(f"{data.where(row, column_of.get(name, name))}: no value, but "
+                            f"{why} (rows without it: {int(missing.sum())})")
+
+
 def _ranges(variables: Mapping[str, Variable], terms: Sequence[Term], data: Any,
             used: np.ndarray) -> dict[str, dict[str, list[float]]]:
     """The least and greatest value of each real child of ``terms`` in the rows ``used``:
@@ -305,6 +327,8 @@ def _learnable(model: Sequence[Term], freeze: Sequence[str],
     for term in model:
         if term.learn is None or term.label in freeze or not term.form.params:
             continue
+        if term.form.deterministic and term.form.scale_param is None and len(term.params) == 1:
+            continue  # the child is a function of its parents: nothing to learn
         formulas = [k for k, v in term.params.items() if isinstance(v, FormulaParam)]
         if formulas:
             raise DataError(f"term {term.label}: its {formulas[0]!r} is a formula of its parents, "

@@ -98,6 +98,13 @@ def _find_block(plan: QuestionPlan) -> tuple[list[Term], str | None]:
             return [], (f"{t.label} has a discrete child of the unknown real "
                         f"{', '.join(p.name for p in t.parents if p.name in latent)}")
     for t in chosen:
+        if t.form.subprogram:
+            return [], (f"{t.label} is another program's answer (a {t.form.name} term), "
+                        "which the Gaussian algebra does not take: where "
+                        f"{t.child.name} or its real parents are unknown, the grid method (on "
+                        "a bounded support) and likelihood weighting ('lw', for discrete "
+                        "searched variables) use its density; where they are known, every "
+                        "discrete method does")
         if t.form.mean_param is None:
             gaussian = " or ".join(n for n in available_forms()
                                    if getattr(get_form(n), "mean_param", None))

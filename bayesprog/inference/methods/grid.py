@@ -138,6 +138,10 @@ class _Discretised:
     def active_terms(self) -> list[Term]:
         return self.terms
 
+    @property
+    def conditioning(self) -> tuple[str, ...]:
+        return self.original.conditioning
+
     def ancestors(self, name: str) -> set[str]:
         return self.original.ancestors(name)
 
