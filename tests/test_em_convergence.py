@@ -54,7 +54,7 @@ def optimum(x: np.ndarray, means, weights, sigma: float = 1.0) -> float:
 CASES = [
     # three components, 3,000 rows, about 1,900 iterations: a relative change of 1e-8 (the
     # former default) stopped 2.9e-6 per row short of the optimum, and 200 iterations (the
-    # former cap) 8e-5 short
+    # former cap) 8.9e-6 short
     ((-1.0, 0.0, 1.0), 0.6, (1000, 1000, 1000), [-1.0, 0.0, 1.0], [0.3, 0.4, 0.3]),
     ((-2.0, 0.0, 1.5), 0.8, (1500, 1000, 1500), [0.0, 1.0, 2.0], [0.3, 0.3, 0.4]),
     ((-1.0, 0.8), 0.7, (1200, 1800), [-0.5, 0.5], [0.5, 0.5]),
