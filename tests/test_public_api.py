@@ -57,6 +57,11 @@ def questions(program: bayesprog.Program) -> list[tuple[str, dict]]:
         states = getattr(program.variables[a], "states", None)
         if states:
             out.append((f"P({a}={states[0]} | {b})", {b: value(b, True)}))
+    # a conditional program's questions give the variables it is conditioned on
+    given = {c: value(c, True) for c in program.conditioning}
+    for a in [n for n in names if n not in given][:4] if given else ():
+        out += [(f"P({a} | {', '.join(given)})", dict(given)),
+                (f"P({a} | {', '.join(given)})", {})]
     return out
 
 
