@@ -815,7 +815,8 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
 def _keystore_command(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("keystore", help="make the keys, certificates and signed "
                             "permissions of DDS Security (SROS2) for explore/robot --secure")
-    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
+    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True,
+                             help="create: a keystore, or more enclaves in one")
     q = verbs.add_parser("create", help="a keystore (as ros2 security create_keystore and "
                          "create_enclave make it), or more enclaves in one")
     q.add_argument("dir", metavar="DIR", help="the keystore's folder (new, or a keystore to add "
