@@ -433,7 +433,7 @@ class Dirac(Form):
         own = formula_values(child)
         shape = [1] * value.ndim
         shape[at] = child.card
-        hit = np.abs(value - own.reshape(shape)) <= 1e-9 * np.maximum(1.0, np.abs(own)).reshape(shape)
+        hit = _is_state(value, own.reshape(shape))
         if not hit.any(axis=at).all():
             row = int(np.argwhere(~hit.any(axis=at))[0][0])
             rest = tuple(a for a in ctx.axes if a != child.name)
@@ -455,7 +455,7 @@ def deterministic_problem(child: Discrete, axes: tuple[str, ...], values: np.nda
     its child's states (see :func:`~bayesprog.forms.base.formula_values`), or ''. ``values``
     may be of size 1 along axes it does not vary over."""
     own = formula_values(child)
-    hit = np.abs(values[..., None] - own) <= 1e-9 * np.maximum(1.0, np.abs(own))
+    hit = _is_state(values[..., None], own)
     bad = ~hit.any(-1)
     if not bad.any():
         return ""
@@ -468,6 +468,12 @@ def deterministic_problem(child: Discrete, axes: tuple[str, ...], values: np.nda
             else "its values")
     return (f"the value {values[index]:g}{' for ' + at if at else ''} is not a state of "
             f"{child.name}: expected one of {kind} ({shown})")
+
+
+def _is_state(values: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """Where ``values`` are the states' values ``states`` (broadcast together), to a relative
+    1e-9 (a formula's arithmetic on the states' numbers)."""
+    return np.abs(values - states) <= 1e-9 * np.maximum(1.0, np.abs(states))
 
 
 def _support(var: Variable) -> tuple[float, float]:
