@@ -135,6 +135,14 @@ DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(
 #: the approach: from this gap above the surface (m) at this speed (m/s); then the z axis's
 #: own damping (N s/m)
 APPROACH_GAP = 1e-4
+#: the steps a batch of presses is rolled on at a time while pressing, each press's contact
+#: set again in between where its depth changed (the stroke's follow its path: :func:`segments`)
+PRESSING = 4
+#: the most presses rolled side by side (each has its model's copy and its readings in memory)
+BATCH = 128
+#: the most threads MuJoCo rolls a batch of presses on (in a process of its own: one in an
+#: experiment's worker process, whose cores the other workers take)
+ROLLOUT_THREADS = 2
 APPROACH_SPEED = 0.002
 Z_DAMPING = 5.0
 #: an electrode: a sphere this small (m) centred on the fingertip's surface, massless and
@@ -713,6 +721,160 @@ class Scene:
     def probe(self, flat: int, rng: np.random.Generator) -> Probe:
         """Press, stroke and lift at cell ``flat``; ``rng`` draws the positioning error and the
         sensor noise (forces and height, then the electrodes, then the thermal sensor)."""
+        return self.probes(np.array([flat]), [rng])[0]
+
+    def probes(self, cells: np.ndarray, rngs: Sequence[np.random.Generator],
+               threads: int | None = None) -> list[Probe]:
+        """One press, stroke and lift per cell of ``cells`` (flat), press i's positioning error
+        and noise drawn from ``rngs[i]``, side by side: MuJoCo rolls every press on a few
+        steps at a time in C (:func:`mujoco.rollout.rollout`, over ``threads`` threads), each
+        press with its own copy of the model, and stops a press's steps where its contact is
+        to be set again (:meth:`contact`, as the fingertip moves: the rule
+        :meth:`probe_stepwise` applies at every step), so that a press is the same whatever
+        others share its batch (its steps start from its own state, with no solver warm start
+        carried from another press)."""
+        import mujoco
+        from mujoco import rollout
+
+        cells = np.asarray(cells, dtype=np.intp).ravel()
+        n, spec = len(cells), self.spec
+        if n > BATCH:  # a bounded batch at a time: its models, states and readings
+            return [probe for lo in range(0, n, BATCH)
+                    for probe in self.probes(cells[lo:lo + BATCH], rngs[lo:lo + BATCH], threads)]
+        if n == 0:
+            return []
+        ix, iy = np.unravel_index(cells, self.material_map.shape)
+        error = np.stack([rng.standard_normal(2) for rng in rngs]) * spec.jitter
+        x0 = (ix + 0.5) * self.cell + error[:, 0] - spec.stroke / 2
+        y0 = (iy + 0.5) * self.cell + error[:, 1]
+        press_steps = int(round(spec.press / TIMESTEP))
+        stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
+        steps = press_steps + stroke_steps
+        path = np.concatenate([np.zeros(press_steps), np.linspace(0, spec.stroke, stroke_steps)])
+        # the controls of every step (the x stage's target along the planned stroke, the y
+        # stage's, the press's force), padded past the last step for the last segment
+        control = np.empty((n, steps, 3))
+        control[:, :, 0] = x0[:, None] + path
+        control[:, :, 1] = y0[:, None]
+        control[:, :, 2] = -spec.force
+        models = self._pool(n)
+        model = self.model
+        scratch = mujoco.MjData(model)
+        kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state = np.empty((n, mujoco.mj_stateSize(model, kind)))
+        for i in range(n):
+            mujoco.mj_resetData(model, scratch)
+            scratch.qpos[:] = (x0[i], y0[i], spec.radius + APPROACH_GAP)
+            mujoco.mj_getState(model, scratch, state[i], kind)
+            models[i].dof_damping[2] = spec.force / APPROACH_SPEED
+        datas = self._datas(threads)
+        readings = np.empty((n, steps, model.nsensordata))
+        at = np.full((n, 3), np.inf)  # where each press's contact was last set
+        touching = np.zeros(n, dtype=bool)
+        last_touch = np.zeros(n)  # the touch sensor after the step before
+        bounds = segments(press_steps, stroke_steps, spec)
+        for start, stop in zip(bounds[:-1], bounds[1:], strict=True):
+            # at the start of a segment, every press's contact as probe_stepwise sets it
+            x, y, z = (state[:, 1 + j] for j in range(3))
+            depth = spec.radius - z
+            for i in np.flatnonzero(~touching & (last_touch > 0)):
+                models[i].dof_damping[2] = Z_DAMPING
+            touching |= last_touch > 0
+            moved = _moved(x, depth, at)
+            if moved.any():
+                update = np.flatnonzero(moved)
+                for i, (k, b, mu) in zip(update, self.contacts(x[update], y[update],
+                                                                depth[update]), strict=True):
+                    models[i].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
+                    models[i].pair_friction[0, :2] = mu
+                at[update] = np.stack([x[update], y[update], depth[update]], axis=1)
+            nstep = stop - start
+            rolled = np.empty((n, nstep, state.shape[1]))
+            sensed = np.empty((n, nstep, model.nsensordata))
+            rollout.rollout(models, datas, state, np.ascontiguousarray(control[:, start:stop]),
+                            nstep=nstep, initial_warmstart=np.zeros((n, model.nv)),
+                            state=rolled, sensordata=sensed, skip_checks=True)
+            readings[:, start:stop] = sensed
+            state = np.ascontiguousarray(rolled[:, -1])
+            last_touch = sensed[:, -1, 0]
+        return [self._probe_of(readings[i], rngs[i], float(x0[i]), float(y0[i]), press_steps)
+                for i in range(n)]
+
+    def _pool(self, n: int) -> list[Any]:
+        """``n`` copies of the model, one per press of a batch (kept: their contact and damping
+        are set again by every press)."""
+        import copy
+
+        pool = self.__dict__.setdefault("_models", [])
+        while len(pool) < n:
+            pool.append(copy.copy(self.model))
+        return pool[:n]
+
+    def _datas(self, threads: int | None) -> list[Any]:
+        import mujoco
+
+        wanted = max(1, int(threads if threads is not None else rollout_threads()))
+        datas = self.__dict__.setdefault("_rollout_datas", [])
+        while len(datas) < wanted:
+            datas.append(mujoco.MjData(self.model))
+        return datas[:wanted]
+
+    def contacts(self, x: np.ndarray, y: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """:meth:`contact` for many fingertip positions at once: [n, 3] (stiffness, damping,
+        friction)."""
+        nx, ny = self.material_map.shape
+        radius = np.maximum(np.sqrt(self.spec.radius * np.maximum(depth, 0.0)),
+                            self.spec.radius / 10)[:, None]
+        px = np.minimum(np.maximum((x[:, None] + radius * DISC[:, 0]) // self.cell, 0), nx - 1)
+        py = np.minimum(np.maximum((y[:, None] + radius * DISC[:, 1]) // self.cell, 0), ny - 1)
+        under = (px * ny + py).astype(np.intp)
+        out = self.cell_contact[under].mean(axis=1)
+        cx = np.minimum(np.maximum((x // self.cell).astype(np.intp), 0), nx - 1)
+        cy = np.minimum(np.maximum((y // self.cell).astype(np.intp), 0), ny - 1)
+        centre = cx * ny + cy
+        u = ((x - cx * self.cell) / RELIEF_SPACING).astype(np.intp) % self.samples
+        v = ((y - cy * self.cell) / RELIEF_SPACING).astype(np.intp) % self.samples
+        slope = self._slope_table[self.material_map.ravel()[centre], self.variant[centre], u, v]
+        out[:, 2] = np.maximum(out[:, 2] + slope, MIN_FRICTION)
+        return out
+
+    @cached_property
+    def _slope_table(self) -> np.ndarray:
+        """The relief's slopes by [material index, variant, u, v] (NaN for a material not
+        laid)."""
+        table = np.full((len(self.materials), VARIANTS, self.samples, self.samples), np.nan)
+        for m, name in enumerate(self.materials):
+            if name in self.slopes:
+                table[m] = self.slopes[name]
+        return table
+
+    def _probe_of(self, readings: np.ndarray, rng: np.random.Generator, x0: float, y0: float,
+                  press_steps: int) -> Probe:
+        """A probe from its sensors' readings per step (after its positioning error was drawn
+        from ``rng``): the noise drawn, the traces and the features."""
+        spec, steps = self.spec, len(readings)
+        sensed, distance = readings[:, [0, 1, 4]], readings[:, 5:]
+        noise = rng.standard_normal((steps, 3)) * (spec.noise_force, spec.noise_force,
+                                                   spec.noise_depth)
+        normal, tangential, height = (sensed + noise).T
+        # the draws of the features added since come after those above, so that a probe's
+        # texture and compliance stay what they were
+        compression = np.maximum(-(distance + ELECTRODE_RADIUS), 0.0)
+        electrodes = compression + rng.standard_normal(compression.shape) * spec.noise_electrode
+        pressed = spec.radius - float(sensed[press_steps - 1, 2])
+        temperature = thermal_trace(sensed[:, 0] > 0, self.effusivity_at(x0, y0, pressed), spec)
+        temperature = temperature + rng.standard_normal(steps) * spec.noise_temperature
+        traces = {"normal": normal, "tangential": tangential, "height": height,
+                  "electrodes": electrodes, "temperature": temperature}
+        every = press_features(traces, press_steps, spec)
+        raw = {key: every[key] for key in ("force", "depth", "friction_ratio", "tangential_sd")}
+        return Probe(texture=every["texture"], compliance=every["compliance"],
+                     at=(x0 + spec.stroke / 2, y0), traces=traces, features=every, **raw)
+
+    def probe_stepwise(self, flat: int, rng: np.random.Generator) -> Probe:
+        """:meth:`probe` driven from Python one step at a time, the contact set again at the
+        step it is due (the reference the batched presses are measured and checked against,
+        ``benchmarks/physics.py``)."""
         import mujoco
 
         model, data, spec = self.model, self.data, self.spec
@@ -752,23 +914,40 @@ class Scene:
             ctrl[0] = xs[k]
             mujoco.mj_step(model, data)
             readings[k] = sensordata
-        sensed, distance = readings[:, [0, 1, 4]], readings[:, 5:]
-        noise = rng.standard_normal((steps, 3)) * (spec.noise_force, spec.noise_force,
-                                                   spec.noise_depth)
-        normal, tangential, height = (sensed + noise).T
-        # the draws of the features added since come after those above, so that a probe's
-        # texture and compliance stay what they were
-        compression = np.maximum(-(distance + ELECTRODE_RADIUS), 0.0)
-        electrodes = compression + rng.standard_normal(compression.shape) * spec.noise_electrode
-        pressed = spec.radius - float(sensed[press_steps - 1, 2])
-        temperature = thermal_trace(sensed[:, 0] > 0, self.effusivity_at(x0, y0, pressed), spec)
-        temperature = temperature + rng.standard_normal(steps) * spec.noise_temperature
-        traces = {"normal": normal, "tangential": tangential, "height": height,
-                  "electrodes": electrodes, "temperature": temperature}
-        every = press_features(traces, press_steps, spec)
-        raw = {key: every[key] for key in ("force", "depth", "friction_ratio", "tangential_sd")}
-        return Probe(texture=every["texture"], compliance=every["compliance"],
-                     at=(x0 + spec.stroke / 2, y0), traces=traces, features=every, **raw)
+        return self._probe_of(readings, rng, float(x0), float(y0), press_steps)
+
+
+def rollout_threads() -> int:
+    """The threads a batch of presses is rolled on: :data:`ROLLOUT_THREADS` at most, as many as
+    the process may use, and one in a worker process of an experiment (the workers share the
+    cores)."""
+    import multiprocessing
+    import os
+
+    if multiprocessing.parent_process() is not None:
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(ROLLOUT_THREADS, cores or 1))
+
+
+def segments(press_steps: int, stroke_steps: int, spec: ProbeSpec) -> list[int]:
+    """The steps at which a batch of presses is stopped for each press's contact to be set
+    again where it moved (:meth:`Scene.probes`), first and last step included: every
+    :data:`PRESSING` steps while pressing, and along the stroke every time its planned path
+    has gone half a relief sample."""
+    bounds = list(range(0, press_steps, PRESSING))
+    advance = spec.stroke / max(stroke_steps - 1, 1)  # per step along the stroke
+    every = int(np.clip(np.floor(RELIEF_SPACING / 2 / advance) + 1, 1, PRESSING * 4))
+    bounds += list(range(press_steps, press_steps + stroke_steps, every))
+    return [*bounds, press_steps + stroke_steps]
+
+
+def _moved(x: np.ndarray, depth: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Whether the contact set at ``at`` (x, y, depth) is to be set again for a fingertip at
+    ``x`` pressed ``depth`` in: it moved half a relief sample along x, or its depth changed by
+    a twentieth."""
+    return ((np.abs(x - at[..., 0]) > RELIEF_SPACING / 2)
+            | (np.abs(depth - at[..., 2]) > 0.05 * np.abs(at[..., 2]) + 1e-5))
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int
@@ -813,10 +992,11 @@ class PhysicsSensor:
     def probe(self, cells: np.ndarray) -> Readings:
         """The readings of one probe per run at ``cells`` [runs] (flat); the probes are kept
         in :attr:`last`."""
-        self.last = []
-        for r, cell in enumerate(np.asarray(cells).ravel()):
-            rng = np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
-            self.last.append(self.scene.probe(int(cell), rng))
+        flat = np.asarray(cells).ravel()
+        rngs = [np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
+                for r in range(len(flat))]
+        self.last = self.scene.probes(flat, rngs)
+        for r in range(len(flat)):
             self.steps[r] += 1
         return self.readings(self.last)
 
