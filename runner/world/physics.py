@@ -770,6 +770,7 @@ class Scene:
         datas = self._datas(threads)
         readings = np.empty((n, steps, model.nsensordata))
         at = np.full((n, 3), np.inf)  # where each press's contact was last set
+        contact = np.empty((n, 3))  # and what it was set to
         touching = np.zeros(n, dtype=bool)
         last_touch = np.zeros(n)  # the touch sensor after the step before
         bounds = segments(press_steps, stroke_steps, spec)
@@ -780,14 +781,11 @@ class Scene:
             for i in np.flatnonzero(~touching & (last_touch > 0)):
                 models[i].dof_damping[2] = Z_DAMPING
             touching |= last_touch > 0
-            moved = _moved(x, depth, at)
-            if moved.any():
-                update = np.flatnonzero(moved)
-                for i, (k, b, mu) in zip(update, self.contacts(x[update], y[update],
-                                                                depth[update]), strict=True):
-                    models[i].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
-                    models[i].pair_friction[0, :2] = mu
-                at[update] = np.stack([x[update], y[update], depth[update]], axis=1)
+            moved = self._contact_updates(x, y, depth, at, contact)
+            for i in np.flatnonzero(moved):
+                k, b, mu = contact[i]
+                models[i].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
+                models[i].pair_friction[0, :2] = mu
             nstep = stop - start
             rolled = np.empty((n, nstep, state.shape[1]))
             sensed = np.empty((n, nstep, model.nsensordata))
@@ -819,24 +817,24 @@ class Scene:
             datas.append(mujoco.MjData(self.model))
         return datas[:wanted]
 
-    def contacts(self, x: np.ndarray, y: np.ndarray, depth: np.ndarray) -> np.ndarray:
-        """:meth:`contact` for many fingertip positions at once: [n, 3] (stiffness, damping,
-        friction)."""
+    def _contact_updates(self, x: np.ndarray, y: np.ndarray, depth: np.ndarray,
+                         at: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Which presses at (``x``, ``y``) pressed ``depth`` in must have their contact, last
+        set at ``at`` (x, y, depth), set again (it moved half a relief sample along x, or its
+        depth changed by a twentieth, as :meth:`probe_stepwise` sets it): for those, ``out`` gets
+        :meth:`contact` there and ``at`` the new place (a compiled loop over the batch)."""
+        from runner.world._contact import contact_updates
+
         nx, ny = self.material_map.shape
-        radius = np.maximum(np.sqrt(self.spec.radius * np.maximum(depth, 0.0)),
-                            self.spec.radius / 10)[:, None]
-        px = np.minimum(np.maximum((x[:, None] + radius * DISC[:, 0]) // self.cell, 0), nx - 1)
-        py = np.minimum(np.maximum((y[:, None] + radius * DISC[:, 1]) // self.cell, 0), ny - 1)
-        under = (px * ny + py).astype(np.intp)
-        out = self.cell_contact[under].mean(axis=1)
-        cx = np.minimum(np.maximum((x // self.cell).astype(np.intp), 0), nx - 1)
-        cy = np.minimum(np.maximum((y // self.cell).astype(np.intp), 0), ny - 1)
-        centre = cx * ny + cy
-        u = ((x - cx * self.cell) / RELIEF_SPACING).astype(np.intp) % self.samples
-        v = ((y - cy * self.cell) / RELIEF_SPACING).astype(np.intp) % self.samples
-        slope = self._slope_table[self.material_map.ravel()[centre], self.variant[centre], u, v]
-        out[:, 2] = np.maximum(out[:, 2] + slope, MIN_FRICTION)
-        return out
+        return contact_updates(
+            np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(depth), at,
+            RELIEF_SPACING / 2, self.spec.radius, self.cell, nx, ny, DISC, self.cell_contact,
+            self._cell_material, self.variant, self._slope_table, RELIEF_SPACING,
+            self.samples, MIN_FRICTION, out)
+
+    @cached_property
+    def _cell_material(self) -> np.ndarray:
+        return np.ascontiguousarray(self.material_map.ravel(), dtype=np.intp)
 
     @cached_property
     def _slope_table(self) -> np.ndarray:
@@ -940,14 +938,6 @@ def segments(press_steps: int, stroke_steps: int, spec: ProbeSpec) -> list[int]:
     every = int(np.clip(np.floor(RELIEF_SPACING / 2 / advance) + 1, 1, PRESSING * 4))
     bounds += list(range(press_steps, press_steps + stroke_steps, every))
     return [*bounds, press_steps + stroke_steps]
-
-
-def _moved(x: np.ndarray, depth: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Whether the contact set at ``at`` (x, y, depth) is to be set again for a fingertip at
-    ``x`` pressed ``depth`` in: it moved half a relief sample along x, or its depth changed by
-    a twentieth."""
-    return ((np.abs(x - at[..., 0]) > RELIEF_SPACING / 2)
-            | (np.abs(depth - at[..., 2]) > 0.05 * np.abs(at[..., 2]) + 1e-5))
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int

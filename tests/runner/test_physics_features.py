@@ -75,9 +75,11 @@ MAIN_RAW = {
 
 
 def test_texture_and_compliance_are_bit_for_bit_what_they_were(paper_physics):
+    """The press driven step by step (the reference the batched presses are checked against)
+    gives what it gave before the features beyond texture and compliance."""
     scene = paper_physics.physics_scene()
     for (cell, seed), (texture, compliance) in MAIN_PROBES.items():
-        probe = scene.probe(cell, np.random.default_rng(list(seed)))
+        probe = scene.probe_stepwise(cell, np.random.default_rng(list(seed)))
         assert (probe.texture, probe.compliance) == (texture, compliance), (cell, seed)
         assert (probe.features["texture"], probe.features["compliance"]) == (texture,
                                                                              compliance)
@@ -245,8 +247,8 @@ def test_the_sensor_reads_the_features_its_readings_name(paper_physics):
     scene = paper_physics.physics_scene()
     default = PhysicsSensor(scene, [(5, 0), (5, 1)]).probe(np.array([400, 1250]))
     assert isinstance(default, Readings) and default.names == ("texture", "compliance")
-    assert default.values.tolist() == [list(MAIN_PROBES[400, (5, 0)]),
-                                       list(MAIN_PROBES[1250, (5, 1)])]
+    alone = [scene.probe(c, np.random.default_rng([5, r, 0])) for r, c in enumerate((400, 1250))]
+    assert default.values.tolist() == [[p.texture, p.compliance] for p in alone]
     spec = scene.spec.model_copy(update={"readings": {
         "grip": "friction_ratio", "heat": "temperature_drop", "E": "texture",
         "pdc": "pressure"}})
@@ -279,8 +281,45 @@ def test_a_vibration_band_outside_the_samples_is_refused(band):
 
 def test_the_sensor_reads_probes_made_elsewhere(paper_physics):
     scene = paper_physics.physics_scene()
-    probes = [scene.probe(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
+    probes = [scene.probe_stepwise(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
     readings = PhysicsSensor(scene, []).readings(probes)
     assert readings.names == ("texture", "compliance")
     assert readings.values.tolist() == [list(MAIN_PROBES[940, (11, 940, s)]) for s in (0, 1)]
     assert PhysicsSensor(scene, []).readings([]).values.shape == (0, 2)
+
+
+def test_presses_side_by_side_set_each_contact_by_the_stepwise_rule(paper_physics, monkeypatch):
+    """Stopped at every step, the batched presses are the stepwise ones (to the solver's
+    warm start, which a batch does not carry from one stop to the next): the machinery that
+    rolls them side by side and sets each press's contact where it moved is the rule of
+    probe_stepwise."""
+    from runner.world import physics
+
+    scene = paper_physics.physics_scene()
+    cells = [940, 912, 896, 400, 1250]
+    monkeypatch.setattr(physics, "segments", lambda press, stroke, spec: list(range(
+        press + stroke + 1)))
+    batched = scene.probes(np.array(cells), [np.random.default_rng([3, c]) for c in cells])
+    for cell, probe in zip(cells, batched, strict=True):
+        stepwise = scene.probe_stepwise(cell, np.random.default_rng([3, cell]))
+        for name, value in stepwise.features.items():
+            assert probe.features[name] == pytest.approx(value, rel=1e-6, abs=1e-12), name
+
+
+def test_a_press_is_the_same_whatever_shares_its_batch(paper_physics):
+    from runner.world.physics import BATCH
+
+    scene = paper_physics.physics_scene()
+    cells = np.random.default_rng(4).integers(paper_physics.material_map.size, size=BATCH + 3)
+
+    def rngs(idx):
+        return [np.random.default_rng([9, int(i)]) for i in idx]
+
+    wide = scene.probes(cells, rngs(range(len(cells))), threads=2)
+    for i in (0, 7, BATCH + 1):  # alone, among a few others, and past the first batch
+        for probe in (scene.probes(cells[i:i + 1], rngs([i]), threads=1)[0],
+                      scene.probes(cells[i:i + 4], rngs(range(i, min(i + 4, len(cells)))),
+                                   threads=1)[0]):
+            assert probe.features == wide[i].features
+            for key, trace in probe.traces.items():
+                np.testing.assert_array_equal(trace, wide[i].traces[key])
