@@ -778,14 +778,14 @@ class Scene:
             # at the start of a segment, every press's contact as probe_stepwise sets it
             x, y, z = (state[:, 1 + j] for j in range(3))
             depth = spec.radius - z
-            for i in np.flatnonzero(~touching & (last_touch > 0)):
-                models[i].dof_damping[2] = Z_DAMPING
+            for onset in np.flatnonzero(~touching & (last_touch > 0)):
+                models[onset].dof_damping[2] = Z_DAMPING
             touching |= last_touch > 0
             moved = self._contact_updates(x, y, depth, at, contact)
-            for i in np.flatnonzero(moved):
-                k, b, mu = contact[i]
-                models[i].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
-                models[i].pair_friction[0, :2] = mu
+            for again in np.flatnonzero(moved):
+                k, b, mu = contact[again]
+                models[again].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
+                models[again].pair_friction[0, :2] = mu
             nstep = stop - start
             rolled = np.empty((n, nstep, state.shape[1]))
             sensed = np.empty((n, nstep, model.nsensordata))
