@@ -129,6 +129,9 @@ def map_html(result: MapResult) -> str:
         body = [[str(t + 1)] + [str(steps[k][t, r]) for r in range(shown) for k in steps]
                 for t in range(result.indices.shape[0])]
         body.append(["probability"] + [f"{prob[r]:.6g}" for r in range(shown) for _ in steps])
+        ties = np.asarray(result.ties).ravel()
+        if (ties[:shown] > 1).any():
+            body.append(["tied sequences"] + [str(ties[r]) for r in range(shown) for _ in steps])
         return f"<div>{title}{_table(header, body)}</div>"
     if result.indices.ndim > 1:
         flat = {k: np.asarray(v).ravel() for k, v in assignment.items()}

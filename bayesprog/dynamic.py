@@ -11,8 +11,10 @@ with time as the first axis (``{"Y": [y1, ..., yT]}``, batch axes after it).
 * ``smooth``: ``P(X_t | y_1..T)``, by the forward and the backward recursion (the backward
   message of a step is a question of the step program on ``PREV`` with soft evidence on ``X``).
 * ``sequence``: the most likely sequence ``argmax P(x_1..T | y_1..T)`` (Viterbi; the state
-  before the first step summed out), from the step program's joint ``P(PREV X | y_t)``; ties
-  go to the first state. Its ``probability`` is ``P(x_1..T | y_1..T)`` of that sequence.
+  before the first step summed out), from the step program's joint ``P(PREV X | y_t)``; the
+  sequences that tie are counted and one of them is drawn by ``rng``, as a MAP question's tied
+  assignments are (:mod:`bayesprog.inference.viterbi`). Its ``probability`` is
+  ``P(x_1..T | y_1..T)`` of that sequence.
 
 Every step's question is asked of the engine for all sequences of the batch at once.
 """
@@ -29,6 +31,7 @@ from bayesprog.errors import QuestionError, expect_mapping
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
+from bayesprog.inference.viterbi import most_likely_sequence
 from bayesprog.limits import check_size, limit
 
 KINDS = ("filter", "smooth", "sequence")
@@ -94,11 +97,15 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
     step = program.ablate(str(program.term_of(previous).expression))
     card = program.variables[state].card
 
+    steps_by = _StepMethod()
+
     def ask(searched: tuple[str, ...], t: int, soft_on: dict[str, np.ndarray]) -> Posterior:
         q = Question(Expression(searched, known, dict(expr.values)))
-        return step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
-                        soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
-                        method=method, samples=options.get("samples"))
+        answer = step.ask(q, {k: v[t] for k, v in per_step.items()}, inputs=inputs,
+                          soft={**soft_on, **{k: v[t] for k, v in soft_steps.items()}},
+                          method=method, samples=options.get("samples"))
+        assert isinstance(answer, Posterior)
+        return steps_by.seen(answer, question.kind)
 
     first = _before(program, [previous]).probabilities  # the belief before the first step
     forward, log_evidence = [], []
@@ -111,8 +118,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         log_evidence.append(answer.log_evidence + np.log(card))
     batch = forward[0].shape[:-1]
     if question.kind == "filter":
-        return _posterior(question, program, state, np.stack(forward), np.stack(log_evidence),
-                          "filter")
+        return steps_by.mark(_posterior(question, program, state, np.stack(forward),
+                                        np.stack(log_evidence), "filter"))
 
     def smoothed() -> Posterior:
         backward = np.ones_like(forward[-1])
@@ -121,8 +128,8 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
             backward = ask((previous,), t, {state: backward}).probabilities
             joint = forward[t - 1] * backward
             marginals.append(joint / joint.sum(axis=-1, keepdims=True))
-        return _posterior(question, program, state, np.stack(marginals[::-1]),
-                          np.stack(log_evidence), "smooth")
+        return steps_by.mark(_posterior(question, program, state, np.stack(marginals[::-1]),
+                                        np.stack(log_evidence), "smooth"))
 
     if question.kind == "smooth":
         return smoothed()
@@ -137,11 +144,41 @@ def over_time(program: Any, question: Question, evidence: Mapping[str, Any] | No
         scale = (answer.log_evidence + np.log(card))[..., None, None]
         with np.errstate(divide="ignore"):
             logs.append(np.log(answer.probabilities) + scale)
-    path, log_best = _viterbi(log_first, logs)
+    path, log_best, ties = most_likely_sequence(log_first, logs, options.get("rng"))
     indices = path[..., None]  # [T, batch, 1]
     marginals = smoothed()
     total = np.broadcast_to(np.sum(log_evidence, axis=0), batch)
-    return _sequence(program, expr, (state,), indices, log_best, total, marginals)
+    return _sequence(program, expr, (state,), indices, log_best, ties, total, marginals)
+
+
+class _StepMethod:
+    """The method that answered the steps' questions, kept for the answer over steps: an
+    approximate one is named there (``steps_method``, with how it estimated the evidence)."""
+
+    def __init__(self) -> None:
+        self.method = ""
+        self.evidence: str | None = None
+
+    def seen(self, answer: Any, kind: str | None) -> Any:
+        if kind == "sequence" and np.isnan(answer.log_evidence).any():
+            raise QuestionError(f"method {answer.method!r} does not estimate the probability "
+                                "of evidence, which the most likely sequence needs: leave out "
+                                "the method (an exact one answers) or use lw")
+        if not _exact(answer.method):
+            self.method, self.evidence = answer.method, answer.evidence
+        return answer
+
+    def mark(self, answer: Posterior) -> Posterior:
+        answer.steps_method = self.method
+        answer.evidence = answer.evidence or self.evidence
+        return answer
+
+
+def _exact(method: str) -> bool:
+    from bayesprog.inference.methods.base import method_named
+
+    known = method_named(method)
+    return known is None or known.exact
 
 
 def _before(program: Any, previous: list[str], inputs: Mapping[str, Any] | None = None,
@@ -155,32 +192,12 @@ def _before(program: Any, previous: list[str], inputs: Mapping[str, Any] | None 
     return dispatch.ask(program, question, None, inputs, None, None, method, {})
 
 
-def _viterbi(log_first: np.ndarray, logs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The most likely sequence of states, ``[T, batch...]``, and its log-probability with the
-    evidence, from the belief before the first step (``[batch..., states]``, logs) and each
-    step's ``log P(x_t, y_t | x_t-1)`` (``[batch..., before, after]``). The state before the
-    first step is not part of the sequence: summed out, not maximised; ties go to the first
-    state."""
-    delta = log_first
-    pointers = []
-    log_best = np.zeros(log_first.shape[:-1])
-    for t, log_step in enumerate(logs):
-        scores = delta[..., :, None] + log_step
-        pointers.append(np.argmax(scores, axis=-2))
-        delta = scipy.special.logsumexp(scores, axis=-2) if t == 0 else np.max(scores, axis=-2)
-        top = np.max(delta, axis=-1, keepdims=True)
-        log_best = log_best + top[..., 0]
-        delta = delta - top
-    path = [np.argmax(delta, axis=-1)]
-    for t in range(len(logs) - 1, 0, -1):
-        path.append(np.take_along_axis(pointers[t], path[-1][..., None], -1)[..., 0])
-    return np.stack(path[::-1]), log_best
-
-
 def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indices: np.ndarray,
-              log_best: np.ndarray, total: np.ndarray, posterior: Posterior) -> MapResult:
+              log_best: np.ndarray, ties: np.ndarray, total: np.ndarray,
+              posterior: Posterior) -> MapResult:
     """The answer of a sequence question: the path's state indices ``[T, batch..., k]``, its
-    log-probability with the evidence and the evidence's (``total``), the smoothed marginals."""
+    log-probability with the evidence, the sequences that tie with it, the evidence's
+    log-probability (``total``), the smoothed marginals."""
     with np.errstate(over="ignore", invalid="ignore"):
         probability = np.exp(log_best - total)
     return MapResult(
@@ -189,7 +206,7 @@ def _sequence(program: Any, expr: Expression, variables: tuple[str, ...], indice
         names={v: program.variables[v].states for v in variables},
         indices=indices,
         probability=np.where(np.isfinite(total), probability, 0.0),
-        ties=np.ones(total.shape, int),
+        ties=ties,
         zero_evidence=~np.isfinite(total),
         posterior=posterior,
         ablated=program.ablated,
@@ -269,6 +286,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
     size = int(np.prod(cards))
     expr = question.expression
     step = program.ablate(*[str(program.term_of(p).expression) for p in previous])
+    steps_by = _StepMethod()
     index = np.unravel_index(np.arange(size), cards)  # each joint state's indices
     first = _before(program, previous).probabilities.reshape(-1)
     batch: tuple[int, ...] | None = None
@@ -286,8 +304,9 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
                                 dict(expr.values)))
         likelihoods = {k: np.broadcast_to(v[t], shape + v[t].shape[-1:])
                        for k, v in (soft_steps or {}).items()}
-        answer = step.ask(q, given, inputs=inputs, method=method, soft=likelihoods or None,
-                          samples=options.get("samples"))
+        answer = steps_by.seen(step.ask(q, given, inputs=inputs, method=method,
+                                        soft=likelihoods or None,
+                                        samples=options.get("samples")), question.kind)
         with np.errstate(divide="ignore"):
             # log P(x, y_t | x_before) = log P(x | x_before, y_t) + log P(x_before, y_t) + log S
             logm = (np.log(answer.probabilities.reshape(shape + (size,)))
@@ -328,7 +347,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             [1 + len(batch) + j for j in range(len(keep))])
         shape = probabilities.shape[:1 + len(batch)]
         kind = question.kind
-        return Posterior(
+        return steps_by.mark(Posterior(
             question=f"{expr}   ({'filtered' if kind == 'filter' else 'smoothed'}, "
                      f"{_steps_text(steps)})",
             variables=tuple(searched),
@@ -339,9 +358,9 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
             batch_shape=shape,
             ablated=program.ablated,
             method=kind,
-        )
+        ))
     # the most likely joint sequence
-    joint_path, log_best = _viterbi(log_first, logs)  # [T, batch...]
+    joint_path, log_best, ties = most_likely_sequence(log_first, logs, options.get("rng"))
     per_variable = np.stack(np.unravel_index(joint_path, cards), axis=-1)  # [T, batch..., k]
     order = [states.index(v) for v in searched]
     indices = per_variable[..., order]
@@ -350,7 +369,7 @@ def _joint(program: Any, question: Question, per_step: dict[str, list[Any]], ste
                                       kind="smooth"), per_step, steps, inputs, method, options,
                     soft_steps)
     assert isinstance(smooth, Posterior)
-    return _sequence(program, expr, tuple(searched), indices, log_best, total, smooth)
+    return _sequence(program, expr, tuple(searched), indices, log_best, ties, total, smooth)
 
 
 def _kalman(program: Any, question: Question, per_step: dict[str, list[Any]], steps: int,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import errno
 import numbers
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -620,7 +621,7 @@ class Program:
         return evidence(self, data, score=score, equivalent_sample_size=equivalent_sample_size,
                         columns=columns)
 
-    def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 200,
+    def fit(self, data: Any, *, freeze: Iterable[str] = (), max_iter: int = 10_000,
             tol: float = 1e-8, columns: Mapping[str, str] | None = None,
             states_from_data: Sequence[str] = (), on_bad_lines: str = "error",
             other_columns: str = "refuse") -> Fit:
@@ -646,8 +647,12 @@ class Program:
         Terms marked ``learn: false`` in the file, and those named in ``freeze``, keep their
         values; the others are fitted by maximum likelihood (the posterior mean under the
         term's Dirichlet pseudo-counts), by EM where discrete values are missing or a variable
-        has no column, and by EM for mixtures. A program fitted before continues from its
-        fit's statistics. Returns a :class:`Fit`; its ``program`` is the fitted program.
+        has no column, and by EM for mixtures. EM stops once the log-likelihood per row is
+        estimated within ``tol`` of its limit (Aitken's acceleration,
+        :func:`~bayesprog.learning.fit.stopping`), or after ``max_iter`` iterations
+        (``fit.converged`` False; ``fit.stopped`` says why it stopped). A program fitted before
+        continues from its fit's statistics. Returns a :class:`Fit`; its ``program`` is the
+        fitted program.
 
         >>> import bayesprog
         >>> p = bayesprog.loads('''
@@ -815,6 +820,18 @@ class Fit:
     @property
     def converged(self) -> bool:
         return self.estimate.converged
+
+    @property
+    def iterations(self) -> int:
+        """The EM iterations made (1: one pass over complete rows)."""
+        return self.estimate.iterations
+
+    @property
+    def stopped(self) -> str:
+        """Why the fit stopped: converged (the log-likelihood per row within ``tol`` of its
+        limit, or no longer changing), or the ``max_iter`` iterations allowed were made, with
+        the last change and how far the limit is estimated to be."""
+        return self.estimate.stopped
 
     @property
     def set_aside(self) -> list[BadRow]:
@@ -1024,11 +1041,17 @@ def _replace_variables(located: Located, variables: Mapping[str, Any],
 def load(path: str | Path, variables: Mapping[str, Any] | None = None,
          terms: Mapping[str, Mapping[str, Any]] | None = None) -> Program:
     """Load and check the program file at ``path`` (``variables``, ``terms``: see
-    :func:`loads`)."""
+    :func:`loads`). Where no file of that name exists, a bundled program of that name is
+    loaded, as the command line does (``load("student")``: ``bayesprog examples`` lists them);
+    a file always wins.
+
+    >>> load("student").name
+    'student'
+    """
     if not isinstance(path, (str, os.PathLike)):
         raise ArgumentError(f"load: expected a path (a string or pathlib.Path), found "
                             f"{type(path).__name__} {short_repr(path)}")
-    path = Path(path)
+    path = _existing_or_bundled(Path(path))
     # programs name others (sub-programs, soft evidence): one that comes back to a file still
     # being loaded is a cycle, reported where it is named instead of recursing without end
     chain = _LOADING.get()
@@ -1057,6 +1080,22 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None,
         return program
     finally:
         _LOADING.reset(token)
+
+
+def _existing_or_bundled(path: Path) -> Path:
+    """``path`` when it exists; else the bundled program of that name; else a
+    ``FileNotFoundError`` that says neither is there."""
+    if path.exists():
+        return path
+    from bayesprog.bundled import find
+
+    found = find(str(path), "program")
+    if found is not None:
+        return found
+    if path.is_absolute():  # a file named by another (a sub-program), never a bundled name
+        raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
+    raise FileNotFoundError(errno.ENOENT, "no such file, and no bundled program of that name "
+                            "(bayesprog examples lists them)", str(path))
 
 
 def _replace_terms(located: Located, terms: Mapping[str, Mapping[str, Any]]

@@ -217,13 +217,12 @@ def render(program: Program) -> str:
 def format_density(result: Density) -> str:
     """Mean, sd, quantiles and MAP of each searched real variable (one block per batch row)."""
     how = {"gaussian": "exact, Gaussian algebra",
-           "grid": "on a grid of " + ", ".join(f"{n} bins for {v}"
-                                               for v, n in result.resolution.items()),
            "kalman": "exact, Kalman filter", "kalman-rts": "exact, Rauch-Tung-Striebel",
-           "pf": "particle filter: the particles' moments",
-           "pf-smooth": "particle smoother (FFBSm): the particles' moments"}
-    out = [f"{result.question}" + _ablated(result.ablated)
-           + (f"   ({how.get(result.method, result.method)})" if result.method else "")]
+           "pf": "particle filter: the particles' moments, no error estimate",
+           "pf-smooth": "particle smoother (FFBSm): the particles' moments, no error estimate"}
+    named = (f"   ({how[result.method]})" if result.method in how
+             else _approximate(result) or (f"   ({result.method})" if result.method else ""))
+    out = [f"{result.question}" + _ablated(result.ablated) + named]
     summary = result.summary()
     over_time = result.method in ("kalman", "kalman-rts", "pf", "pf-smooth")
     for pos in np.ndindex(*result.batch_shape):
@@ -253,7 +252,15 @@ def format_density(result: Density) -> str:
 def format_joint(result: Joint) -> str:
     """Per configuration of the discrete variables: its probability, and the mean and sd of
     each real variable given it; then the MAP (one block per batch row when batched)."""
-    out = [f"{result.question}" + _ablated(result.ablated) + "   (discrete and real together)"]
+    made = []
+    for part, name in ((result.discrete, result.methods.get("discrete", "")),
+                       (result.real, result.methods.get("real", ""))):
+        method = _method(name)
+        if method is not None and not method.exact:
+            made.append(f"{', '.join(part)}: {method.title or method.name}")
+    approximate = f"; {', '.join(made)}, no error given" if made else ""
+    out = [f"{result.question}" + _ablated(result.ablated)
+           + f"   (discrete and real together{approximate})"]
     best = result.map()
     means = {v: result.mean(v) for v in result.real}
     sds = {v: result.sd(v) for v in result.real}
@@ -294,13 +301,17 @@ def format_result(result: Posterior | MapResult | Density | Joint | Probability,
         return _format_sequence(result)
     if isinstance(result, MapResult):
         rows = np.ndindex(*result.indices.shape[:-1])
-        out = [f"MAP of {result.question}" + _ablated(result.ablated)]
+        posterior = result.posterior
+        out = [f"MAP of {result.question}" + _ablated(result.ablated) + _approximate(posterior)]
+        plus = posterior.stderr if posterior.stderr is not None else posterior.error
         for pos in rows:
-            names = [result.names[v][int(i)] for v, i in zip(result.variables, result.indices[pos], strict=False)]
+            at = tuple(int(i) for i in result.indices[pos])
+            names = [result.names[v][i] for v, i in zip(result.variables, at, strict=False)]
             label = f"[{', '.join(map(str, pos))}] " if pos else ""
             assignment = ", ".join(f"{v}={s}" for v, s in zip(result.variables, names, strict=False))
+            error = f" +- {float(plus[pos + at]):.2g}" if plus is not None else ""
             out.append(f"  {label}{assignment}   p = {_fmt(float(result.probability[pos]))}"
-                       + (f"   ({int(result.ties[pos])} tied)" if result.ties[pos] > 1 else ""))
+                       f"{error}" + _tied(result.ties[pos]))
         return "\n".join(out)
     out = [f"{result.question}" + _ablated(result.ablated) + _approximate(result)]
     over_time = result.method in ("filter", "smooth")
@@ -310,8 +321,9 @@ def format_result(result: Posterior | MapResult | Density | Joint | Probability,
             out.append(f"  step {pos[0] + 1}{rest}")
         elif pos:
             out.append(f"  batch row [{', '.join(map(str, pos))}]")
-        stderr = result.stderr[pos] if result.stderr is not None else None
-        out += _table(result, result.probabilities[pos], limit, stderr)
+        plus = result.stderr if result.stderr is not None else result.error
+        out += _table(result, result.probabilities[pos], limit,
+                      plus[pos] if plus is not None else None)
         if result.ess is not None:
             out.append(f"  effective sample size {float(result.ess[pos]):.0f}")
     return "\n".join(out)
@@ -321,7 +333,7 @@ def format_probability(result: Probability, limit: int = 20) -> str:
     """The probability of an event (a density where it fixes a real variable), with its
     logarithm; one line per batch row."""
     word = "density" if result.density else "probability"
-    out = [result.question + _ablated(result.ablated)]
+    out = [result.question + _ablated(result.ablated) + _approximate(result, plus=False)]
     rows = list(np.ndindex(*result.batch_shape))
     for pos in rows[:limit]:
         label = f"[{', '.join(map(str, pos))}] " if pos else ""
@@ -335,7 +347,7 @@ def format_probability(result: Probability, limit: int = 20) -> str:
 def _format_sequence(result: MapResult) -> str:
     """The most likely sequence: its state at each step, then its probability (per sequence of
     a batch)."""
-    out = [result.question + _ablated(result.ablated)]
+    out = [result.question + _ablated(result.ablated) + _approximate(result.posterior)]
     batch = result.probability.shape
     for row in np.ndindex(*batch):
         indent = "  "
@@ -351,17 +363,36 @@ def _format_sequence(result: MapResult) -> str:
             out.append(f"{indent}the evidence has probability zero: no sequence is likelier")
         else:
             out.append(f"{indent}probability of the sequence: "
-                       f"{_fmt(float(result.probability[row]))}")
+                       f"{_fmt(float(result.probability[row]))}" + _tied(result.ties[row]))
     return "\n".join(out)
 
 
-def _approximate(result: Posterior) -> str:
-    if result.method == "lw":
-        return "   (likelihood weighting: +- one standard error)"
-    if result.method == "lbp":
-        return (f"   (loopy belief propagation: {result.iterations} sweeps, last change "
-                f"{result.residual:.2g})")
-    return ""
+def _tied(ties: Any) -> str:
+    """How many assignments (or sequences) share the maximum, when more than one do."""
+    return f"   ({int(ties)} tied)" if ties > 1 else ""
+
+
+def _approximate(result: Any, plus: bool = True) -> str:
+    """How an approximate answer was made and what its +- is (nothing for an exact one), as
+    its method describes it; ``plus`` False for an answer that shows no +- (an estimate
+    alone)."""
+    steps = getattr(result, "steps_method", "")
+    method = _method(steps or result.method)
+    if method is None or method.exact:
+        return ""
+    title = method.title or method.name
+    if steps:
+        return f"   (each step by {title}: no error estimate)"
+    return f"   ({method.describe(result) if plus else title + ': an estimate, no error given'})"
+
+
+def _method(name: str) -> Any:
+    """The registered inference method called ``name`` (None for the other answers)."""
+    if not name:
+        return None
+    from bayesprog.inference.methods.base import method_named
+
+    return method_named(name)
 
 
 def _ablated(ablated: tuple[str, ...]) -> str:

@@ -64,6 +64,10 @@ class ExploreOptions:
     frame: str = "workspace"
     #: every probe written to this CSV or Parquet file
     log: Path | None = None
+    #: the file of the secret every line must carry (written there when it does not exist)
+    secret: Path | None = None
+    #: with ``ros``: the keystore of DDS Security (SROS2)
+    secure: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,10 @@ class RobotCommand:
     ros: bool = True
     #: every probe written to this CSV or Parquet file
     log: Path | None = None
+    #: the file of the explorer's secret, sent with every line
+    secret: Path | None = None
+    #: the keystore of DDS Security (SROS2)
+    secure: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -95,6 +103,10 @@ class RecordOptions:
     stdio: bool = False
     ros: bool = False
     namespace: str = "/bayesprog"
+    #: the file of the secret every line must carry (written there when it does not exist)
+    secret: Path | None = None
+    #: with ``ros``: the keystore of DDS Security (SROS2)
+    secure: Path | None = None
 
 
 def run(experiment: Path, out: Path, options: RunOptions = RunOptions(),
@@ -288,6 +300,9 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
         from runner.robot.ros import require
 
         require()  # before the scenario is loaded: a missing extra is said at once
+    # the secret's file before the scenario: a file that will not do is said at once
+    secret = _secret(options.secret, "bayesprog_explorer", "driver") if options.secret else None
+    if options.ros:
         print(f"bayesprog_explorer: loading {target}", file=sys.stderr, flush=True)
     from runner.attention.explorer import Explorer
     from runner.world.scenario import load_scenario
@@ -310,11 +325,12 @@ def explore(target: Path, options: ExploreOptions = ExploreOptions()) -> int:
             from runner.robot.session import Session
 
             return explore_ros(Session(explorer, seed=options.seed, frame=options.frame,
-                                       log=log),
-                               namespace=options.namespace, frame=options.frame)
+                                       log=log, secret=secret),
+                               namespace=options.namespace, frame=options.frame,
+                               secure=options.secure)
         from runner.robot.stdio import serve
 
-        serve(explorer, sys.stdin, sys.stdout, seed=options.seed, log=log)
+        serve(explorer, sys.stdin, sys.stdout, seed=options.seed, log=log, secret=secret)
         return 0
     finally:
         if log is not None:
@@ -338,6 +354,9 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     from runner.world.scenario import load_scenario
 
     require()
+    from runner.robot.secret import driver_secret
+
+    secret = driver_secret(options.secret) if options.secret is not None else None
     print(f"bayesprog_robot: loading {target}", file=sys.stderr, flush=True)
     scenario = load_scenario(_scenario_path(target))
     _say(scenario.warnings)
@@ -350,10 +369,10 @@ def robot(target: Path, options: RobotCommand = RobotCommand()) -> int:
     robot_options = RobotOptions(task=task, steps=options.steps, seed=options.seed,
                                  run=options.run, timeout=options.timeout,
                                  physics=_probe_spec(scenario) if options.physics else None,
-                                 log=log)
+                                 log=log, secret=secret)
     try:
         return run_robot(scenario, robot_options, namespace=options.namespace,
-                         as_json=options.json)
+                         as_json=options.json, secure=options.secure)
     finally:
         if log is not None:
             log.close()
@@ -372,6 +391,19 @@ def _task(scenario: Scenario, task: str | None) -> str:
         raise BayesprogError(f"--task: unknown task {task!r}: expected one of "
                              f"{', '.join(scenario.spec.tasks)}")
     return task
+
+
+def _secret(path: Path, node: str, reader: str) -> str:
+    """The secret of ``--secret FILE``: the file's, or a new one written there (said on
+    stderr, for the ``reader`` to be given the file)."""
+    from runner.robot.secret import explorer_secret
+
+    existed = path.exists()
+    secret = explorer_secret(path)
+    if not existed:
+        print(f"{node}: wrote a new secret to {path} (readable by you only): give the {reader} "
+              f"--secret {path}", file=sys.stderr, flush=True)
+    return secret
 
 
 def _closed_loop(target: Path, options: RobotCommand) -> int:
@@ -436,12 +468,13 @@ def _record_driven(scenario: Scenario, out: Path, options: RecordOptions) -> int
     """``record --stdio`` or ``--ros``: the presses a lab's driver sends, as recordings."""
     from runner.robot.recording import Recorder, serve
 
-    recorder = Recorder(scenario, out)
+    secret = _secret(options.secret, "bayesprog_recorder", "driver") if options.secret else None
+    recorder = Recorder(scenario, out, secret=secret)
     try:
         if options.ros:
             from runner.robot.ros.run import record as record_ros
 
-            return record_ros(recorder, options.namespace)
+            return record_ros(recorder, options.namespace, secure=options.secure)
         serve(recorder, sys.stdin, sys.stdout)
     finally:
         recorder.close()
@@ -467,6 +500,15 @@ def _whole_number(flag: str, text: str | None, least: int) -> int | None:
                              f"{text!r}") from None
     _at_least(flag, value, least)
     return value
+
+
+def _path(text: str | None) -> Path | None:
+    return Path(text) if text else None
+
+
+def _ros_only(flag: str, given: object, ros: bool) -> None:
+    if given and not ros:
+        raise BayesprogError(f"{flag}: a ROS 2 node's option: expected --ros with it")
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -501,10 +543,12 @@ def _cmd_explore(args: argparse.Namespace) -> int:
         raise BayesprogError("explore needs one of --stdio (JSON lines on standard input and "
                              "output) or --ros (a ROS 2 node)")
     _at_least("--seed", args.seed, 0)
+    _ros_only("--secure", args.secure, args.ros)
     return explore(Path(args.target), ExploreOptions(
         task=args.task, seed=args.seed, ablate=tuple(args.ablate), ros=args.ros,
         namespace=args.namespace, frame=args.frame,
-        log=Path(args.log) if args.log else None))
+        log=Path(args.log) if args.log else None, secret=_path(args.secret),
+        secure=_path(args.secure)))
 
 
 def _cmd_robot(args: argparse.Namespace) -> int:
@@ -518,10 +562,19 @@ def _cmd_robot(args: argparse.Namespace) -> int:
     if not args.timeout > 0:
         raise BayesprogError(f"--timeout: expected a positive number of seconds, found "
                              f"{args.timeout}")
+    _ros_only("--secret", args.secret, args.ros)
+    _ros_only("--secure", args.secure, args.ros)
     return robot(Path(args.target), RobotCommand(
         task=args.task, steps=args.steps, seed=args.seed, run=args.run,
         namespace=args.namespace, timeout=args.timeout, json=args.json, physics=args.physics,
-        ros=args.ros, log=Path(args.log) if args.log else None))
+        ros=args.ros, log=Path(args.log) if args.log else None, secret=_path(args.secret),
+        secure=_path(args.secure)))
+
+
+def _cmd_keystore(args: argparse.Namespace) -> int:
+    domain = _whole_number("--domain", args.domain, 0)
+    return keystore(Path(args.dir), args.enclaves, args.explorer, tuple(args.viewers),
+                    tuple(args.namespace), domain)
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
@@ -537,6 +590,10 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise BayesprogError(f"{', '.join(simulated)}: a simulated sensor's options; with "
                              f"{'--stdio' if args.stdio else '--ros'} the lab's driver sends "
                              "the presses")
+    if args.secret and not driven:
+        raise BayesprogError("--secret: the driver's lines carry it: expected --stdio or --ros "
+                             "with it")
+    _ros_only("--secure", args.secure, args.ros)
     if args.ros:
         from runner.robot.ros import require
 
@@ -544,7 +601,28 @@ def _cmd_record(args: argparse.Namespace) -> int:
     return record(Path(args.target), Path(args.output), RecordOptions(
         presses=50 if presses is None else presses, seed=1 if seed is None else seed,
         physics=args.physics, traces=Path(args.traces) if args.traces else None,
-        quiet=args.quiet, stdio=args.stdio, ros=args.ros, namespace=args.namespace))
+        quiet=args.quiet, stdio=args.stdio, ros=args.ros, namespace=args.namespace,
+        secret=_path(args.secret), secure=_path(args.secure)))
+
+
+def keystore(root: Path, enclaves: list[str], explorer: str | None = None,
+             viewers: tuple[str, ...] = (), namespaces: tuple[str, ...] = (),
+             domain: int | None = None) -> int:
+    """``bayesprog keystore create``: an SROS2 keystore for ``explore``/``robot --secure``."""
+    from runner.robot.keystore import EXPLORER_ENCLAVE, NAMESPACE, create_keystore
+
+    if explorer is not None and explorer not in enclaves:
+        raise BayesprogError(f"--explorer {explorer}: not among --enclaves "
+                             f"({', '.join(enclaves)}): expected the explorer's enclave listed")
+    parts = create_keystore(root, enclaves, explorer or EXPLORER_ENCLAVE, viewers,
+                            namespaces or (NAMESPACE,), domain)
+    from runner.robot.keystore import Keystore
+
+    governed = Keystore(root).domain
+    print(f"{root}: " + ", ".join(f"{name} ({part})" for name, part in parts.items())
+          + f"; topics in {', '.join(namespaces or (NAMESPACE,))}, domain {governed}; CA "
+          f"{root / 'public' / 'ca.cert.pem'} (keep {root / 'private'} to yourself)")
+    return 0
 
 
 def validate(path: str, kind: str) -> list | None:
@@ -662,6 +740,7 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    help="write every probe (cell, readings, missing readings, warnings, the "
                    "material decided, the next cell, timings) to this file, a recordings file "
                    "`bayesprog learn` reads; what the session explored beside it (FILE.json)")
+    _security_arguments(p, "the explorer")
     p.set_defaults(func=_cmd_explore)
 
     p = commands.add_parser("robot", help="a simulated robot that drives `explore --ros` over "
@@ -691,6 +770,13 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    "without --ros, the closed loop in one process")
     p.add_argument("--log", metavar="FILE.csv|.parquet", default=None,
                    help="write every probe (as explore --log does) to this file")
+    p.add_argument("--secret", metavar="FILE", default=None,
+                   help="with --ros: send the explorer's secret, read from FILE (the file "
+                   "explore --secret wrote), with every line (default: none)")
+    p.add_argument("--secure", metavar="KEYSTORE", default=None,
+                   help="with --ros: run under DDS Security (SROS2) in the enclave "
+                   "/bayesprog/driver of KEYSTORE (bayesprog keystore create; "
+                   "ROS_SECURITY_ENCLAVE_OVERRIDE names another) (default: not secured)")
     p.set_defaults(func=_cmd_robot)
 
     p = commands.add_parser("record", help="record labelled presses of every material of a "
@@ -720,7 +806,46 @@ def add_commands(commands: argparse._SubParsersAction) -> None:
                    "NS/probe and replies on NS/reply (install bayesprog[ros])")
     p.add_argument("--namespace", default="/bayesprog", metavar="NS",
                    help="with --ros: the node's namespace (default: %(default)s)")
+    _security_arguments(p, "the recorder")
     p.set_defaults(func=_cmd_record)
+
+    _keystore_command(commands)
+
+
+def _keystore_command(commands: argparse._SubParsersAction) -> None:
+    p = commands.add_parser("keystore", help="make the keys, certificates and signed "
+                            "permissions of DDS Security (SROS2) for explore/robot --secure")
+    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True,
+                             help="create: a keystore, or more enclaves in one")
+    q = verbs.add_parser("create", help="a keystore (as ros2 security create_keystore and "
+                         "create_enclave make it), or more enclaves in one")
+    q.add_argument("dir", metavar="DIR", help="the keystore's folder (new, or a keystore to add "
+                   "enclaves to: its CA and governance are kept)")
+    q.add_argument("--enclaves", nargs="+", required=True, metavar="ENCLAVE",
+                   help="the enclaves to make: the explorer's (see --explorer), and the "
+                   "drivers', each allowed to publish probes and read the explorer's topics")
+    q.add_argument("--explorer", metavar="ENCLAVE", default=None,
+                   help="which of --enclaves is the explorer's, allowed to read probes and "
+                   "publish replies and maps (default: /bayesprog/explorer)")
+    q.add_argument("--viewers", nargs="+", default=[], metavar="ENCLAVE",
+                   help="enclaves that may only read (RViz) (default: none)")
+    q.add_argument("--namespace", action="append", default=[], metavar="NS",
+                   help="the explorer's namespace; repeatable (default: /bayesprog)")
+    q.add_argument("--domain", metavar="ID", default=None,
+                   help="the ROS_DOMAIN_ID the nodes will use (default: ROS_DOMAIN_ID's, else "
+                   "the keystore's, else 0)")
+    q.set_defaults(func=_cmd_keystore)
+
+
+def _security_arguments(p: argparse.ArgumentParser, node: str) -> None:
+    p.add_argument("--secret", metavar="FILE", default=None,
+                   help="answer only lines that carry the secret in FILE (\"secret\": ...; "
+                   "replies never hold it); a new one is written there, readable by you only, "
+                   "when FILE does not exist (default: none)")
+    p.add_argument("--secure", metavar="KEYSTORE", default=None,
+                   help=f"with --ros: run {node} under DDS Security (SROS2) in the enclave "
+                   "/bayesprog/explorer of KEYSTORE (bayesprog keystore create; "
+                   "ROS_SECURITY_ENCLAVE_OVERRIDE names another) (default: not secured)")
 
 
 def _report_arguments(p: argparse.ArgumentParser) -> None:

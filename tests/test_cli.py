@@ -518,6 +518,58 @@ def test_query_input_npy(capsys, tmp_path, input_program):
                                atol=1e-12)
 
 
+SCALED = """\
+bayesprog: 1
+variables:
+  A: {states: [a0, a1]}
+  X: {continuous: [-.inf, .inf]}
+inputs:
+  prior: {shape: [2]}
+  spread: {shape: [], description: the sensor's noise given at question time}
+decomposition:
+  - {term: P(A), form: categorical, probabilities: {input: prior}}
+  - {term: P(X | A), form: normal, mean: {a0: 0.0, a1: 1.0}, sigma: {input: spread}}
+"""
+
+
+def test_query_input_numbers_on_the_command_line(capsys, tmp_path):
+    path = tmp_path / "scaled.yaml"
+    path.write_text(SCALED, encoding="utf-8")
+    data = query_json(capsys, path, "P(A | X=0.4)", "--input", "spread=0.5", "--input",
+                      "prior=0.3,0.7")
+    from scipy import stats
+
+    joint = np.array([0.3, 0.7]) * stats.norm([0.0, 1.0], 0.5).pdf(0.4)
+    assert data["probabilities"] == pytest.approx(list(joint / joint.sum()), abs=1e-12)
+    # the same as .npy files
+    np.save(tmp_path / "spread.npy", np.array(0.5))
+    np.save(tmp_path / "prior.npy", np.array([0.3, 0.7]))
+    again = query_json(capsys, path, "P(A | X=0.4)", "--input",
+                       f"spread={tmp_path / 'spread.npy'}", "--input",
+                       f"prior={tmp_path / 'prior.npy'}")
+    assert again["probabilities"] == data["probabilities"]
+    assert main(["sample", str(path), "-n", "5", "-o", str(tmp_path / "draws.csv"),
+                 "--input", "spread=0.5", "--input", "prior=0.3,0.7"]) == 0
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    ("spread=0.5x", "--input spread=0.5x: expected a number, numbers separated by commas (a "
+                    "vector) or FILE.npy (an array), found '0.5x'"),
+    ("spread=1,,2", "found ''"),
+    ("spread=-1", "input 'spread' for normal parameter 'sigma' of P(X | A): expected values > 0"),
+    ("prior=0.2,0.3,0.5", "input 'prior': expected trailing shape [2]"),
+    ("sprad=0.5", "unknown input 'sprad': did you mean 'spread'?"),
+])
+def test_query_input_bad_numbers(capsys, tmp_path, value, expected):
+    path = tmp_path / "scaled.yaml"
+    path.write_text(SCALED, encoding="utf-8")
+    given = {"spread": "spread=0.5", "prior": "prior=0.3,0.7"}
+    given[value.split("=")[0] if value.split("=")[0] in given else "extra"] = value
+    line = user_error(capsys, "query", path, "P(A | X=0.4)",
+                      *[arg for v in given.values() for arg in ("--input", v)])
+    assert expected in line
+
+
 def test_query_input_bad_shape(capsys, tmp_path, input_program):
     prior = tmp_path / "prior.npy"
     np.save(prior, np.array([0.2, 0.3, 0.5]))

@@ -57,6 +57,11 @@ def questions(program: bayesprog.Program) -> list[tuple[str, dict]]:
         states = getattr(program.variables[a], "states", None)
         if states:
             out.append((f"P({a}={states[0]} | {b})", {b: value(b, True)}))
+    # a conditional program's questions give the variables it is conditioned on
+    given = {c: value(c, True) for c in program.conditioning}
+    for a in [n for n in names if n not in given][:4] if given else ():
+        out += [(f"P({a} | {', '.join(given)})", dict(given)),
+                (f"P({a} | {', '.join(given)})", {})]
     return out
 
 
@@ -98,3 +103,31 @@ def test_map_and_probability_name_the_call_that_answers():
         program.map("P(E | M)", {"M": ["a"]})
     with pytest.raises(bayesprog.QuestionError, match=r"program\.density\(\.\.\.\)"):
         program.posterior("P(E | M)", {"M": ["a"]})
+
+
+def test_load_finds_a_bundled_program_by_its_name_as_the_command_line_does(tmp_path,
+                                                                          monkeypatch):
+    from bayesprog import bundled
+
+    monkeypatch.chdir(tmp_path)  # no file called student here
+    for name in ("student", "student.yaml", "examples/student"):
+        program = bayesprog.load(name)
+        assert program.path == bundled.find("student", "program")
+        assert program.ask("P(G | D=easy, I=high)").probabilities.tolist() == pytest.approx(
+            [0.9, 0.08, 0.02])
+    with pytest.raises(FileNotFoundError, match="no bundled program of that name"):
+        bayesprog.load("studnet")
+
+
+def test_a_file_of_the_name_in_the_working_directory_wins_over_a_bundled_one(tmp_path,
+                                                                            monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "student").write_text(
+        "bayesprog: 1\nname: mine\nvariables: {G: {states: [pass, fail]}}\n"
+        "decomposition:\n  - {term: P(G), form: table, table: [0.6, 0.4]}\n")
+    mine = bayesprog.load("student")
+    assert mine.name == "mine" and mine.ask("P(G)").probabilities.tolist() == [0.6, 0.4]
+    (tmp_path / "student.yaml").write_text(
+        "bayesprog: 1\nname: mine_too\nvariables: {G: {states: [pass, fail]}}\n"
+        "decomposition:\n  - {term: P(G), form: table, table: [0.5, 0.5]}\n")
+    assert bayesprog.load("student.yaml").name == "mine_too"

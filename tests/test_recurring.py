@@ -248,3 +248,49 @@ def test_readings_new_on_every_row_are_answered_afresh_and_alike():
         (layout,) = layouts.values()
         resting.append(layout.prepared["contraction"].recurring.resting)
     assert max(resting) > 0 and resting[-1] < max(resting)
+
+
+def test_threads_asking_one_program_at_once_get_the_answers_asked_alone():
+    """Two threads sharing a program (threaded workers of a cluster) each ask a run of
+    questions of one layout: what the layout keeps, and the memo of its field, are taken by
+    one question at a time, so each answer is the one a program asked alone gives."""
+    import sys
+    import threading
+
+    runs = {seed: list(_steps(seed, 12)) for seed in (3, 4)}
+
+    def question(step):
+        i_field, s_field, t, templates, l1 = step
+        return ({"T": np.array(["T1", "T2"])[t], "I": i_field, "S": s_field},
+                {"templates": templates, "l1": l1, "l2": 0.3})
+
+    alone = {seed: [_ask(bayesprog.load(PROGRAMS / "tar.yaml"), "P(O | T, I, S)",
+                         question(step)[0], inputs=question(step)[1]) for step in steps]
+             for seed, steps in runs.items()}
+    for _ in range(3):
+        shared = bayesprog.load(PROGRAMS / "tar.yaml")
+        got: dict[int, list] = {}
+        errors: list[BaseException] = []
+
+        def ask(seed, into=got, shared=shared, errors=errors):
+            try:
+                into[seed] = [shared.ask("P(O | T, I, S)", evidence, inputs=inputs)
+                              for evidence, inputs in map(question, runs[seed])]
+            except BaseException as exc:  # noqa: BLE001  (reported below)
+                errors.append(exc)
+
+        threads = [threading.Thread(target=ask, args=(seed,)) for seed in runs]
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(1e-6)  # the threads taking turns as often as they can
+        try:
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join()
+        finally:
+            sys.setswitchinterval(switch)
+        assert not errors
+        for seed in runs:
+            for mine, reference in zip(got[seed], alone[seed], strict=True):
+                assert np.array_equal(mine.probabilities, reference.probabilities)
+                assert np.array_equal(mine.log_evidence, reference.log_evidence)

@@ -227,7 +227,7 @@ decomposition:
     joint = np.array([0.4 * stats.norm.pdf(1.0, 1.0, np.sqrt(6.25)),
                       0.6 * stats.norm.pdf(1.0, 5.0, np.sqrt(18.25))])
     error = np.abs(answer.probabilities - _posterior(joint)[0])
-    assert np.all(error <= answer.stderr), (error, answer.stderr)
+    assert np.all(error <= answer.error), (error, answer.error)
     assert np.all(error < 1e-4)
 
 
@@ -344,7 +344,7 @@ def test_the_grid_method_answers_an_unknown_real_child_within_its_error(tmp_path
     expected = _unknown_x_posterior(2.0)
     error = np.abs(answer.probabilities - expected)
     # the answer on 256 bins is closer than its estimated error (the change from 128 bins)
-    assert np.all(error <= answer.stderr), (error, answer.stderr)
+    assert np.all(error <= answer.error), (error, answer.error)
     assert np.all(error < 1e-3)
 
 

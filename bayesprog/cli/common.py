@@ -1,7 +1,7 @@
 """What the commands share: the user error (printed as ``bayesprog: ...``, exit status 2,
 never a traceback), a program read from a file or a bundled name, the ``--ablate`` option, the
 readers of options given as ``NAME=VALUE`` (``--evidence``, ``--input``, ``--soft``,
-``--column``), ``.npy`` arrays and seeds, and the runner plugins found through the
+``--column``), numbers, ``.npy`` arrays and seeds, and the runner plugins found through the
 ``bayesprog.runners`` entry point group.
 """
 
@@ -131,7 +131,8 @@ _ONCE = {
     "--evidence": "; for a batch of rows, VAR=FILE.npy; for one value per step of a program "
                   "over time, VAR=v1,v2,... with --over-time",
     "--soft": " (one likelihood per variable: VAR=p1,p2,...)",
-    "--input": " (one array per input: NAME=FILE.npy, with a batch axis for several rows)",
+    "--input": " (one array per input: NAME=v1,v2,... for a vector, NAME=FILE.npy for any "
+               "array, with a batch axis for several rows)",
 }
 
 
@@ -146,6 +147,35 @@ def read_npy(path: str, option: str) -> np.ndarray:
     except (ValueError, OSError, EOFError):
         raise UserError(f"{option}: cannot read {path} as an array: expected a .npy file "
                         "of numbers written by numpy.save") from None
+
+
+def input_values(items: Sequence[str]) -> dict[str, np.ndarray]:
+    """The ``--input NAME=VALUE`` options: each a number (``dt=0.5``), numbers separated by
+    commas (a vector, ``w=0.3,0.7``) or a ``.npy`` file (an array of any shape, batch axes
+    first)."""
+    out = {}
+    for name, text in named_values(items, "--input").items():
+        if text.endswith(".npy"):
+            out[name] = read_npy(text, "--input")
+            continue
+        parts = [part.strip() for part in text.split(",")]
+        try:
+            numbers = [float(part) for part in parts]
+        except ValueError:
+            bad = next(part for part in parts if not _is_number(part))
+            raise UserError(f"--input {name}={text}: expected a number, numbers separated by "
+                            f"commas (a vector) or FILE.npy (an array), found {bad!r}"
+                            ) from None
+        out[name] = np.array(numbers[0] if len(parts) == 1 else numbers)
+    return out
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def evidence_value(text: str) -> object:

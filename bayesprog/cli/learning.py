@@ -31,11 +31,11 @@ def add_learn(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--freeze", action="append", default=[], metavar="TERM",
                    help='keep a term as written, e.g. --freeze "P(M)"; repeatable (default: '
                    "the terms marked learn: false)")
-    p.add_argument("--max-iter", type=int, default=200,
+    p.add_argument("--max-iter", type=int, default=10_000,
                    help="most EM iterations (default: %(default)s)")
     p.add_argument("--tol", type=float, default=1e-8,
-                   help="EM stops when the log-likelihood gains less than this, relative "
-                   "(default: %(default)s)")
+                   help="EM stops when the log-likelihood per row is estimated within this of "
+                   "its limit (default: %(default)s)")
     p.add_argument("--column", action="append", default=[], metavar="COLUMN=VARIABLE",
                    help="read the data's column COLUMN as the variable VARIABLE, e.g. --column "
                    "material=M; repeatable (default: columns named like the variables)")
@@ -120,8 +120,8 @@ def cmd_learn(args: argparse.Namespace) -> int:
         print(f"{n or 'no'} bad row{'s' if n != 1 else ''} of {record.data} set aside, listed "
               f"in {listing}")
     if not fit.converged:
-        print(f"bayesprog: EM stopped after {args.max_iter} iterations before converging "
-              "(raise --max-iter)", file=sys.stderr)
+        print(f"bayesprog: EM stopped before converging: {fit.stopped} (raise --max-iter)",
+              file=sys.stderr)
     return 0
 
 

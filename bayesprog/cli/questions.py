@@ -15,6 +15,7 @@ from bayesprog.cli.common import (
     ablated,
     check_seed,
     evidence_value,
+    input_values,
     load_program,
     named_values,
     output_file,
@@ -43,8 +44,9 @@ def add_query(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help='replace a term by a uniform, e.g. --ablate "P(S | O, T)"; repeatable '
                    "(default: none)")
-    p.add_argument("--input", action="append", default=[], metavar="NAME=FILE.npy",
-                   help="bind a runtime input to an array; repeatable (default: none)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   help="bind a runtime input: a number, numbers separated by commas (a "
+                   "vector) or FILE.npy (an array); repeatable (default: none)")
     p.add_argument("--evidence", action="append", default=[], metavar="VAR=VALUE",
                    help="evidence for a known variable: a state, a number, or FILE.npy "
                    "(an array: a field, or a batch of values); repeatable (default: none)")
@@ -93,7 +95,7 @@ def cmd_query(args: argparse.Namespace) -> int:
         raise UserError("query: expected a question (a named question of the file, or "
                         "P(searched | known)), or --marginals for every variable's posterior")
     program = ablated(load_program(args.file), args.ablate)
-    inputs = {k: read_npy(v, "--input") for k, v in named_values(args.input, "--input").items()}
+    inputs = input_values(args.input)
     evidence = {k: evidence_value(v) for k, v in named_values(args.evidence, "--evidence").items()}
     kind = args.over_time or ("map" if args.map else None)
     if args.over_time and args.map:
@@ -213,7 +215,7 @@ def _marginals(args: argparse.Namespace) -> int:
             raise UserError(f"--marginals and {flag}: expected one of them (--marginals "
                             "answers exactly, in one pass, the posterior of each variable)")
     program = ablated(load_program(args.file), args.ablate)
-    inputs = {k: read_npy(v, "--input") for k, v in named_values(args.input, "--input").items()}
+    inputs = input_values(args.input)
     evidence = {k: evidence_value(v) for k, v in named_values(args.evidence, "--evidence").items()}
     _no_steps(program, evidence)
     soft = {}
@@ -253,8 +255,9 @@ def add_sample(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", choices=["forward", "lw", "rejection"],
                    help="forward (no evidence), lw (weighted draws, a weight column) or "
                    "rejection (discrete evidence) (default: forward, or lw with evidence)")
-    p.add_argument("--input", action="append", default=[], metavar="NAME=FILE.npy",
-                   help="bind a runtime input to an array; repeatable (default: none)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   help="bind a runtime input: a number, numbers separated by commas (a "
+                   "vector) or FILE.npy (an array); repeatable (default: none)")
     p.add_argument("--ablate", action="append", default=[], metavar="TERM",
                    help="draw with this term uniform; repeatable (default: none)")
     p.add_argument("--seed", type=int, default=0, help="seed of the draws (default: %(default)s)")
@@ -273,7 +276,7 @@ def cmd_sample(args: argparse.Namespace) -> int:
 
         require_extra("pyarrow", "parquet", f"writing {args.output}")
     program = ablated(load_program(args.file), args.ablate)
-    inputs = {k: read_npy(v, "--input") for k, v in named_values(args.input, "--input").items()}
+    inputs = input_values(args.input)
     evidence = {k: evidence_value(v) for k, v in named_values(args.evidence, "--evidence").items()}
     draws = program.sample(args.n, evidence, inputs=inputs, rng=args.seed, method=args.method)
     try:

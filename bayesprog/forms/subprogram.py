@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.errors import ProgramCycleError, QuestionError, SpecError
+from bayesprog.errors import ProgramCycleError, QuestionError, SpecError, did_you_mean
 from bayesprog.expressions import ExpressionError, parse_expression
 from bayesprog.files import reference_problem
 from bayesprog.forms.base import (
@@ -159,9 +159,17 @@ class ProgramForm(Form):
             try:
                 expr = parse_expression(question)
             except ExpressionError as exc:
-                checker.error(path + ("question",), f"{what}: {raw['question']!r} is neither a "
-                              f"question of {raw['program']!r} ({', '.join(sub.questions)}) "
-                              f"nor an expression: {exc}")
+                named = ", ".join(sub.questions) or "none"
+                if "(" not in question:  # a name: misspelt, or not one of the other file's
+                    checker.error(path + ("question",), f"{what}: {question!r} is not a "
+                                  f"question of {raw['program']!r}"
+                                  f"{did_you_mean(question, sub.questions)} (its questions: "
+                                  f"{named}); expected one of them, or P({term.child.name} | "
+                                  "...)")
+                else:
+                    checker.error(path + ("question",), f"{what}: {question!r} is neither a "
+                                  f"question of {raw['program']!r} ({named}) nor an "
+                                  f"expression: {exc}")
                 return len(checker.problems) - before
         problems = []
         if expr.left != (term.child.name,):

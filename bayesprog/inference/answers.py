@@ -14,7 +14,7 @@ import numpy as np
 
 from bayesprog import rich
 from bayesprog.errors import ArgumentError, QuestionError, ZeroEvidenceError, short_repr
-from bayesprog.inference.density import Density
+from bayesprog.inference.density import Density, per_row
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
 TIE_RTOL = 1e-12
@@ -22,17 +22,21 @@ TIE_RTOL = 1e-12
 
 class Deferred:
     """A dataclass field that may be given as a function of no arguments, called at its first
-    read (a value the answer can give but seldom needs)."""
+    read (a value the answer can give but seldom needs); ``shaped``: the value read is one
+    number per row, shaped as the answer's batch (:func:`~bayesprog.inference.density.per_row`)."""
 
-    def __init__(self, name: str) -> None:
-        self.name, self.slot = name, "_" + name
+    def __init__(self, name: str, shaped: bool = False) -> None:
+        self.name, self.slot, self.shaped = name, "_" + name, shaped
 
     def __get__(self, obj: Any, owner: type | None = None) -> Any:
         if obj is None:
             return self
         value = obj.__dict__[self.slot]
         if callable(value):
-            value = obj.__dict__[self.slot] = value()
+            value = value()
+            if self.shaped:
+                value = per_row(value, obj.batch_shape)
+            obj.__dict__[self.slot] = value
         return value
 
     def __set__(self, obj: Any, value: Any) -> None:
@@ -62,17 +66,33 @@ class Posterior:
     values: dict[str, tuple[Any, ...]] | None = None
     #: the inference method that answered (``table``, ``contraction``: exact; ``lbp``, ``lw``)
     method: str = ""
-    #: approximate answers: the standard error of each probability (``lw``), the effective
-    #: sample size per row (``lw``), the sweeps made and the last change of a message (``lbp``)
+    #: approximate answers: the standard error of each probability (``lw``, ``gibbs``), the
+    #: effective sample size per row (``lw``, ``gibbs``), the sweeps made and the last change
+    #: of a message (``lbp``)
     stderr: np.ndarray | None = None
     ess: np.ndarray | None = None
     iterations: int | None = None
     residual: float | None = None
     #: how ``log_evidence`` was computed when it is not exact (``lbp``: "Bethe approximation")
     evidence: str | None = None
+    #: an estimated bound of each probability's error, not a standard error (``grid``: the
+    #: change from half its bins), and the bins of each unknown real variable
+    error: np.ndarray | None = None
+    resolution: dict[str, int] = field(default_factory=dict)
+    #: what the +- of an approximate answer is: ``"stderr"`` (``stderr``), ``"bound"``
+    #: (``error``); None when it has none
+    uncertainty: str | None = None
+    #: a question over steps whose steps an approximate method answered: that method (its
+    #: answer gives no error estimate)
+    steps_method: str = ""
     #: the rows without an answer (the evidence that bears on it has probability zero), when
     #: ``log_evidence`` is not computed yet; None: the rows where it is -inf
     impossible: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        given = self.__dict__["_log_evidence"]
+        if not callable(given):  # (computed at its first read: shaped then)
+            self.__dict__["_log_evidence"] = per_row(given, self.batch_shape)
 
     def _repr_html_(self) -> str | None:
         return rich.html("posterior", self)
@@ -103,8 +123,16 @@ class Posterior:
 
     def _method_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"method": self.method} if self.method else {}
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty
         if self.stderr is not None:
             out["stderr"] = self.stderr.tolist()
+        if self.error is not None:
+            out["error"] = self.error.tolist()
+        if self.resolution:
+            out["bins"] = dict(self.resolution)
+        if self.steps_method:
+            out["steps_method"] = self.steps_method
         if self.ess is not None:
             out["ess"] = self.ess.tolist()
         if self.iterations is not None:
@@ -115,7 +143,7 @@ class Posterior:
         return out
 
 
-Posterior.log_evidence = Deferred("log_evidence")  # type: ignore[assignment]
+Posterior.log_evidence = Deferred("log_evidence", shaped=True)  # type: ignore[assignment]
 
 
 @dataclass
@@ -127,7 +155,8 @@ class MapResult:
 
     ``kind`` is ``"sequence"`` for the most likely sequence of a program over time steps: then
     ``indices`` has time as its first axis, and ``probability``, ``ties`` and ``zero_evidence``
-    are one per sequence (the batch shape), ``probability`` that of the whole sequence.
+    are one per sequence (the batch shape), ``probability`` that of the whole sequence and
+    ``ties`` the number of sequences as probable (drawn among as a MAP's tied assignments).
     """
 
     question: str
@@ -140,6 +169,19 @@ class MapResult:
     posterior: Posterior
     ablated: tuple[str, ...] = ()
     kind: str = "map"
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The rows of evidence: one assignment each (one sequence each, for a sequence)."""
+        return tuple(self.probability.shape)
+
+    @property
+    def log_evidence(self) -> np.ndarray:
+        """The log-probability of the evidence per row; for a sequence, of all its steps'
+        evidence, ``log P(y_1..T)`` (the posterior's are per step, ``log P(y_t | y_1..t-1)``)."""
+        if self.kind == "sequence":
+            return per_row(np.sum(self.posterior.log_evidence, axis=0), self.batch_shape)
+        return self.posterior.log_evidence
 
     @property
     def steps(self) -> int | None:
@@ -180,13 +222,13 @@ class MapResult:
             "probability": self.probability.tolist(),
             "ties": self.ties.tolist(),
             "zero_evidence": self.zero_evidence.tolist(),
-            "log_evidence": _floats(self.posterior.log_evidence),
+            "log_evidence": _floats(self.log_evidence),
             "ablated": list(self.ablated),
             **self.posterior._method_json(),
         }
-        if self.kind == "sequence":  # one path per sequence: its probability once, no ties
-            del out["ties"]
+        if self.kind == "sequence":  # one path per sequence: its probability, its ties
             out["method"] = "sequence"
+            out["log_evidence_per_step"] = _floats(self.posterior.log_evidence)
         return out
 
 
@@ -219,6 +261,16 @@ def generator_of(rng: Any) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(seed_of(rng))
 
 
+def row_generators(rng: Any, rows: int) -> list[np.random.Generator]:
+    """One generator per batch row: ``rng`` shared by the rows (a seed or a generator; None is
+    seed 0), or a sequence of one per row."""
+    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
+        if len(rng) != rows:
+            raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
+        return [generator_of(r) for r in rng]
+    return [generator_of(0 if rng is None else rng)] * rows
+
+
 def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str, ...]) -> MapResult:
     """Joint argmax per batch row; ties (relative 1e-12) broken uniformly by ``rng``.
 
@@ -229,12 +281,7 @@ def choose_map(posterior: Posterior, question: str, rng: Any, ablated: tuple[str
     cards = posterior.probabilities.shape[len(shape) :]
     flat = posterior.probabilities.reshape((-1, int(np.prod(cards))))
     rows = flat.shape[0]
-    if isinstance(rng, Sequence) and not isinstance(rng, (str, bytes)):
-        if len(rng) != rows:
-            raise QuestionError(f"expected one generator per batch row ({rows}), got {len(rng)}")
-        gens = [generator_of(r) for r in rng]
-    else:
-        gens = [generator_of(rng)] * rows
+    gens = row_generators(rng, rows)
     best = flat.max(axis=1)
     tied = flat >= (best * (1 - TIE_RTOL))[:, None]
     counts = tied.sum(axis=1)

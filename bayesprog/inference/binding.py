@@ -125,8 +125,8 @@ def bind(
     for name, value in inputs.items():
         decl = program.inputs.get(name)
         if decl is None:
-            raise QuestionError(f"unknown input {name!r} (declared inputs: "
-                                f"{', '.join(program.inputs) or 'none'})")
+            raise QuestionError(f"unknown input {name!r}{did_you_mean(name, program.inputs)} "
+                                f"(declared inputs: {', '.join(program.inputs) or 'none'})")
         arr = _input_array(program, decl, value)
         staged.append(("input", name, arr, arr.shape[: arr.ndim - decl.ndim], decl.ndim))
     for name, value in soft.items():

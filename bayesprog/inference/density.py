@@ -36,6 +36,22 @@ _SQRT_2PI = float(np.sqrt(2 * np.pi))
 _LOG_2PI = float(np.log(2 * np.pi))
 
 
+def per_row(values: Any, batch_shape: tuple[int, ...]) -> np.ndarray:
+    """``values``, one number per row of evidence, shaped as the batch (flat rows reshaped,
+    one number for every row broadcast): every answer's ``log_evidence`` has its batch's shape,
+    ``()`` for a question asked once.
+
+    >>> per_row(np.zeros(1), ()).shape, per_row(np.zeros(6), (2, 3)).shape
+    ((), (2, 3))
+    """
+    array = np.asarray(values, dtype=float)
+    if array.shape == batch_shape:
+        return array
+    if array.size == int(np.prod(batch_shape)):
+        return array.reshape(batch_shape)
+    return np.broadcast_to(array, batch_shape).copy()
+
+
 @dataclass
 class Density:
     """``P(searched | evidence)`` over real variables (see the module's docstring)."""
@@ -59,6 +75,13 @@ class Density:
     error: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     #: a particle filter's effective sample size per row (step), before it resampled
     ess: np.ndarray | None = None
+    #: what the +- of an approximate answer is (``"bound"``: ``error``, an estimated bound of
+    #: each summary's error); None when it has none
+    uncertainty: str | None = None
+
+    def __post_init__(self) -> None:
+        self.batch_shape = tuple(self.batch_shape)
+        self.log_evidence = per_row(self.log_evidence, self.batch_shape)
 
     @property
     def kind(self) -> str:
@@ -308,12 +331,14 @@ class Density:
                           for v, s in summary.items()},
             "map": {v: _plain(s["map"]) for v, s in summary.items()},
             "density": self.kind,
-            "log_evidence": _plain(self.log_evidence.reshape(self.batch_shape)),
+            "log_evidence": _plain(self.log_evidence),
             "ablated": list(self.ablated),
             "method": self.method,
         }
         if self.ess is not None:
             out["ess"] = _plain(self.ess.reshape(self.batch_shape))
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty
         if self.resolution:
             out["bins"] = dict(self.resolution)
             out["error"] = {k: {v: _plain(e) for v, e in by.items()}

@@ -18,6 +18,7 @@ from bayesprog.errors import QuestionError, ZeroEvidenceError
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import _floats
 from bayesprog.inference.binding import bind
+from bayesprog.inference.density import per_row
 from bayesprog.inference.dispatch import compute_posterior
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.variables import Discrete
@@ -41,6 +42,9 @@ class Probability:
     density: bool = False
     ablated: tuple[str, ...] = ()
     method: str = ""
+
+    def __post_init__(self) -> None:
+        self.log_evidence = per_row(self.log_evidence, self.batch_shape)
 
     def __float__(self) -> float:
         if self.probability.size != 1:

@@ -12,6 +12,7 @@ largest size, and a term whose values are seldom found again stops using it.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import numpy as np
@@ -75,13 +76,22 @@ def _add(keys: np.ndarray, filled: np.ndarray, values: np.ndarray, bits: np.ndar
 class Memo:
     """A term's log densities by value (see the module); ``width``: how many per value. The
     table starts small (a field of a thousand values stays in the processor's caches) and
-    doubles as it fills, up to ``CAPACITY`` entries."""
+    doubles as it fills, up to ``CAPACITY`` entries. Threads that share a program look it up
+    one at a time (the table is read and grown by several steps)."""
 
     def __init__(self, width: int, capacity: int = SMALLEST) -> None:
         self.width = width
+        self._lock = threading.Lock()
         self._allocate(capacity)
         #: questions in a row that found fewer than half of their values
         self.missed = 0
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k != "_lock"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
 
     def _allocate(self, capacity: int) -> None:
         self.keys = np.zeros(capacity, np.uint64)
@@ -101,13 +111,14 @@ class Memo:
         ``[unique values, width]``), once per distinct value, and kept."""
         bits = np.ascontiguousarray(values, dtype=np.float64).view(np.uint64)
         out = np.empty((bits.size, self.width))
-        missing = _find(self.keys, self.filled, self.values, bits, self.shift, out)
-        self.missed = self.missed + 1 if 2 * missing.size > bits.size else 0
-        if missing.size:
-            new, where = np.unique(bits[missing], return_inverse=True)
-            rows = np.ascontiguousarray(compute(new.view(np.float64)), dtype=np.float64)
-            out[missing] = rows[where.reshape(-1)]
-            self._keep(new, rows)
+        with self._lock:
+            missing = _find(self.keys, self.filled, self.values, bits, self.shift, out)
+            self.missed = self.missed + 1 if 2 * missing.size > bits.size else 0
+            if missing.size:
+                new, where = np.unique(bits[missing], return_inverse=True)
+                rows = np.ascontiguousarray(compute(new.view(np.float64)), dtype=np.float64)
+                out[missing] = rows[where.reshape(-1)]
+                self._keep(new, rows)
         return out
 
     def _keep(self, bits: np.ndarray, rows: np.ndarray) -> None:

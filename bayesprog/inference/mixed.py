@@ -11,7 +11,7 @@ where the joint density is highest: for a Gaussian conditional, at its mean, wit
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,7 @@ from bayesprog import rich
 from bayesprog.errors import QuestionError
 from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import Posterior
-from bayesprog.inference.density import Density
+from bayesprog.inference.density import Density, per_row
 
 #: the most configurations of the searched discrete variables a mixed question answers
 MAX_CONFIGURATIONS = 4096
@@ -41,6 +41,12 @@ class Joint:
     log_evidence: np.ndarray
     batch_shape: tuple[int, ...]
     ablated: tuple[str, ...] = ()
+    #: the methods that answered the discrete variables (``"discrete"``: their weights) and
+    #: the real ones given them (``"real"``)
+    methods: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.log_evidence = per_row(self.log_evidence, self.batch_shape)
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -121,6 +127,7 @@ class Joint:
             "log_evidence": np.asarray(self.log_evidence).tolist(),
             "ablated": list(self.ablated),
             "method": "mixed",
+            "methods": dict(self.methods),
         }
 
     def _repr_html_(self) -> str | None:
@@ -165,4 +172,4 @@ def mixed(program: Any, question: Question, evidence: Mapping[str, Any] | None,
     return Joint(f"{expr}", discrete, real,
                  {v: program.variables[v].states for v in discrete},
                  weights.probabilities, conditional, weights.log_evidence, batch,
-                 program.ablated)
+                 program.ablated, {"discrete": weights.method, "real": conditional.method})

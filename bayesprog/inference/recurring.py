@@ -25,6 +25,7 @@ alone, as for any batch of them).
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -175,6 +176,14 @@ class Recurring:
         self.last: _Last | None = None
         #: questions in a row that reused nothing, and questions left to compute afresh
         self.idle, self.resting = 0, 0
+        self._taking = threading.Lock()  # one thread takes the kept state at a time
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k != "_taking"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._taking = threading.Lock()
 
     def operands(self, program: ProgramLike, terms: list[Term], bound: Bound
                  ) -> tuple[list[Factor], np.ndarray]:
@@ -183,7 +192,8 @@ class Recurring:
         and the logs of what they were divided by, per row: what the last question with as
         many rows computed, computed again where what they read changed."""
         size = bound.size
-        last, self.last = self.last, None
+        with self._taking:
+            last, self.last = self.last, None
         read = sum(v.array.size for kind in (bound.continuous, bound.inputs, bound.soft)
                    for v in kind.values())
         if self.resting or not bound.batch_shape or read > KEPT_SHARE * limit("entries"):

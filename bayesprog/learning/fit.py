@@ -57,6 +57,8 @@ class Estimate:
     iterations: int
     converged: bool
     set_aside: list[BadRow] = field(default_factory=list)
+    #: why EM stopped (converged, or the iterations allowed were made, with the last change)
+    stopped: str = ""
 
 
 @dataclass
@@ -88,6 +90,66 @@ def _missing_patterns(columns: Sequence[np.ndarray], rows: int
     return out
 
 
+@dataclass
+class Stop:
+    """Whether EM has converged, and why it stopped or goes on (a sentence)."""
+
+    converged: bool
+    why: str
+
+
+@dataclass
+class Run:
+    """What EM gives: the parameters, the log-likelihood at them, the iterations made, why it
+    stopped, and the statistics the parameters were estimated from."""
+
+    params: dict[str, Params]
+    log_likelihood: float
+    iterations: int
+    stop: Stop
+    statistics: dict[str, Stats]
+
+
+#: a change of the objective this small, relative, is rounding: the iterations have stopped
+#: moving it
+ROUNDING = 1e-13
+
+
+def stopping(objectives: Sequence[float], rows: int, tol: float) -> Stop:
+    """Whether EM has converged, from its objectives (the log-likelihood, plus the log-prior
+    with pseudo-counts) at each iteration so far: when the objective per row is estimated
+    within ``tol`` of its limit, or no longer changes beyond rounding.
+
+    EM converges linearly near an optimum: each gain is about ``r`` times the one before, so
+    the objective's limit is ``l_k + d_k r / (1 - r)`` (Aitken's acceleration, as mclust and
+    McNicholas et al. 2010 stop EM), with ``d_k = l_k - l_k-1`` and ``r = d_k / d_k-1``. A
+    small gain alone does not stop it: on a plateau, where the gains still grow (``r >= 1``),
+    the optimum may be far.
+
+    >>> limit = -1.0
+    >>> slow = [limit - 0.9**k for k in range(1, 200)]  # a gap that shrinks tenfold slowly
+    >>> stopping(slow[:50], 1, 1e-8).converged, stopping(slow, 1, 1e-8).converged
+    (False, True)
+    """
+    if len(objectives) < 2:
+        return Stop(False, "fewer than two iterations")
+    last, gain = objectives[-1], objectives[-1] - objectives[-2]
+    if abs(gain) <= ROUNDING * max(abs(last), 1.0):
+        return Stop(True, f"the log-likelihood no longer changes (by {gain / rows:.3g} per row)")
+    change = f"the last iteration changed the log-likelihood by {gain / rows:.3g} per row"
+    if len(objectives) < 3 or gain < 0:
+        return Stop(False, change)
+    before = objectives[-2] - objectives[-3]
+    rate = gain / before if before > 0 else np.inf
+    if not 0 <= rate < 1:
+        return Stop(False, f"{change}, and its gains still grow")
+    distance = gain * rate / (1 - rate) / rows
+    if distance <= tol:
+        return Stop(True, f"{change}; estimated {distance:.3g} per row from its limit")
+    return Stop(False, f"{change}; estimated {distance:.3g} per row from its limit "
+                       f"(tol {tol:g})")
+
+
 class _Group:
     """Rows that miss the same discrete variables."""
 
@@ -98,7 +160,7 @@ class _Group:
 
 def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
               learned: Sequence[FitRecord], source: Any, *, freeze: Sequence[str] = (),
-              max_iter: int = 200, tol: float = 1e-8,
+              max_iter: int = 10_000, tol: float = 1e-8,
               columns: Mapping[str, str] | None = None, on_bad_lines: str = "error",
               other_columns: str = "refuse"
               ) -> Estimate:
@@ -153,7 +215,7 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
             except DataError as exc:
                 failed.append(f"{k} ({exc})")
                 continue
-            bic = -2 * result[1] + em.free(result[0]) * np.log(len(used))
+            bic = -2 * result.log_likelihood + em.free(result.params) * np.log(len(used))
             if best is None or bic < best[0]:
                 best = (bic, k, trial[label])
         if best is None:
@@ -162,7 +224,8 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         params[label] = best[2]
         skipped = f", {len(failed)} candidate(s) could not be fitted" if failed else ""
         choices.append(f"{label}: {best[1]} components by BIC ({best[0]:.6g}){skipped}")
-    final, ll, iterations, converged, stats = em.run(params, max_iter, tol)
+    run = em.run(params, max_iter, tol)
+    final, ll, iterations, stats = run.params, run.log_likelihood, run.iterations, run.statistics
     iterative = em.iterative
     method = "EM" if iterative else "maximum likelihood"
     if any(i.options.pseudo_counts is not None for i in todo):
@@ -187,7 +250,8 @@ def fit_terms(variables: Mapping[str, Variable], terms: Sequence[Term],
         ranges=_ranges(variables, [i.term for i in todo], data, used))
     out = {i.term.label: {k: v for k, v in final[i.term.label].items()
                           if k in i.estimator.learned} for i in todo}
-    return Estimate(out, record, float(ll), iterations, converged, list(data.set_aside or ()))
+    return Estimate(out, record, float(ll), iterations, run.stop.converged,
+                    list(data.set_aside or ()), run.stop.why)
 
 
 def _check_given(variables: Mapping[str, Variable], model: Sequence[Term], data: Any,
@@ -377,37 +441,46 @@ class _Em:
         return sum(i.estimator.free_parameters(i.term, params[i.term.label], i.options)
                    for i in self.todo)
 
-    def run(self, params: dict[str, Params], max_iter: int, tol: float
-            ) -> tuple[dict[str, Params], float, int, bool, dict[str, Stats]]:
-        """EM from ``params`` (one M-step when nothing is missing and no mixture is learned):
-        (parameters, log-likelihood at them, iterations, converged, statistics at them)."""
-        previous = -np.inf
-        converged = not self.iterative
+    def run(self, params: dict[str, Params], max_iter: int, tol: float) -> Run:
+        """EM from ``params`` (one M-step when nothing is missing and no mixture is learned),
+        until the objective per row is within ``tol`` of its limit (:func:`stopping`) or
+        ``max_iter`` iterations. The parameters returned are the last M-step's, and the
+        statistics those it estimated them from (so that the record's statistics give the
+        values written); the log-likelihood is taken at these parameters."""
+        objectives: list[float] = []
+        stop: Stop = Stop(not self.iterative, "one pass over complete rows")
         iterations = 0
         bar = None
         if self.iterative and sys.stderr.isatty():  # tqdm imported only to be shown
             from tqdm import tqdm
 
             bar = tqdm(total=max_iter, desc="EM", unit="iteration", leave=False)
+        rows = max(len(self.used), 1)
         for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is returned
             if bar is not None:
                 bar.update(1)
             # one pass needs no starting values: rows are not checked against them, nor its
             # log-likelihood (the one at the fitted values is taken below)
             ll, stats = self.e_step(params, strict=self.iterative)
-            objective = ll + self.log_prior(params) if self.iterative else 0.0
+            if self.iterative:
+                objectives.append(ll + self.log_prior(params))
             params = self.m_step(params, stats)
             if not self.iterative:
                 break
-            if abs(objective - previous) <= tol * max(abs(objective), 1.0):
-                converged = True
+            stop = stopping(objectives, rows, tol)
+            if stop.converged:
                 break
-            previous = objective
         if bar is not None:
             bar.close()
-        ll, stats = self.e_step(params)
+        if not self.iterative:  # complete rows: the statistics do not depend on the values
+            ll, stats = self.e_step(params)
+        else:
+            ll, _ = self.e_step(params)
+            if not stop.converged:
+                stop = Stop(False, f"the {max_iter} iterations allowed were made (max_iter): "
+                                   f"{stop.why}")
         total = {i.term.label: self._merged(i, stats[i.term.label]) for i in self.todo}
-        return params, ll, iterations, converged, total
+        return Run(params, ll, iterations, stop, total)
 
     def log_prior(self, params: dict[str, Params]) -> float:
         return sum(i.estimator.log_prior(i.term, params[i.term.label], i.options)

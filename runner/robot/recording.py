@@ -25,7 +25,7 @@ from typing import IO
 import numpy as np
 
 from bayesprog import BayesprogError, short_repr
-from runner.robot.session import checked_cell, json_object
+from runner.robot.session import Refused, checked_cell, screened
 from runner.world.readings import ReadingError, shown
 from runner.world.scenario import Scenario
 
@@ -34,10 +34,12 @@ RECORD_KEYS = frozenset({"material", "cell", "readings"})
 
 
 class Recorder:
-    """Writes the presses of a lab's sensor on ``scenario`` to ``out`` as recordings."""
+    """Writes the presses of a lab's sensor on ``scenario`` to ``out`` as recordings; with a
+    ``secret``, only the lines that carry it (as the explorer's session takes them)."""
 
-    def __init__(self, scenario: Scenario, out: Path):
+    def __init__(self, scenario: Scenario, out: Path, secret: str | None = None):
         self.scenario = scenario
+        self.secret = secret
         self.perception = scenario.readings
         self.out = out
         dims = scenario.dims
@@ -59,12 +61,13 @@ class Recorder:
         if not line.strip():
             return None
         try:
-            return self._record(line)
+            return self._record(screened(line, self.secret, self.line_no, "nothing recorded"))
+        except Refused as refused:
+            return refused.reply
         except (ValueError, BayesprogError) as exc:
             return {"error": f"line {self.line_no}: {exc}"}
 
-    def _record(self, line: str) -> dict:
-        obj = json_object(line)
+    def _record(self, obj: dict) -> dict:
         names = self.perception.names
         beside = {k: v for k, v in obj.items() if k in names}
         extra = sorted(set(obj) - RECORD_KEYS - set(beside))

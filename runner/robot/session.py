@@ -48,6 +48,7 @@ import bayesprog
 from bayesprog import BayesprogError, short_repr
 from runner.attention.explorer import Explorer
 from runner.experiments.loop import decision_seed
+from runner.robot.secret import REFUSED, take_secret
 from runner.world.readings import Perception, Readings, shown
 
 if TYPE_CHECKING:
@@ -104,7 +105,10 @@ class Session:
     """One exploration of ``explorer`` (one run) answered line by line.
 
     ``seed`` is the seed of the decisions' tie breaking until a reset names another. Lines are
-    numbered from 1 as they arrive, blank ones included (they get no reply).
+    numbered from 1 as they arrive, blank ones included (they get no reply). With a ``secret``
+    (:mod:`runner.robot.secret`), a line is answered only when it carries it (``"secret"``);
+    any other, a malformed one included, is refused with ``"refused": "secret"`` beside its
+    error and changes nothing.
 
     >>> from runner.world.scenario import load_scenario
     >>> session = Session(Explorer(load_scenario("models/scenarios/paper.yaml"), "T2"))
@@ -120,8 +124,10 @@ class Session:
     """
 
     def __init__(self, explorer: Explorer, seed: int = 0, frame: str = "workspace",
-                 log: SessionLog | None = None):
+                 log: SessionLog | None = None, secret: str | None = None):
         self.explorer = explorer
+        #: the word every line must carry (None: lines carry none)
+        self.secret = secret
         #: where every probe is written, when asked (``--log``)
         self.log = log
         #: the frame the workspace's positions are given in (a reset's reply names it)
@@ -240,12 +246,13 @@ class Session:
         if not line.strip():
             return None
         try:
-            return self._answer(line)
+            return self._answer(screened(line, self.secret, self.line_no))
+        except Refused as refused:
+            return refused.reply
         except (ValueError, BayesprogError) as exc:
             return {"error": f"line {self.line_no}: {exc}"}
 
-    def _answer(self, line: str) -> dict:
-        obj = json_object(line)
+    def _answer(self, obj: dict) -> dict:
         if "reset" in obj:
             return self._reset(obj)
         self._check_holder(obj)
@@ -429,6 +436,33 @@ def checked_cell(cell: object, shape: tuple[int, ...], what: str = "cell") -> li
         raise ValueError(f"cell {_short(cell)} is outside the {' x '.join(map(str, shape))} "
                          "grid")
     return list(cell)
+
+
+class Refused(Exception):
+    """A line answered with ``reply`` alone: malformed, or without the explorer's secret."""
+
+    def __init__(self, reply: dict):
+        super().__init__(reply["error"])
+        self.reply = reply
+
+
+def screened(line: str, secret: str | None, line_no: int, unchanged: str = "nothing changed"
+             ) -> dict:
+    """Line ``line_no`` as the JSON object it must be, its ``"secret"`` checked against
+    ``secret`` and taken off (:func:`runner.robot.secret.take_secret`); else :class:`Refused`
+    with the reply, which says ``"refused": "secret"`` when the explorer has a secret (a
+    malformed line does not show it either)."""
+    try:
+        obj = json_object(line)
+    except ValueError as exc:
+        why = str(exc)
+    else:
+        refusal = take_secret(obj, secret)
+        if refusal is None:
+            return obj
+        why = f"{refusal} ({unchanged})"
+    reply = {"error": f"line {line_no}: {why}"}
+    raise Refused(reply if secret is None else {**reply, "refused": REFUSED})
 
 
 def json_object(line: str) -> dict:

@@ -34,10 +34,10 @@ def _lines(stdin: IO[str] | Iterable[str]) -> Iterator[str]:
 
 
 def serve(explorer: Explorer, stdin: IO[str] | Iterable[str], stdout: IO[str], seed: int = 0,
-          log: SessionLog | None = None) -> int:
-    """Answer probes until end of input, each written to ``log`` when given. Returns the
-    number of probes answered."""
-    session = Session(explorer, seed, log=log)
+          log: SessionLog | None = None, secret: str | None = None) -> int:
+    """Answer probes until end of input, each written to ``log`` when given (with a
+    ``secret``, only lines that carry it). Returns the number of probes answered."""
+    session = Session(explorer, seed, log=log, secret=secret)
     answered = 0
     for line in _lines(stdin):
         reply = session.answer(line)

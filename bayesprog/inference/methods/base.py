@@ -52,8 +52,13 @@ class Method:
     """One way of answering questions. Subclasses set ``name`` and implement both methods."""
 
     name: ClassVar[str] = ""
+    #: how an answer names the method (the text output's header): ``name`` when empty
+    title: ClassVar[str] = ""
     #: whether the answers are exact (else they carry an error estimate)
     exact: ClassVar[bool] = True
+    #: what the +- of an approximate answer is: ``"stderr"``, a standard error (sampling);
+    #: ``"bound"``, an estimated bound of its error (a discretisation); None: none is given
+    uncertainty: ClassVar[str | None] = None
     #: whether it answers questions with unknown continuous variables (searched ones, or
     #: parents of a relevant term); the discrete methods do not
     continuous: ClassVar[bool] = False
@@ -99,6 +104,19 @@ class Method:
         """The answer (a density when the searched variables are real), or None when some rows
         need another method (the next cheapest)."""
         raise NotImplementedError
+
+    def describe(self, answer: Any) -> str:
+        """How an approximate ``answer`` was made and what its +- is, as the text output says
+        it after the question: the method's title, then the meaning of the +-."""
+        return (self.title or self.name) + {
+            "stderr": ": +- one standard error",
+            "bound": ": +- an estimated bound of its error"}.get(self.uncertainty or "", "")
+
+
+def method_named(name: str) -> Method | None:
+    """The registered method called ``name``; None for the other answers (the recursions of
+    questions over steps, a particle filter)."""
+    return registered_methods().get(name)
 
 
 def answer(plan: QuestionPlan, probabilities: np.ndarray, log_evidence: np.ndarray,

@@ -36,7 +36,12 @@ BLOCK = 256
 @register_method
 class GibbsSampling(Method):
     name = "gibbs"
+    title = "Gibbs sampling"
     exact = False
+    uncertainty = "stderr"
+
+    def describe(self, answer: Any) -> str:
+        return f"{self.title}: +- one standard error, from batch means"
 
     def why_not(self, plan: QuestionPlan) -> str | None:
         if plan.latent:
@@ -93,6 +98,7 @@ class GibbsSampling(Method):
         probs = np.where(possible[:, None], probs, 0.0)
         log_z = np.where(possible, np.nan, -np.inf)
         return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=ess,
+                      uncertainty=self.uncertainty,
                       evidence="not estimated by Gibbs sampling")
 
 

@@ -39,9 +39,17 @@ DEFAULT_BINS = 128
 @register_method
 class GridMethod(Method):
     name = "grid"
+    title = "on a grid"
     exact = False
     continuous = True
     fallback = True
+    uncertainty = "bound"
+
+    def describe(self, answer: Any) -> str:
+        bins = ", ".join(f"{n} bins for {v}" for v, n in answer.resolution.items())
+        fewer = ", ".join(str(n // 2) for n in answer.resolution.values())
+        return (f"{self.title} of {bins}: +- an estimated bound of the discretisation error, the "
+                f"change from {fewer} bins")
 
     def why_not(self, plan: QuestionPlan) -> str | None:
         if not plan.latent:
@@ -69,7 +77,9 @@ class GridMethod(Method):
         fine = contract_question(_derived_plan(plan, 2 * n))
         if not plan.searched or plan.searched[0] not in plan.latent:
             fine.method = "grid"
-            fine.stderr = np.abs(fine.probabilities - coarse.probabilities)
+            fine.error = np.abs(fine.probabilities - coarse.probabilities)
+            fine.uncertainty = self.uncertainty
+            fine.resolution = {v: 2 * n for v in plan.latent}
             return fine
         answers = [_density(plan, p, m) for p, m in ((coarse, n), (fine, 2 * n))]
         error: dict[str, dict[str, np.ndarray]] = {"mean": {}, "sd": {}, "map": {},
@@ -85,6 +95,7 @@ class GridMethod(Method):
             error["quantiles"][v] = np.abs(b.quantile(v, q) - a.quantile(v, q)).max(-1)
         result = answers[1]
         result.error = error
+        result.uncertainty = self.uncertainty
         return result
 
 

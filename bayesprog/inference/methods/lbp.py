@@ -33,7 +33,12 @@ EXPECTED_ITERATIONS = 25
 @register_method
 class LoopyBeliefPropagation(Method):
     name = "lbp"
+    title = "loopy belief propagation"
     exact = False
+
+    def describe(self, answer: Any) -> str:
+        return (f"{self.title}: {answer.iterations} sweeps, last change "
+                f"{answer.residual:.2g}; no error estimate")
     ablates_rows = True
 
     def estimate(self, plan: QuestionPlan) -> Cost | None:
@@ -62,7 +67,9 @@ class LoopyBeliefPropagation(Method):
         tolerance = plan.options.get("tolerance", TOLERANCE)
         beliefs, residual, done = _propagate(tables, variables, card, rows, iterations, tolerance)
         home = next((i for i, (axes, _) in enumerate(tables) if set(searched) <= set(axes)), None)
-        if len(searched) == 1:
+        if not searched:  # the evidence's probability alone (every variable known or summed)
+            probs = np.ones(rows)
+        elif len(searched) == 1:
             probs = beliefs["var"][searched[0]]
         elif home is not None:
             probs = beliefs["factor"](home, searched)

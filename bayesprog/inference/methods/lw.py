@@ -25,7 +25,9 @@ DEFAULT_SAMPLES = 10_000
 @register_method
 class LikelihoodWeighting(Method):
     name = "lw"
+    title = "likelihood weighting"
     exact = False
+    uncertainty = "stderr"
     continuous = True
     fallback = True
 
@@ -70,4 +72,5 @@ class LikelihoodWeighting(Method):
         stderr = np.sqrt(np.maximum(variance, 0.0))
         with np.errstate(divide="ignore"):
             log_z = special.logsumexp(draws.log_weights, axis=1) - np.log(n)
-        return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=draws.ess)
+        return answer(plan, probs, log_z, method=self.name, stderr=stderr, ess=draws.ess,
+                      uncertainty=self.uncertainty)

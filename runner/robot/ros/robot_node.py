@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, TransformStamped
@@ -25,6 +26,8 @@ from runner.experiments.log import SessionLog
 from runner.experiments.loop import make_sensor, reading_seed, start_cell
 from runner.experiments.metrics import BorderDistance, moves
 from runner.robot.ros.explorer_node import LATCHED, PROBES, STREAM
+from runner.robot.secret import KEY as SECRET_KEY
+from runner.robot.secret import REFUSED
 from runner.robot.session import probe_line
 from runner.world.physics import ProbeSpec
 from runner.world.readings import Readings, shown
@@ -46,6 +49,8 @@ class RobotOptions:
     frame: str = "workspace"
     #: where every probe and its answer are written, when asked (``--log``)
     log: SessionLog | None = None
+    #: the explorer's secret, sent with every line (``--secret FILE``)
+    secret: str | None = None
 
 
 @dataclass
@@ -67,8 +72,9 @@ POSE_DELIVERY = 0.3
 class RobotNode(Node):
     """A simulated robot on ``scenario``; :meth:`advance` drives it from a spin loop."""
 
-    def __init__(self, scenario: Scenario, options: RobotOptions, namespace: str = "/bayesprog"):
-        super().__init__("bayesprog_robot", namespace=namespace)
+    def __init__(self, scenario: Scenario, options: RobotOptions, namespace: str = "/bayesprog",
+                 **node_options: Any):
+        super().__init__("bayesprog_robot", namespace=namespace, **node_options)
         self.scenario, self.options = scenario, options
         seed, run = options.seed, options.run
         self.sensor = make_sensor(scenario, [reading_seed(seed, run)], options.physics)
@@ -87,6 +93,7 @@ class RobotNode(Node):
         #: our probes not answered yet, by step: the cell, its readings and when it was sent
         self._pending: dict[int, tuple[list[int], Readings, float]] = {}
         self._ready = False  # the explorer answered the reset
+        self._refusals = 0  # replies that refused a line for its secret (anyone's)
         self._waiting_since = time.monotonic()
         self._created = time.monotonic()
         self.done = False
@@ -114,9 +121,9 @@ class RobotNode(Node):
             return now - self._matched_at >= POSE_DELIVERY
         return now - self._done_at >= POSE_LINGER
 
-    def reset_line(self) -> str:
+    def reset_line(self) -> dict:
         """A new session that decides as the robot's run of an experiment does."""
-        return json.dumps({"reset": {"seed": self.options.seed, "run": self.options.run}})
+        return {"reset": {"seed": self.options.seed, "run": self.options.run}}
 
     def advance(self) -> None:
         """Called between spins: find the explorer, reset it, watch the time."""
@@ -139,7 +146,7 @@ class RobotNode(Node):
                 self._reset_sent = now
             if now - self._created > self.options.timeout:
                 self.fail(f"the explorer on {self.probe.topic_name} does not answer its reset "
-                          f"after {self.options.timeout:g} s")
+                          f"after {self.options.timeout:g} s" + self.refusals_seen())
             return
         if now - self._waiting_since > self.options.timeout:
             if len(self.outcome.cells) >= self.options.steps:
@@ -157,6 +164,11 @@ class RobotNode(Node):
         except ValueError:
             return
         if not isinstance(reply, dict):
+            return
+        if reply.get("refused") == REFUSED:
+            # a line without the explorer's secret: a stranger's (ours carry it), or all of
+            # ours if our secret is not the explorer's (then our reset is never answered)
+            self._refusals += 1
             return
         k = reply.get("k")
         if isinstance(k, int) and not isinstance(k, bool) and k in self._pending:
@@ -196,8 +208,8 @@ class RobotNode(Node):
         self.outcome.cells.append(flat)
         k = len(self.outcome.cells) - 1
         # the step it answers: a late or repeated message is refused, never taken as another
-        self.send(json.dumps(probe_line([int(i) for i in cell], readings, k=k,
-                                        perception=self.scenario.readings)))
+        self.send(probe_line([int(i) for i in cell], readings, k=k,
+                             perception=self.scenario.readings))
         self._waiting_since = time.monotonic()
         self._pending[k] = ([int(i) for i in cell], readings, self._waiting_since)
 
@@ -235,8 +247,20 @@ class RobotNode(Node):
         pose.transform.rotation.w = 1.0
         self.fingertip.publish(pose)
 
-    def send(self, line: str) -> None:
-        self.probe.publish(String(data=line))
+    def send(self, line: dict) -> None:
+        if self.options.secret is not None:
+            line = {**line, SECRET_KEY: self.options.secret}
+        self.probe.publish(String(data=json.dumps(line)))
+
+    def refusals_seen(self) -> str:
+        """What the replies refused for their secret say of the explorer, for a message."""
+        if not self._refusals:
+            return ""
+        if self.options.secret is None:
+            return (f" (it refused {self._refusals} line(s) without its secret: it was started "
+                    "with --secret FILE; give the robot --secret FILE too)")
+        return (f" (it refused {self._refusals} line(s) for their secret: is --secret the file "
+                "the explorer was started with?)")
 
     def fail(self, why: str) -> None:
         self.outcome.error = why

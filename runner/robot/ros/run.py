@@ -8,10 +8,11 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from bayesprog import BayesprogError
-from runner.robot.ros import require
+from runner.robot.ros import require, security
 
 #: set by SIGINT or SIGTERM once :func:`catch_signals` has run: the node then ends cleanly
 STOP = threading.Event()
@@ -25,15 +26,16 @@ def catch_signals() -> None:
 
 
 @contextmanager
-def _ros() -> Iterator[threading.Event]:
-    """rclpy started without its own signal handlers (ours set :data:`STOP`)."""
+def _ros(args: list[str] | None = None) -> Iterator[threading.Event]:
+    """rclpy started without its own signal handlers (ours set :data:`STOP`), with ``args``
+    (the enclave of ``--secure``)."""
     require()
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     catch_signals()
     try:
-        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=args or [], signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # rclpy's RCLError and kin: the middleware refused to start
         raise BayesprogError(f"cannot start ROS 2: {exc}") from None
     try:
@@ -43,13 +45,23 @@ def _ros() -> Iterator[threading.Event]:
 
 
 def _node(make: Callable[[], Any]) -> Any:
-    """A node from ``make``, a bad namespace or name reported as a user error."""
+    """A node from ``make``, a bad namespace or name reported as a user error, and so is the
+    middleware's refusal of a secured node."""
     from rclpy.exceptions import InvalidNamespaceException, NameValidationException
 
     try:
         return make()
     except (InvalidNamespaceException, NameValidationException) as exc:
         raise BayesprogError(f"--namespace: {exc}") from None
+    except RuntimeError as exc:  # rclpy's RCLError: the participant was not created
+        if security.enabled():
+            raise security.refusal(exc) from None
+        raise
+
+
+def _secured(keystore: Path | None, enclave: str) -> list[str]:
+    """rclpy's arguments for ``--secure KEYSTORE`` (none without it)."""
+    return security.secure(keystore, enclave) if keystore is not None else []
 
 
 def _spin(node: Any, stop: threading.Event, until: Callable[[], bool] = lambda: False,
@@ -68,16 +80,19 @@ def _spin(node: Any, stop: threading.Event, until: Callable[[], bool] = lambda: 
         node.destroy_node()
 
 
-def explore(session: Any, namespace: str, frame: str) -> int:
-    """Serve ``session`` as ``bayesprog_explorer`` until SIGINT or SIGTERM."""
-    with _ros() as stop:
+def explore(session: Any, namespace: str, frame: str, secure: Path | None = None) -> int:
+    """Serve ``session`` as ``bayesprog_explorer`` until SIGINT or SIGTERM (with ``secure``, a
+    keystore, under DDS Security)."""
+    with _ros(_secured(secure, security.EXPLORER_ENCLAVE)) as stop:
         from runner.robot.ros.explorer_node import ExplorerNode
 
         node = _node(lambda: ExplorerNode(session, namespace=namespace, frame=frame))
         e, name = session.explorer, node.get_fully_qualified_name()
         print(f"{name}: task {e.task} of {e.scenario.name} "
               f"({' x '.join(map(str, e.scenario.shape))} cells of {e.scenario.cell:g} m), "
-              f"probes on {node.get_namespace().rstrip('/')}/probe, frame {frame!r}",
+              f"probes on {node.get_namespace().rstrip('/')}/probe, frame {frame!r}"
+              + (", lines with its secret only" if session.secret is not None else "")
+              + (", DDS Security enforced" if security.enabled() else ""),
               file=sys.stderr, flush=True)
         _spin(node, stop)
         print(f"{name}: stopped after {node.answered} probe(s)",
@@ -85,9 +100,10 @@ def explore(session: Any, namespace: str, frame: str) -> int:
     return 0
 
 
-def record(recorder: Any, namespace: str) -> int:
-    """Record the presses sent to ``bayesprog_recorder`` until SIGINT or SIGTERM."""
-    with _ros() as stop:
+def record(recorder: Any, namespace: str, secure: Path | None = None) -> int:
+    """Record the presses sent to ``bayesprog_recorder`` until SIGINT or SIGTERM (with
+    ``secure``, in the explorer's enclave of that keystore)."""
+    with _ros(_secured(secure, security.EXPLORER_ENCLAVE)) as stop:
         from runner.robot.ros.recorder_node import RecorderNode
 
         node = _node(lambda: RecorderNode(recorder, namespace=namespace))
@@ -100,9 +116,11 @@ def record(recorder: Any, namespace: str) -> int:
     return 0
 
 
-def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False) -> int:
-    """Drive an explorer with the simulated robot; print the run's Gamma and path length."""
-    with _ros() as stop:
+def robot(scenario: Any, options: Any, namespace: str, as_json: bool = False,
+          secure: Path | None = None) -> int:
+    """Drive an explorer with the simulated robot; print the run's Gamma and path length
+    (with ``secure``, a keystore, in the driver's enclave)."""
+    with _ros(_secured(secure, security.DRIVER_ENCLAVE)) as stop:
         from runner.robot.ros.robot_node import RobotNode
 
         node = _node(lambda: RobotNode(scenario, options, namespace=namespace))
