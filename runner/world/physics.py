@@ -135,9 +135,9 @@ DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(
 #: the approach: from this gap above the surface (m) at this speed (m/s); then the z axis's
 #: own damping (N s/m)
 APPROACH_GAP = 1e-4
-#: the steps a batch of presses is rolled on at a time while pressing, each press's contact
-#: set again in between where its depth changed (the stroke's follow its path: :func:`segments`)
-PRESSING = 4
+#: the steps a batch of presses is rolled on at a time while pressing and while stroking, each
+#: press's contact set again in between where it moved (:func:`segments`)
+PRESSING, STROKING = 2, 1
 #: the most presses rolled side by side (each has its model's copy and its readings in memory)
 BATCH = 128
 #: the most threads MuJoCo rolls a batch of presses on (in a process of its own: one in an
@@ -427,21 +427,36 @@ def vibration_power(tangential: np.ndarray, band: tuple[float, float]) -> float:
     x = np.asarray(tangential, float)
     if x.size < 4:
         return float("nan")
-    size = min(VIBRATION_SEGMENT, x.size)
-    step = size - size // 2
-    starts = np.arange(0, x.size - size + 1, step)
-    segments = x[starts[:, None] + np.arange(size)]
-    ramp = np.arange(size) - (size - 1) / 2
+    index, ramp, slope_scale, window, scale, inside, spacing = _welch_plan(
+        x.size, (float(band[0]), float(band[1])))
+    segments = x[index]
     segments = (segments - segments.mean(axis=1, keepdims=True)
-                - np.outer(segments @ ramp / (ramp @ ramp), ramp))
-    window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(size) / size)  # periodic Hann
-    fs = 1 / TIMESTEP
-    density = np.abs(np.fft.rfft(segments * window, axis=1)) ** 2 / (fs * (window @ window))
+                - np.outer(segments @ ramp / slope_scale, ramp))
+    density = np.abs(np.fft.rfft(segments * window, axis=1)) ** 2 / scale
+    size = window.size
     density[:, 1:(size + 1) // 2] *= 2  # one-sided: each frequency but 0 and fs / 2 twice
     density = density.mean(axis=0)
+    return float(density[inside].sum() * spacing)
+
+
+@functools.lru_cache(maxsize=16)
+def _welch_plan(samples: int, band: tuple[float, float]) -> tuple:
+    """What :func:`vibration_power` computes of ``samples`` samples before reading them (the
+    segments' indices, the ramp a line is fitted on, the periodic Hann window, the density's
+    scale, the band's frequencies and their spacing), once per length and band."""
+    size = min(VIBRATION_SEGMENT, samples)
+    step = size - size // 2
+    starts = np.arange(0, samples - size + 1, step)
+    index = starts[:, None] + np.arange(size)
+    ramp = np.arange(size) - (size - 1) / 2
+    window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(size) / size)  # periodic Hann
+    fs = 1 / TIMESTEP
     frequency = np.fft.rfftfreq(size, TIMESTEP)
     inside = (frequency >= band[0]) & (frequency <= band[1])
-    return float(density[inside].sum() * (frequency[1] - frequency[0]))
+    for kept in (index, ramp, window, inside):  # shared by every call: read only
+        kept.flags.writeable = False
+    return (index, ramp, ramp @ ramp, window, fs * (window @ window), inside,
+            frequency[1] - frequency[0])
 
 
 def electrode_spread(compressions: np.ndarray) -> float:
@@ -758,6 +773,9 @@ class Scene:
         control[:, :, 1] = y0[:, None]
         control[:, :, 2] = -spec.force
         models = self._pool(n)
+        # each model's contact pair, as arrays (views into the model)
+        solref = [m.pair_solref[0] for m in models]
+        friction = [m.pair_friction[0] for m in models]
         model = self.model
         scratch = mujoco.MjData(model)
         kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -784,8 +802,9 @@ class Scene:
             moved = self._contact_updates(x, y, depth, at, contact)
             for again in np.flatnonzero(moved):
                 k, b, mu = contact[again]
-                models[again].pair_solref[0] = (-k / (2 * TIP_MASS), -b / (2 * TIP_MASS))
-                models[again].pair_friction[0, :2] = mu
+                solref[again][0] = -k / (2 * TIP_MASS)
+                solref[again][1] = -b / (2 * TIP_MASS)
+                friction[again][:2] = mu
             nstep = stop - start
             rolled = np.empty((n, nstep, state.shape[1]))
             sensed = np.empty((n, nstep, model.nsensordata))
@@ -931,12 +950,10 @@ def rollout_threads() -> int:
 def segments(press_steps: int, stroke_steps: int, spec: ProbeSpec) -> list[int]:
     """The steps at which a batch of presses is stopped for each press's contact to be set
     again where it moved (:meth:`Scene.probes`), first and last step included: every
-    :data:`PRESSING` steps while pressing, and along the stroke every time its planned path
-    has gone half a relief sample."""
+    :data:`PRESSING` steps while pressing, every :data:`STROKING` steps while stroking (where
+    a soft surface's depth changes as often as the relief under the fingertip)."""
     bounds = list(range(0, press_steps, PRESSING))
-    advance = spec.stroke / max(stroke_steps - 1, 1)  # per step along the stroke
-    every = int(np.clip(np.floor(RELIEF_SPACING / 2 / advance) + 1, 1, PRESSING * 4))
-    bounds += list(range(press_steps, press_steps + stroke_steps, every))
+    bounds += list(range(press_steps, press_steps + stroke_steps, STROKING))
     return [*bounds, press_steps + stroke_steps]
 
 
