@@ -135,12 +135,9 @@ DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(
 #: the approach: from this gap above the surface (m) at this speed (m/s); then the z axis's
 #: own damping (N s/m)
 APPROACH_GAP = 1e-4
-#: the steps a batch of presses is rolled on at a time while pressing and while stroking, each
-#: press's contact set again in between where it moved (:func:`segments`)
-PRESSING, STROKING = 2, 1
-#: the most presses rolled side by side (each has its model's copy and its readings in memory)
+#: the most presses stepped in one batch (their readings per step are in memory together)
 BATCH = 128
-#: the most threads MuJoCo rolls a batch of presses on (in a process of its own: one in an
+#: the most threads a batch of presses is stepped on (in a process of its own: one in an
 #: experiment's worker process, whose cores the other workers take)
 ROLLOUT_THREADS = 2
 APPROACH_SPEED = 0.002
@@ -741,19 +738,15 @@ class Scene:
     def probes(self, cells: np.ndarray, rngs: Sequence[np.random.Generator],
                threads: int | None = None) -> list[Probe]:
         """One press, stroke and lift per cell of ``cells`` (flat), press i's positioning error
-        and noise drawn from ``rngs[i]``, side by side: MuJoCo rolls every press on a few
-        steps at a time in C (:func:`mujoco.rollout.rollout`, over ``threads`` threads), each
-        press with its own copy of the model, and stops a press's steps where its contact is
-        to be set again (:meth:`contact`, as the fingertip moves: the rule
-        :meth:`probe_stepwise` applies at every step), so that a press is the same whatever
-        others share its batch (its steps start from its own state, with no solver warm start
-        carried from another press)."""
-        import mujoco
-        from mujoco import rollout
-
+        and noise drawn from ``rngs[i]``: the presses of the batch are stepped in compiled code
+        (MuJoCo's ``mj_step`` called from a loop with no Python between the steps), over
+        ``threads`` threads (:func:`rollout_threads` unless given), each thread with its copy
+        of the model and its data. Each press starts from MuJoCo's reset state and sets its
+        contact at every step it is due, as :meth:`probe_stepwise` does, so that a press is
+        the same whatever others share its batch or thread."""
         cells = np.asarray(cells, dtype=np.intp).ravel()
         n, spec = len(cells), self.spec
-        if n > BATCH:  # a bounded batch at a time: its models, states and readings
+        if n > BATCH:  # a bounded batch at a time: its readings in memory
             return [probe for lo in range(0, n, BATCH)
                     for probe in self.probes(cells[lo:lo + BATCH], rngs[lo:lo + BATCH], threads)]
         if n == 0:
@@ -764,92 +757,56 @@ class Scene:
         y0 = (iy + 0.5) * self.cell + error[:, 1]
         press_steps = int(round(spec.press / TIMESTEP))
         stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
-        steps = press_steps + stroke_steps
         path = np.concatenate([np.zeros(press_steps), np.linspace(0, spec.stroke, stroke_steps)])
-        # the controls of every step (the x stage's target along the planned stroke, the y
-        # stage's, the press's force), padded past the last step for the last segment
-        control = np.empty((n, steps, 3))
-        control[:, :, 0] = x0[:, None] + path
-        control[:, :, 1] = y0[:, None]
-        control[:, :, 2] = -spec.force
-        models = self._pool(n)
-        # each model's contact pair, as arrays (views into the model)
-        solref = [m.pair_solref[0] for m in models]
-        friction = [m.pair_friction[0] for m in models]
-        model = self.model
-        scratch = mujoco.MjData(model)
-        kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        state = np.empty((n, mujoco.mj_stateSize(model, kind)))
-        for i in range(n):
-            mujoco.mj_resetData(model, scratch)
-            scratch.qpos[:] = (x0[i], y0[i], spec.radius + APPROACH_GAP)
-            mujoco.mj_getState(model, scratch, state[i], kind)
-            models[i].dof_damping[2] = spec.force / APPROACH_SPEED
-        datas = self._datas(threads)
-        readings = np.empty((n, steps, model.nsensordata))
-        at = np.full((n, 3), np.inf)  # where each press's contact was last set
-        contact = np.empty((n, 3))  # and what it was set to
-        touching = np.zeros(n, dtype=bool)
-        last_touch = np.zeros(n)  # the touch sensor after the step before
-        bounds = segments(press_steps, stroke_steps, spec)
-        for start, stop in zip(bounds[:-1], bounds[1:], strict=True):
-            # at the start of a segment, every press's contact as probe_stepwise sets it
-            x, y, z = (state[:, 1 + j] for j in range(3))
-            depth = spec.radius - z
-            for onset in np.flatnonzero(~touching & (last_touch > 0)):
-                models[onset].dof_damping[2] = Z_DAMPING
-            touching |= last_touch > 0
-            moved = self._contact_updates(x, y, depth, at, contact)
-            for again in np.flatnonzero(moved):
-                k, b, mu = contact[again]
-                solref[again][0] = -k / (2 * TIP_MASS)
-                solref[again][1] = -b / (2 * TIP_MASS)
-                friction[again][:2] = mu
-            nstep = stop - start
-            rolled = np.empty((n, nstep, state.shape[1]))
-            sensed = np.empty((n, nstep, model.nsensordata))
-            rollout.rollout(models, datas, state, np.ascontiguousarray(control[:, start:stop]),
-                            nstep=nstep, initial_warmstart=np.zeros((n, model.nv)),
-                            state=rolled, sensordata=sensed, skip_checks=True)
-            readings[:, start:stop] = sensed
-            state = np.ascontiguousarray(rolled[:, -1])
-            last_touch = sensed[:, -1, 0]
+        readings = np.empty((n, path.size, self.model.nsensordata))
+        wanted = max(1, min(int(threads if threads is not None else rollout_threads()), n))
+        chunks = np.array_split(np.arange(n), wanted)
+        workers = self._workers(wanted)
+        if wanted == 1:
+            self._press(workers[0], x0, y0, path, readings)
+        else:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(wanted) as pool:  # the loop lets go of the GIL
+                list(pool.map(lambda w, part: self._press(w, x0[part], y0[part], path,
+                                                          readings[part[0]:part[-1] + 1]),
+                              workers, chunks))
         return [self._probe_of(readings[i], rngs[i], float(x0[i]), float(y0[i]), press_steps)
                 for i in range(n)]
 
-    def _pool(self, n: int) -> list[Any]:
-        """``n`` copies of the model, one per press of a batch (kept: their contact and damping
-        are set again by every press)."""
+    def _workers(self, count: int) -> list[tuple[Any, Any, np.ndarray]]:
+        """``count`` copies of the model, each with a data and the addresses of the arrays the
+        compiled loop reads and writes (kept: each press sets again what it changes)."""
         import copy
 
-        pool = self.__dict__.setdefault("_models", [])
-        while len(pool) < n:
-            pool.append(copy.copy(self.model))
-        return pool[:n]
-
-    def _datas(self, threads: int | None) -> list[Any]:
         import mujoco
 
-        wanted = max(1, int(threads if threads is not None else rollout_threads()))
-        datas = self.__dict__.setdefault("_rollout_datas", [])
-        while len(datas) < wanted:
-            datas.append(mujoco.MjData(self.model))
-        return datas[:wanted]
+        workers = self.__dict__.setdefault("_press_workers", [])
+        while len(workers) < count:
+            model = copy.copy(self.model)
+            data = mujoco.MjData(model)
+            fields = np.array([a.ctypes.data for a in (
+                data.qpos, data.ctrl, data.sensordata, model.pair_solref, model.pair_friction,
+                model.dof_damping)], dtype=np.int64)
+            workers.append((model, data, fields))
+        return workers[:count]
 
-    def _contact_updates(self, x: np.ndarray, y: np.ndarray, depth: np.ndarray,
-                         at: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Which presses at (``x``, ``y``) pressed ``depth`` in must have their contact, last
-        set at ``at`` (x, y, depth), set again (it moved half a relief sample along x, or its
-        depth changed by a twentieth, as :meth:`probe_stepwise` sets it): for those, ``out`` gets
-        :meth:`contact` there and ``at`` the new place (a compiled loop over the batch)."""
-        from runner.world._contact import contact_updates
+    def _press(self, worker: tuple[Any, Any, np.ndarray], x0: np.ndarray, y0: np.ndarray,
+               path: np.ndarray, readings: np.ndarray) -> None:
+        """The presses from (``x0``, ``y0``) on one worker (:meth:`_workers`), their sensors
+        per step into ``readings``."""
+        from runner.world._contact import mujoco_library, press_batch
 
+        step, reset = mujoco_library()
+        model, data, fields = worker
+        spec = self.spec
         nx, ny = self.material_map.shape
-        return contact_updates(
-            np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(depth), at,
-            RELIEF_SPACING / 2, self.spec.radius, self.cell, nx, ny, DISC, self.cell_contact,
-            self._cell_material, self.variant, self._slope_table, RELIEF_SPACING,
-            self.samples, MIN_FRICTION, out)
+        press_batch(step, reset, model._address, data._address, fields, model.nsensordata,
+                    np.ascontiguousarray(x0), np.ascontiguousarray(y0),
+                    spec.radius + APPROACH_GAP, spec.force / APPROACH_SPEED, Z_DAMPING,
+                    spec.force, path, TIP_MASS, RELIEF_SPACING / 2, spec.radius, self.cell,
+                    nx, ny, DISC, self.cell_contact, self._cell_material, self.variant,
+                    self._slope_table, RELIEF_SPACING, self.samples, MIN_FRICTION, readings)
 
     @cached_property
     def _cell_material(self) -> np.ndarray:
@@ -945,16 +902,6 @@ def rollout_threads() -> int:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return max(1, min(ROLLOUT_THREADS, cores or 1))
-
-
-def segments(press_steps: int, stroke_steps: int, spec: ProbeSpec) -> list[int]:
-    """The steps at which a batch of presses is stopped for each press's contact to be set
-    again where it moved (:meth:`Scene.probes`), first and last step included: every
-    :data:`PRESSING` steps while pressing, every :data:`STROKING` steps while stroking (where
-    a soft surface's depth changes as often as the relief under the fingertip)."""
-    bounds = list(range(0, press_steps, PRESSING))
-    bounds += list(range(press_steps, press_steps + stroke_steps, STROKING))
-    return [*bounds, press_steps + stroke_steps]
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int

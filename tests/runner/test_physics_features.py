@@ -288,22 +288,30 @@ def test_the_sensor_reads_probes_made_elsewhere(paper_physics):
     assert PhysicsSensor(scene, []).readings([]).values.shape == (0, 2)
 
 
-def test_presses_side_by_side_set_each_contact_by_the_stepwise_rule(paper_physics, monkeypatch):
-    """Stopped at every step, the batched presses are the stepwise ones (to the solver's
-    warm start, which a batch does not carry from one stop to the next): the machinery that
-    rolls them side by side and sets each press's contact where it moved is the rule of
-    probe_stepwise."""
-    from runner.world import physics
-
+@pytest.mark.parametrize("threads", [1, 2])
+def test_presses_in_a_batch_are_the_stepwise_presses_bit_for_bit(paper_physics, threads):
+    """The compiled loop steps each press of a batch as probe_stepwise does from Python (the
+    contact set again at every step it is due, MuJoCo's own steps): the same traces and
+    features to the last bit, on one thread or two."""
     scene = paper_physics.physics_scene()
     cells = [940, 912, 896, 400, 1250]
-    monkeypatch.setattr(physics, "segments", lambda press, stroke, spec: list(range(
-        press + stroke + 1)))
-    batched = scene.probes(np.array(cells), [np.random.default_rng([3, c]) for c in cells])
+    batched = scene.probes(np.array(cells), [np.random.default_rng([3, c]) for c in cells],
+                           threads=threads)
     for cell, probe in zip(cells, batched, strict=True):
         stepwise = scene.probe_stepwise(cell, np.random.default_rng([3, cell]))
-        for name, value in stepwise.features.items():
-            assert probe.features[name] == pytest.approx(value, rel=1e-6, abs=1e-12), name
+        assert probe.features == stepwise.features, cell
+        assert probe.at == stepwise.at
+        for key, trace in stepwise.traces.items():
+            np.testing.assert_array_equal(probe.traces[key], trace)
+
+
+def test_batched_texture_and_compliance_are_what_the_stepwise_presses_gave(paper_physics):
+    scene = paper_physics.physics_scene()
+    keys = list(MAIN_PROBES)
+    probes = scene.probes(np.array([cell for cell, _ in keys]),
+                          [np.random.default_rng(list(seed)) for _, seed in keys])
+    for key, probe in zip(keys, probes, strict=True):
+        assert (probe.texture, probe.compliance) == MAIN_PROBES[key], key
 
 
 def test_a_press_is_the_same_whatever_shares_its_batch(paper_physics):
