@@ -43,7 +43,9 @@ def per_probe(repeats: int) -> dict[str, float]:
     computed): side by side as one step of 60 runs makes them (on one thread, and on two), one
     at a time as ``robot --physics`` makes them, and driven from Python step by step (the
     reference); against the bare MuJoCo steps of as many presses (``mj_step`` called as often,
-    in C, without reading; the electrodes' distance sensors included)."""
+    in C, without reading, a fingertip resting on the surface; the electrodes' distance sensors
+    included), and against the same presses' own steps (the same start and controls, the
+    contact left as it is, rolled by ``mujoco.rollout``: what MuJoCo alone costs for them)."""
     import mujoco
 
     from runner.world.scenario import load_scenario
@@ -78,8 +80,31 @@ def per_probe(repeats: int) -> dict[str, float]:
             data.qpos[2] = scene.spec.radius
             mujoco.mj_step(scene.model, data, nstep=steps)
 
+    # the same presses' own steps: from the same start, under the same controls (the stage
+    # along the stroke, the press's force), the contact left as it is, rolled by MuJoCo in C
+    from mujoco import rollout
+
+    spec, model = scene.spec, scene.model
+    kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    ix, iy = np.unravel_index(cells, scene.material_map.shape)
+    x0, y0 = (ix + 0.5) * scene.cell - spec.stroke / 2, (iy + 0.5) * scene.cell
+    start_states = np.empty((len(cells), mujoco.mj_stateSize(model, kind)))
+    for i in range(len(cells)):
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = (x0[i], y0[i], spec.radius + 1e-4)
+        mujoco.mj_getState(model, data, start_states[i], kind)
+    press = int(round(spec.press / 0.001))
+    path = np.concatenate([np.zeros(press), np.linspace(0, spec.stroke, steps - press)])
+    controls = np.stack([x0[:, None] + path, np.repeat(y0[:, None], steps, axis=1),
+                         np.full((len(cells), steps), -spec.force)], axis=2)
+
+    def same_press() -> None:
+        rollout.rollout([model] * len(cells), [data], start_states, controls, nstep=steps,
+                        skip_checks=True)
+
     ways = {"batched_1_thread": lambda: batched(1), "batched_2_threads": lambda: batched(2),
-            "one_at_a_time": alone, "stepwise": stepwise, "bare": bare}
+            "one_at_a_time": alone, "stepwise": stepwise, "bare": bare,
+            "bare_same_press": same_press}
     times: dict[str, list[float]] = {name: [] for name in ways}
     batched(1)  # (the models' copies made once)
     for _ in range(repeats):  # interleaved: each repeat times every way once
@@ -88,10 +113,12 @@ def per_probe(repeats: int) -> dict[str, float]:
             way()
             times[name].append((time.perf_counter() - start) / len(cells))
     ms = {name: 1000 * float(np.median(t)) for name, t in times.items()}
-    out = {"scene_build_s": build, "steps_per_probe": steps, "bare_mujoco_steps_ms": ms["bare"]}
+    out = {"scene_build_s": build, "steps_per_probe": steps, "bare_mujoco_steps_ms": ms["bare"],
+           "bare_same_press_ms": ms["bare_same_press"]}
     for name in ("batched_1_thread", "batched_2_threads", "one_at_a_time", "stepwise"):
         out[f"{name}_ms"] = ms[name]
         out[f"{name}_ratio"] = ms[name] / ms["bare"]
+        out[f"{name}_ratio_same_press"] = ms[name] / ms["bare_same_press"]
     return out
 
 

@@ -34,6 +34,10 @@ def _doubles_at(typingctx: Any, address: Any) -> Any:
     return signature, codegen
 
 
+#: (for the type checker, which reads the intrinsic's typing signature as its call's)
+_array_at: Any = _doubles_at
+
+
 @functools.cache
 def mujoco_library() -> tuple[Any, Any]:
     """MuJoCo's ``mj_step`` and ``mj_resetData``, from the library the bindings loaded (the
@@ -99,10 +103,10 @@ def press_batch(step: Any, reset: Any, model: int, data: int, fields: np.ndarray
     ``readings[i, k]`` gets every sensor after step k. ``fields`` holds the addresses of the
     model's and the data's arrays the loop reads and writes: qpos, ctrl, sensordata (of the
     data), the contact pair's solref and friction, the joints' damping (of the model)."""
-    qpos, ctrl = carray(_doubles_at(fields[0]), 3), carray(_doubles_at(fields[1]), 3)
-    sensed = carray(_doubles_at(fields[2]), nsensordata)
-    solref, friction = carray(_doubles_at(fields[3]), 2), carray(_doubles_at(fields[4]), 2)
-    damping = carray(_doubles_at(fields[5]), 3)
+    qpos, ctrl = carray(_array_at(fields[0]), 3), carray(_array_at(fields[1]), 3)
+    sensed = carray(_array_at(fields[2]), nsensordata)
+    solref, friction = carray(_array_at(fields[3]), 2), carray(_array_at(fields[4]), 2)
+    damping = carray(_array_at(fields[5]), 3)
     for i in range(x0.size):
         reset(model, data)
         qpos[0], qpos[1], qpos[2] = x0[i], y0[i], start_height
