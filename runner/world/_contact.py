@@ -50,7 +50,11 @@ def mujoco_library() -> tuple[Any, Any]:
         sys.platform, ("libmujoco.so*",))
     found = sorted(path for pattern in patterns for path in folder.glob(pattern))
     if not found:
-        raise OSError(f"MuJoCo's library was not found beside its bindings in {folder}")
+        from bayesprog import BayesprogError
+
+        raise BayesprogError(f"MuJoCo's library was not found beside its Python bindings in "
+                             f"{folder}: reinstall the physics extra (pip install "
+                             "'bayesprog[physics]')")
     library = ctypes.CDLL(str(found[0]))
     functions = []
     for name in ("mj_step", "mj_resetData"):

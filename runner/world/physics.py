@@ -93,6 +93,7 @@ MuJoCo is the ``physics`` extra: it is imported when a scene is built, never bef
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -618,6 +619,19 @@ class Scene:
                        for name, p in self.properties.items()}
         self.variant = np.random.default_rng([spec.seed, 0xCE11]).integers(
             VARIANTS, size=self.material_map.size)
+        self._lock = threading.Lock()  # one batch of presses at a time on the scene's workers
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The scene without what MuJoCo built for it (built again where it is unpickled) and
+        without its lock."""
+        state = self.__dict__.copy()
+        for built in ("model", "data", "_press_workers", "_lock"):
+            state.pop(built, None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
 
     @cached_property
     def model(self) -> Any:
@@ -761,16 +775,17 @@ class Scene:
         readings = np.empty((n, path.size, self.model.nsensordata))
         wanted = max(1, min(int(threads if threads is not None else rollout_threads()), n))
         chunks = np.array_split(np.arange(n), wanted)
-        workers = self._workers(wanted)
-        if wanted == 1:
-            self._press(workers[0], x0, y0, path, readings)
-        else:
-            from concurrent.futures import ThreadPoolExecutor
+        with self._lock:
+            workers = self._workers(wanted)
+            if wanted == 1:
+                self._press(workers[0], x0, y0, path, readings)
+            else:
+                from concurrent.futures import ThreadPoolExecutor
 
-            with ThreadPoolExecutor(wanted) as pool:  # the loop lets go of the GIL
-                list(pool.map(lambda w, part: self._press(w, x0[part], y0[part], path,
-                                                          readings[part[0]:part[-1] + 1]),
-                              workers, chunks))
+                with ThreadPoolExecutor(wanted) as pool:  # the loop lets go of the GIL
+                    list(pool.map(lambda w, part: self._press(w, x0[part], y0[part], path,
+                                                              readings[part[0]:part[-1] + 1]),
+                                  workers, chunks))
         return [self._probe_of(readings[i], rngs[i], float(x0[i]), float(y0[i]), press_steps)
                 for i in range(n)]
 

@@ -331,3 +331,17 @@ def test_a_press_is_the_same_whatever_shares_its_batch(paper_physics):
             assert probe.features == wide[i].features
             for key, trace in probe.traces.items():
                 np.testing.assert_array_equal(trace, wide[i].traces[key])
+
+
+def test_a_scene_sent_to_another_process_presses_the_same(paper_physics):
+    """A scene pickled (as for a worker) leaves MuJoCo's model, its copies and its lock
+    behind, builds them again, and presses as the original does."""
+    import pickle
+
+    scene = paper_physics.physics_scene()
+    cells = np.array([940, 912])
+    here = scene.probes(cells, [np.random.default_rng([6, c]) for c in cells])
+    sent = pickle.dumps(scene)
+    assert b"_press_workers" not in sent
+    there = pickle.loads(sent).probes(cells, [np.random.default_rng([6, c]) for c in cells])
+    assert [p.features for p in there] == [p.features for p in here]
