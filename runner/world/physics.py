@@ -93,6 +93,7 @@ MuJoCo is the ``physics`` extra: it is imported when a scene is built, never bef
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -135,6 +136,11 @@ DISC = np.array([(u, v) for u in np.linspace(-0.8, 0.8, 5) for v in np.linspace(
 #: the approach: from this gap above the surface (m) at this speed (m/s); then the z axis's
 #: own damping (N s/m)
 APPROACH_GAP = 1e-4
+#: the most presses stepped in one batch (their readings per step are in memory together)
+BATCH = 128
+#: the most threads a batch of presses is stepped on (in a process of its own: one in an
+#: experiment's worker process, whose cores the other workers take)
+ROLLOUT_THREADS = 2
 APPROACH_SPEED = 0.002
 Z_DAMPING = 5.0
 #: an electrode: a sphere this small (m) centred on the fingertip's surface, massless and
@@ -419,21 +425,36 @@ def vibration_power(tangential: np.ndarray, band: tuple[float, float]) -> float:
     x = np.asarray(tangential, float)
     if x.size < 4:
         return float("nan")
-    size = min(VIBRATION_SEGMENT, x.size)
-    step = size - size // 2
-    starts = np.arange(0, x.size - size + 1, step)
-    segments = x[starts[:, None] + np.arange(size)]
-    ramp = np.arange(size) - (size - 1) / 2
+    index, ramp, slope_scale, window, scale, inside, spacing = _welch_plan(
+        x.size, (float(band[0]), float(band[1])))
+    segments = x[index]
     segments = (segments - segments.mean(axis=1, keepdims=True)
-                - np.outer(segments @ ramp / (ramp @ ramp), ramp))
-    window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(size) / size)  # periodic Hann
-    fs = 1 / TIMESTEP
-    density = np.abs(np.fft.rfft(segments * window, axis=1)) ** 2 / (fs * (window @ window))
+                - np.outer(segments @ ramp / slope_scale, ramp))
+    density = np.abs(np.fft.rfft(segments * window, axis=1)) ** 2 / scale
+    size = window.size
     density[:, 1:(size + 1) // 2] *= 2  # one-sided: each frequency but 0 and fs / 2 twice
     density = density.mean(axis=0)
+    return float(density[inside].sum() * spacing)
+
+
+@functools.lru_cache(maxsize=16)
+def _welch_plan(samples: int, band: tuple[float, float]) -> tuple:
+    """What :func:`vibration_power` computes of ``samples`` samples before reading them (the
+    segments' indices, the ramp a line is fitted on, the periodic Hann window, the density's
+    scale, the band's frequencies and their spacing), once per length and band."""
+    size = min(VIBRATION_SEGMENT, samples)
+    step = size - size // 2
+    starts = np.arange(0, samples - size + 1, step)
+    index = starts[:, None] + np.arange(size)
+    ramp = np.arange(size) - (size - 1) / 2
+    window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(size) / size)  # periodic Hann
+    fs = 1 / TIMESTEP
     frequency = np.fft.rfftfreq(size, TIMESTEP)
     inside = (frequency >= band[0]) & (frequency <= band[1])
-    return float(density[inside].sum() * (frequency[1] - frequency[0]))
+    for kept in (index, ramp, window, inside):  # shared by every call: read only
+        kept.flags.writeable = False
+    return (index, ramp, ramp @ ramp, window, fs * (window @ window), inside,
+            frequency[1] - frequency[0])
 
 
 def electrode_spread(compressions: np.ndarray) -> float:
@@ -598,6 +619,19 @@ class Scene:
                        for name, p in self.properties.items()}
         self.variant = np.random.default_rng([spec.seed, 0xCE11]).integers(
             VARIANTS, size=self.material_map.size)
+        self._lock = threading.Lock()  # one batch of presses at a time on the scene's workers
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The scene without what MuJoCo built for it (built again where it is unpickled) and
+        without its lock."""
+        state = self.__dict__.copy()
+        for built in ("model", "data", "_press_workers", "_lock"):
+            state.pop(built, None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
 
     @cached_property
     def model(self) -> Any:
@@ -713,6 +747,123 @@ class Scene:
     def probe(self, flat: int, rng: np.random.Generator) -> Probe:
         """Press, stroke and lift at cell ``flat``; ``rng`` draws the positioning error and the
         sensor noise (forces and height, then the electrodes, then the thermal sensor)."""
+        return self.probes(np.array([flat]), [rng])[0]
+
+    def probes(self, cells: np.ndarray, rngs: Sequence[np.random.Generator],
+               threads: int | None = None) -> list[Probe]:
+        """One press, stroke and lift per cell of ``cells`` (flat), press i's positioning error
+        and noise drawn from ``rngs[i]``: the presses of the batch are stepped in compiled code
+        (MuJoCo's ``mj_step`` called from a loop with no Python between the steps), over
+        ``threads`` threads (:func:`rollout_threads` unless given), each thread with its copy
+        of the model and its data. Each press starts from MuJoCo's reset state and sets its
+        contact at every step it is due, as :meth:`probe_stepwise` does, so that a press is
+        the same whatever others share its batch or thread."""
+        cells = np.asarray(cells, dtype=np.intp).ravel()
+        n, spec = len(cells), self.spec
+        if n > BATCH:  # a bounded batch at a time: its readings in memory
+            return [probe for lo in range(0, n, BATCH)
+                    for probe in self.probes(cells[lo:lo + BATCH], rngs[lo:lo + BATCH], threads)]
+        if n == 0:
+            return []
+        ix, iy = np.unravel_index(cells, self.material_map.shape)
+        error = np.stack([rng.standard_normal(2) for rng in rngs]) * spec.jitter
+        x0 = (ix + 0.5) * self.cell + error[:, 0] - spec.stroke / 2
+        y0 = (iy + 0.5) * self.cell + error[:, 1]
+        press_steps = int(round(spec.press / TIMESTEP))
+        stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
+        path = np.concatenate([np.zeros(press_steps), np.linspace(0, spec.stroke, stroke_steps)])
+        readings = np.empty((n, path.size, self.model.nsensordata))
+        wanted = max(1, min(int(threads if threads is not None else rollout_threads()), n))
+        chunks = np.array_split(np.arange(n), wanted)
+        with self._lock:
+            workers = self._workers(wanted)
+            if wanted == 1:
+                self._press(workers[0], x0, y0, path, readings)
+            else:
+                from concurrent.futures import ThreadPoolExecutor
+
+                with ThreadPoolExecutor(wanted) as pool:  # the loop lets go of the GIL
+                    list(pool.map(lambda w, part: self._press(w, x0[part], y0[part], path,
+                                                              readings[part[0]:part[-1] + 1]),
+                                  workers, chunks))
+        return [self._probe_of(readings[i], rngs[i], float(x0[i]), float(y0[i]), press_steps)
+                for i in range(n)]
+
+    def _workers(self, count: int) -> list[tuple[Any, Any, np.ndarray]]:
+        """``count`` copies of the model, each with a data and the addresses of the arrays the
+        compiled loop reads and writes (kept: each press sets again what it changes)."""
+        import copy
+
+        import mujoco
+
+        workers = self.__dict__.setdefault("_press_workers", [])
+        while len(workers) < count:
+            model = copy.copy(self.model)
+            data = mujoco.MjData(model)
+            fields = np.array([a.ctypes.data for a in (
+                data.qpos, data.ctrl, data.sensordata, model.pair_solref, model.pair_friction,
+                model.dof_damping)], dtype=np.int64)
+            workers.append((model, data, fields))
+        return workers[:count]
+
+    def _press(self, worker: tuple[Any, Any, np.ndarray], x0: np.ndarray, y0: np.ndarray,
+               path: np.ndarray, readings: np.ndarray) -> None:
+        """The presses from (``x0``, ``y0``) on one worker (:meth:`_workers`), their sensors
+        per step into ``readings``."""
+        from runner.world._contact import mujoco_library, press_batch
+
+        step, reset = mujoco_library()
+        model, data, fields = worker
+        spec = self.spec
+        nx, ny = self.material_map.shape
+        press_batch(step, reset, model._address, data._address, fields, model.nsensordata,
+                    np.ascontiguousarray(x0), np.ascontiguousarray(y0),
+                    spec.radius + APPROACH_GAP, spec.force / APPROACH_SPEED, Z_DAMPING,
+                    spec.force, path, TIP_MASS, RELIEF_SPACING / 2, spec.radius, self.cell,
+                    nx, ny, DISC, self.cell_contact, self._cell_material, self.variant,
+                    self._slope_table, RELIEF_SPACING, self.samples, MIN_FRICTION, readings)
+
+    @cached_property
+    def _cell_material(self) -> np.ndarray:
+        return np.ascontiguousarray(self.material_map.ravel(), dtype=np.intp)
+
+    @cached_property
+    def _slope_table(self) -> np.ndarray:
+        """The relief's slopes by [material index, variant, u, v] (NaN for a material not
+        laid)."""
+        table = np.full((len(self.materials), VARIANTS, self.samples, self.samples), np.nan)
+        for m, name in enumerate(self.materials):
+            if name in self.slopes:
+                table[m] = self.slopes[name]
+        return table
+
+    def _probe_of(self, readings: np.ndarray, rng: np.random.Generator, x0: float, y0: float,
+                  press_steps: int) -> Probe:
+        """A probe from its sensors' readings per step (after its positioning error was drawn
+        from ``rng``): the noise drawn, the traces and the features."""
+        spec, steps = self.spec, len(readings)
+        sensed, distance = readings[:, [0, 1, 4]], readings[:, 5:]
+        noise = rng.standard_normal((steps, 3)) * (spec.noise_force, spec.noise_force,
+                                                   spec.noise_depth)
+        normal, tangential, height = (sensed + noise).T
+        # the draws of the features added since come after those above, so that a probe's
+        # texture and compliance stay what they were
+        compression = np.maximum(-(distance + ELECTRODE_RADIUS), 0.0)
+        electrodes = compression + rng.standard_normal(compression.shape) * spec.noise_electrode
+        pressed = spec.radius - float(sensed[press_steps - 1, 2])
+        temperature = thermal_trace(sensed[:, 0] > 0, self.effusivity_at(x0, y0, pressed), spec)
+        temperature = temperature + rng.standard_normal(steps) * spec.noise_temperature
+        traces = {"normal": normal, "tangential": tangential, "height": height,
+                  "electrodes": electrodes, "temperature": temperature}
+        every = press_features(traces, press_steps, spec)
+        raw = {key: every[key] for key in ("force", "depth", "friction_ratio", "tangential_sd")}
+        return Probe(texture=every["texture"], compliance=every["compliance"],
+                     at=(x0 + spec.stroke / 2, y0), traces=traces, features=every, **raw)
+
+    def probe_stepwise(self, flat: int, rng: np.random.Generator) -> Probe:
+        """:meth:`probe` driven from Python one step at a time, the contact set again at the
+        step it is due (the reference the batched presses are measured and checked against,
+        ``benchmarks/physics.py``)."""
         import mujoco
 
         model, data, spec = self.model, self.data, self.spec
@@ -752,23 +903,20 @@ class Scene:
             ctrl[0] = xs[k]
             mujoco.mj_step(model, data)
             readings[k] = sensordata
-        sensed, distance = readings[:, [0, 1, 4]], readings[:, 5:]
-        noise = rng.standard_normal((steps, 3)) * (spec.noise_force, spec.noise_force,
-                                                   spec.noise_depth)
-        normal, tangential, height = (sensed + noise).T
-        # the draws of the features added since come after those above, so that a probe's
-        # texture and compliance stay what they were
-        compression = np.maximum(-(distance + ELECTRODE_RADIUS), 0.0)
-        electrodes = compression + rng.standard_normal(compression.shape) * spec.noise_electrode
-        pressed = spec.radius - float(sensed[press_steps - 1, 2])
-        temperature = thermal_trace(sensed[:, 0] > 0, self.effusivity_at(x0, y0, pressed), spec)
-        temperature = temperature + rng.standard_normal(steps) * spec.noise_temperature
-        traces = {"normal": normal, "tangential": tangential, "height": height,
-                  "electrodes": electrodes, "temperature": temperature}
-        every = press_features(traces, press_steps, spec)
-        raw = {key: every[key] for key in ("force", "depth", "friction_ratio", "tangential_sd")}
-        return Probe(texture=every["texture"], compliance=every["compliance"],
-                     at=(x0 + spec.stroke / 2, y0), traces=traces, features=every, **raw)
+        return self._probe_of(readings, rng, float(x0), float(y0), press_steps)
+
+
+def rollout_threads() -> int:
+    """The threads a batch of presses is rolled on: :data:`ROLLOUT_THREADS` at most, as many as
+    the process may use, and one in a worker process of an experiment (the workers share the
+    cores)."""
+    import multiprocessing
+    import os
+
+    if multiprocessing.parent_process() is not None:
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(ROLLOUT_THREADS, cores or 1))
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int
@@ -813,10 +961,11 @@ class PhysicsSensor:
     def probe(self, cells: np.ndarray) -> Readings:
         """The readings of one probe per run at ``cells`` [runs] (flat); the probes are kept
         in :attr:`last`."""
-        self.last = []
-        for r, cell in enumerate(np.asarray(cells).ravel()):
-            rng = np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
-            self.last.append(self.scene.probe(int(cell), rng))
+        flat = np.asarray(cells).ravel()
+        rngs = [np.random.default_rng(probe_seed(self.seeds[r], self.steps[r]))
+                for r in range(len(flat))]
+        self.last = self.scene.probes(flat, rngs)
+        for r in range(len(flat)):
             self.steps[r] += 1
         return self.readings(self.last)
 

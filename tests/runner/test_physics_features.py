@@ -75,9 +75,11 @@ MAIN_RAW = {
 
 
 def test_texture_and_compliance_are_bit_for_bit_what_they_were(paper_physics):
+    """The press driven step by step (the reference the batched presses are checked against)
+    gives what it gave before the features beyond texture and compliance."""
     scene = paper_physics.physics_scene()
     for (cell, seed), (texture, compliance) in MAIN_PROBES.items():
-        probe = scene.probe(cell, np.random.default_rng(list(seed)))
+        probe = scene.probe_stepwise(cell, np.random.default_rng(list(seed)))
         assert (probe.texture, probe.compliance) == (texture, compliance), (cell, seed)
         assert (probe.features["texture"], probe.features["compliance"]) == (texture,
                                                                              compliance)
@@ -245,8 +247,8 @@ def test_the_sensor_reads_the_features_its_readings_name(paper_physics):
     scene = paper_physics.physics_scene()
     default = PhysicsSensor(scene, [(5, 0), (5, 1)]).probe(np.array([400, 1250]))
     assert isinstance(default, Readings) and default.names == ("texture", "compliance")
-    assert default.values.tolist() == [list(MAIN_PROBES[400, (5, 0)]),
-                                       list(MAIN_PROBES[1250, (5, 1)])]
+    alone = [scene.probe(c, np.random.default_rng([5, r, 0])) for r, c in enumerate((400, 1250))]
+    assert default.values.tolist() == [[p.texture, p.compliance] for p in alone]
     spec = scene.spec.model_copy(update={"readings": {
         "grip": "friction_ratio", "heat": "temperature_drop", "E": "texture",
         "pdc": "pressure"}})
@@ -279,8 +281,67 @@ def test_a_vibration_band_outside_the_samples_is_refused(band):
 
 def test_the_sensor_reads_probes_made_elsewhere(paper_physics):
     scene = paper_physics.physics_scene()
-    probes = [scene.probe(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
+    probes = [scene.probe_stepwise(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
     readings = PhysicsSensor(scene, []).readings(probes)
     assert readings.names == ("texture", "compliance")
     assert readings.values.tolist() == [list(MAIN_PROBES[940, (11, 940, s)]) for s in (0, 1)]
     assert PhysicsSensor(scene, []).readings([]).values.shape == (0, 2)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_presses_in_a_batch_are_the_stepwise_presses_bit_for_bit(paper_physics, threads):
+    """The compiled loop steps each press of a batch as probe_stepwise does from Python (the
+    contact set again at every step it is due, MuJoCo's own steps): the same traces and
+    features to the last bit, on one thread or two."""
+    scene = paper_physics.physics_scene()
+    cells = [940, 912, 896, 400, 1250]
+    batched = scene.probes(np.array(cells), [np.random.default_rng([3, c]) for c in cells],
+                           threads=threads)
+    for cell, probe in zip(cells, batched, strict=True):
+        stepwise = scene.probe_stepwise(cell, np.random.default_rng([3, cell]))
+        assert probe.features == stepwise.features, cell
+        assert probe.at == stepwise.at
+        for key, trace in stepwise.traces.items():
+            np.testing.assert_array_equal(probe.traces[key], trace)
+
+
+def test_batched_texture_and_compliance_are_what_the_stepwise_presses_gave(paper_physics):
+    scene = paper_physics.physics_scene()
+    keys = list(MAIN_PROBES)
+    probes = scene.probes(np.array([cell for cell, _ in keys]),
+                          [np.random.default_rng(list(seed)) for _, seed in keys])
+    for key, probe in zip(keys, probes, strict=True):
+        assert (probe.texture, probe.compliance) == MAIN_PROBES[key], key
+
+
+def test_a_press_is_the_same_whatever_shares_its_batch(paper_physics):
+    from runner.world.physics import BATCH
+
+    scene = paper_physics.physics_scene()
+    cells = np.random.default_rng(4).integers(paper_physics.material_map.size, size=BATCH + 3)
+
+    def rngs(idx):
+        return [np.random.default_rng([9, int(i)]) for i in idx]
+
+    wide = scene.probes(cells, rngs(range(len(cells))), threads=2)
+    for i in (0, 7, BATCH + 1):  # alone, among a few others, and past the first batch
+        for probe in (scene.probes(cells[i:i + 1], rngs([i]), threads=1)[0],
+                      scene.probes(cells[i:i + 4], rngs(range(i, min(i + 4, len(cells)))),
+                                   threads=1)[0]):
+            assert probe.features == wide[i].features
+            for key, trace in probe.traces.items():
+                np.testing.assert_array_equal(trace, wide[i].traces[key])
+
+
+def test_a_scene_sent_to_another_process_presses_the_same(paper_physics):
+    """A scene pickled (as for a worker) leaves MuJoCo's model, its copies and its lock
+    behind, builds them again, and presses as the original does."""
+    import pickle
+
+    scene = paper_physics.physics_scene()
+    cells = np.array([940, 912])
+    here = scene.probes(cells, [np.random.default_rng([6, c]) for c in cells])
+    sent = pickle.dumps(scene)
+    assert b"_press_workers" not in sent
+    there = pickle.loads(sent).probes(cells, [np.random.default_rng([6, c]) for c in cells])
+    assert [p.features for p in there] == [p.features for p in here]
