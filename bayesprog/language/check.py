@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bayesprog.errors import Diagnostic, did_you_mean, short_repr
-from bayesprog.expressions import Expression, ExpressionError, parse_expression
 from bayesprog.forms import (
     Form,
     FormulaParam,
@@ -30,12 +29,19 @@ from bayesprog.forms import (
 )
 from bayesprog.forms.base import nonnegative, real
 from bayesprog.forms.standard import deterministic_problem
-from bayesprog.formula import Formula, FormulaError, parse_formula
 from bayesprog.language.loader import Located
 from bayesprog.language.loader import Path as YPath
 from bayesprog.limits import limit
 from bayesprog.model import InputDecl, LearnOptions, Term
-from bayesprog.variables import Continuous, Discrete, Variable, binned_variable, grid_variable
+from bayesprog.vocabulary.expressions import Expression, ExpressionError, parse_expression
+from bayesprog.vocabulary.formula import Formula, FormulaError, parse_formula
+from bayesprog.vocabulary.variables import (
+    Continuous,
+    Discrete,
+    Variable,
+    binned_variable,
+    grid_variable,
+)
 
 if TYPE_CHECKING:  # (pydantic's models are built only for a file the plain reader leaves)
     from bayesprog.language.document import Document, InputSpec, LearnSpec
@@ -1056,7 +1062,7 @@ def _form_named(name: str) -> Form:
 def _forms_taking(option: str) -> str:
     """The forms whose estimator takes the ``learn:`` option, as a message lists them (over a
     variable of the kind each learns)."""
-    from bayesprog.variables import Continuous, Discrete
+    from bayesprog.vocabulary.variables import Continuous, Discrete
 
     probes = (Discrete("X", ("a", "b")), Continuous("X", -np.inf, np.inf))
     names = [name for name in available_forms()
