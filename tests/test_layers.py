@@ -94,6 +94,7 @@ def test_the_graph_sees_the_imports():
     g = graph()
     assert g.has_edge("bayesprog.program.program", "bayesprog.inference")
     assert g.has_edge("bayesprog.program.program", "bayesprog.program.dynamic")  # (a lazy one)
+    assert g.has_edge("bayesprog.language.check.terms", "bayesprog.language.check.parameters")
     assert g.has_edge("bayesprog.inference.methods.table", "bayesprog.inference.methods.base")
     assert g.number_of_edges() > 40
 
