@@ -271,7 +271,7 @@ def runner_graph() -> nx.DiGraph:
 def test_the_runner_graph_sees_the_imports():
     g = runner_graph()
     assert g.has_edge("runner.attention.explorer", "runner.world.scenario")
-    assert g.has_edge("runner.report.build", "runner.experiments.experiment")
+    assert g.has_edge("runner.report.build.write", "runner.experiments.experiment")
     assert g.has_edge("runner.robot.ros.robot_node", "runner.experiments.loop")
     assert g.number_of_edges() > 40
 
