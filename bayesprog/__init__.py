@@ -16,8 +16,9 @@
 
 from typing import TYPE_CHECKING
 
-from bayesprog import rich
-from bayesprog.extras import lazy_names
+from bayesprog.support import rich
+from bayesprog.support.extras import lazy_names
+from bayesprog.support.moved import old_paths
 
 __version__ = "0.5.0"
 
@@ -32,9 +33,9 @@ _WHERE = {
     "ZeroEvidenceError": "bayesprog.errors",
     "short_repr": "bayesprog.errors",
     "did_you_mean": "bayesprog.errors",
-    "Question": "bayesprog.expressions",
-    "canonical": "bayesprog.expressions",
-    "atomic_write": "bayesprog.files",
+    "Question": "bayesprog.vocabulary.expressions",
+    "canonical": "bayesprog.vocabulary.expressions",
+    "atomic_write": "bayesprog.support.files",
     "Form": "bayesprog.forms",
     "Param": "bayesprog.forms",
     "ParamValue": "bayesprog.forms",
@@ -47,8 +48,8 @@ _WHERE = {
     "load_document": "bayesprog.language.document",
     "Located": "bayesprog.language.loader",
     "load_yaml": "bayesprog.language.loader",
-    "wrong_kind": "bayesprog.files",
-    "reference_problem": "bayesprog.files",
+    "wrong_kind": "bayesprog.support.files",
+    "reference_problem": "bayesprog.support.files",
     "SizeError": "bayesprog.limits",
     "check_size": "bayesprog.limits",
     "limit": "bayesprog.limits",
@@ -56,28 +57,49 @@ _WHERE = {
     "Program": "bayesprog.program",
     "load": "bayesprog.program",
     "loads": "bayesprog.program",
-    "show_inference": "bayesprog.display",
+    "show_inference": "bayesprog.views.display",
     "render_values": "bayesprog.learning.write",
-    "discover": "bayesprog.discovery",
-    "bundled_path": "bayesprog.bundled",
-    "bundled_root": "bayesprog.bundled",
-    "require_extra": "bayesprog.extras",
+    "discover": "bayesprog.program.discovery",
+    "bundled_path": "bayesprog.support.bundled",
+    "bundled_root": "bayesprog.support.bundled",
+    "require_extra": "bayesprog.support.extras",
     "compare": "bayesprog.learning.evidence",
     "read_data": "bayesprog.learning.data",
     "BadRow": "bayesprog.learning.csv_rows",
     "BadRowsWarning": "bayesprog.learning.data",
-    "Discovery": "bayesprog.discovery",
-    "StructureWarning": "bayesprog.discovery",
+    "Discovery": "bayesprog.program.discovery",
+    "StructureWarning": "bayesprog.program.discovery",
     "Summary": "bayesprog.learning.summary",
     "summarise": "bayesprog.learning.summary",
-    "scatter_matrix": "bayesprog.draw",
+    "scatter_matrix": "bayesprog.views.draw",
+}
+
+#: The modules that stood directly in bayesprog/ until 0.5, and the packages they live in now.
+#: Their old paths still work (``import bayesprog.bundled``, ``from bayesprog.files import
+#: atomic_write``, ``bayesprog.expressions`` read as an attribute, a pickle that names a class
+#: by its old module): each is the same module under both names, imported at its first use.
+#: (``bayesprog.program`` and ``bayesprog.model`` are packages of those names: their public
+#: names are read from them as before.)
+_MOVED = {
+    "bundled": "bayesprog.support.bundled",
+    "cache": "bayesprog.support.cache",
+    "extras": "bayesprog.support.extras",
+    "files": "bayesprog.support.files",
+    "rich": "bayesprog.support.rich",
+    "yamltext": "bayesprog.support.yamltext",
+    "expressions": "bayesprog.vocabulary.expressions",
+    "formula": "bayesprog.vocabulary.formula",
+    "variables": "bayesprog.vocabulary.variables",
+    "records": "bayesprog.model.records",
+    "dynamic": "bayesprog.program.dynamic",
+    "discovery": "bayesprog.program.discovery",
+    "show": "bayesprog.views.show",
+    "draw": "bayesprog.views.draw",
+    "display": "bayesprog.views.display",
+    "compile": "bayesprog.io.compile",
 }
 
 if TYPE_CHECKING:  # what the names are, for type checkers and editors
-    from bayesprog.bundled import bundled_path, bundled_root
-    from bayesprog.discovery import Discovery, StructureWarning, discover
-    from bayesprog.display import show_inference
-    from bayesprog.draw import scatter_matrix
     from bayesprog.errors import (
         BayesprogError,
         Diagnostic,
@@ -86,9 +108,6 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
         ZeroEvidenceError,
         short_repr,
     )
-    from bayesprog.expressions import Question, canonical
-    from bayesprog.extras import require_extra
-    from bayesprog.files import atomic_write, reference_problem, wrong_kind
     from bayesprog.forms import Form, Param, ParamValue, available_forms, register_form
     from bayesprog.inference import MapResult, Posterior
     from bayesprog.inference.density import Density
@@ -103,18 +122,27 @@ if TYPE_CHECKING:  # what the names are, for type checkers and editors
     from bayesprog.limits import SizeError, check_size, limit
     from bayesprog.model import Term
     from bayesprog.program import Program, load, loads
+    from bayesprog.program.discovery import Discovery, StructureWarning, discover
+    from bayesprog.support.bundled import bundled_path, bundled_root
+    from bayesprog.support.extras import require_extra
+    from bayesprog.support.files import atomic_write, reference_problem, wrong_kind
+    from bayesprog.views.display import show_inference
+    from bayesprog.views.draw import scatter_matrix
+    from bayesprog.vocabulary.expressions import Question, canonical
 
 
 def _load_display() -> None:
-    from bayesprog import display  # noqa: F401  (its renderers register themselves)
+    from bayesprog.views import display  # noqa: F401  (its renderers register themselves)
 
 
-# Programs and answers render themselves in a notebook through the hooks of bayesprog.rich, the
-# package's lowest floor; the notebook display, near its top, is imported at the first display.
+# Programs and answers render themselves in a notebook through the hooks of
+# bayesprog.support.rich, on the package's lowest floor; the notebook display, near its top, is
+# imported at the first display.
 rich.defer(_load_display)
 
 
 __getattr__, __dir__ = lazy_names(globals(), _WHERE, __name__)
+__getattr__ = old_paths(__name__, _MOVED, __getattr__)
 
 
 __all__ = [

@@ -348,7 +348,7 @@ import json, os, sys, time
 from pathlib import Path
 from bayesprog import load
 import bayesprog.program
-from bayesprog import cache
+from bayesprog.support import cache
 path = Path(sys.argv[1])
 place = cache.folder()
 before = set(os.listdir(place)) if place is not None and place.is_dir() else set()

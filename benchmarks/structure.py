@@ -69,8 +69,8 @@ def ours(frame: Any) -> dict[str, list[str]]:
 
 
 def ours_search(frame: Any) -> dict[str, list[str]]:
-    from bayesprog.discovery import code_data
     from bayesprog.learning.structure import Constraints, Scores, hill_climb
+    from bayesprog.program.discovery import code_data
 
     coded = code_data(frame)
     climb = hill_climb(Scores(coded.codes, coded.card, "bic"), Constraints(len(coded.names)))
@@ -144,8 +144,8 @@ def f1(found: set, true: set) -> float:
 def bench_pc(frame: Any, model: Any, repeats: int) -> dict[str, Any]:
     from pgmpy.estimators import PC
 
-    from bayesprog.discovery import code_data
     from bayesprog.learning.structure import Constraints, pc_skeleton
+    from bayesprog.program.discovery import code_data
 
     coded = code_data(frame)
     names = coded.names

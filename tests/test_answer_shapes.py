@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import bayesprog
-from bayesprog import bundled
 from bayesprog.errors import QuestionError
 from bayesprog.inference.answers import MapResult
+from bayesprog.support import bundled
 
 PROGRAMS = sorted(b.name for b in bundled.listing() if b.kind == "program")
 #: the approximate methods, each asked where it answers (a refusal says it does not)

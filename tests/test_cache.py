@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 import bayesprog
-import bayesprog.program
-from bayesprog import cache, limits
+import bayesprog.program.program
+from bayesprog import limits
 from bayesprog.errors import SpecError
 from bayesprog.io import dump_document
+from bayesprog.support import cache
 
 
 def _network(states: int = 30, seed: int = 0) -> str:
@@ -45,7 +46,7 @@ def _read_only_from_cache(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("read and checked again")
 
-    monkeypatch.setattr(bayesprog.program, "loads", refuse)
+    monkeypatch.setattr(bayesprog.program.program, "loads", refuse)
 
 
 def test_the_same_bytes_are_read_back_and_answer_the_same(tmp_path, kept, monkeypatch):

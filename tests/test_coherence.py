@@ -14,8 +14,8 @@ import pytest
 from scipy import stats
 
 import bayesprog
-from bayesprog import bundled
 from bayesprog.errors import QuestionError, SpecError
+from bayesprog.support import bundled
 
 PA = np.array([0.1, 0.2, 0.3, 0.4])
 PB = np.array([0.4, 0.3, 0.2, 0.1])

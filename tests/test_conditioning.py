@@ -17,9 +17,9 @@ import scipy.stats
 import bayesprog
 from bayesprog.cli import main
 from bayesprog.errors import QuestionError, SpecError
-from bayesprog.expressions import parse_expression
 from bayesprog.learning.data import DataError
-from bayesprog.show import render
+from bayesprog.views.show import render
+from bayesprog.vocabulary.expressions import parse_expression
 
 #: P(X) and P(Y | X, U), drawn once: [x], [x, u, y]
 _RNG = np.random.default_rng(20240611)

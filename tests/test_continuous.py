@@ -346,7 +346,7 @@ decomposition:
 def test_a_discretised_program_exports_to_pgmpy_with_the_same_answers():
     from pgmpy.inference import VariableElimination
 
-    from bayesprog.compile import to_bayesian_network
+    from bayesprog.io.compile import to_bayesian_network
 
     p = program("""
 variables:

@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 
 from bayesprog.cli import main
-from bayesprog.draw import scatter_matrix
 from bayesprog.learning.data import DataError
 from bayesprog.learning.summary import REAL_STATISTICS, summarise
+from bayesprog.views.draw import scatter_matrix
 
 ROOT = Path(__file__).parents[1]
 LAB = ROOT / "models" / "data" / "lab_recordings.csv"

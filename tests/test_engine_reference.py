@@ -29,9 +29,9 @@ from scipy import stats
 from scipy.special import logsumexp, softmax
 
 import bayesprog
-from bayesprog.compile import to_bayesian_network, to_factor_graph
 from bayesprog.errors import QuestionError, ZeroEvidenceError
 from bayesprog.inference.relevance import requisite
+from bayesprog.io.compile import to_bayesian_network, to_factor_graph
 
 PROGRAMS = Path(__file__).parent / "programs"
 

@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayesprog.formula import FUNCTIONS, MAX_DEPTH, FormulaError, parse_formula, substitute
+from bayesprog.vocabulary.formula import (
+    FUNCTIONS,
+    MAX_DEPTH,
+    FormulaError,
+    parse_formula,
+    substitute,
+)
 
 RNG = np.random.default_rng(7)
 X = RNG.uniform(0.1, 3.0, 50)

@@ -331,7 +331,7 @@ def test_the_layouts_algebra_equals_the_general_gaussian_path(imported, monkeypa
     ("+X - -Y", True), ("hypot(3, 4)*X + e", True), ("minimum(X, 1)", False),
     ("1e308*10*X", False), ("-(2*X - Y)/5 + 1.5e-3", True)])
 def test_the_affine_form_of_a_formula_gives_its_values(text, affine):
-    from bayesprog.formula import parse_formula
+    from bayesprog.vocabulary.formula import parse_formula
 
     formula = parse_formula(text)
     found = formula.affine()

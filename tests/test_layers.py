@@ -1,6 +1,8 @@
-"""The package's layering: no import circle between bayesprog's modules or its layers, and
-bayesprog never imports the haptic application (runner); the application's rooms (runner's
-sub-packages) import one way, from the world up to the report and the robot.
+"""The package's layering: bayesprog's rooms (its sub-packages, and the few modules directly in
+it) import one way, from its errors and support up to the command line, with no import circle
+between its modules or its rooms, and bayesprog never imports the haptic application (runner);
+the application's rooms (runner's sub-packages) import one way, from the world up to the report
+and the robot.
 
 Imports are read from the source with ``ast`` (every import statement, wherever it stands:
 module level, inside functions, under ``TYPE_CHECKING``), so a lazy import counts too.
@@ -18,20 +20,25 @@ import pytest
 PACKAGE = Path(__file__).parents[1] / "bayesprog"
 RUNNER = PACKAGE.parent / "runner"
 
-#: From the bottom up: a layer may import its own modules and the layers below it only.
+#: bayesprog's rooms from the bottom up: a room may import its own modules and the rooms below
+#: it only; the rooms of one floor (the views and the exchange with other tools) know nothing of
+#: each other.
 LAYERS = [
-    {"errors", "variables", "expressions", "formula", "files", "rich", "limits", "bundled",
-     "extras", "cache", "yamltext"},
-    {"forms"},
-    {"model", "records"},
-    {"language"},
-    {"inference"},
-    {"learning"},
-    {"program", "dynamic"},
-    {"compile", "draw", "show", "display", "discovery", "__init__"},
-    {"io"},
-    {"cli", "__main__"},
+    {"errors"},  # the errors users catch
+    {"limits"},  # sizes refused before they are allocated
+    {"support"},  # files, the cache, bundled models, YAML text, extras, display hooks
+    {"vocabulary"},  # variables, P(A | B) expressions and questions, formulas
+    {"forms"},  # parametric forms
+    {"model"},  # a checked program's terms and inputs, the records of a fit
+    {"language"},  # YAML read and checked
+    {"inference"},  # the engine
+    {"learning"},  # identification from data
+    {"program"},  # Program, questions over time, discovered structure
+    {"views", "io", "__init__"},  # notation, figures, notebook; networks in and out
+    {"cli", "__main__"},  # the command line
 ]
+#: rooms of one floor that never import each other
+SIDE_BY_SIDE_IN_BAYESPROG = {"views", "io"}
 
 
 def module_name(path: Path) -> str:
@@ -85,7 +92,9 @@ def layer_of(module: str) -> int:
 
 def test_the_graph_sees_the_imports():
     g = graph()
-    assert g.has_edge("bayesprog.program", "bayesprog.inference")
+    assert g.has_edge("bayesprog.program.program", "bayesprog.inference")
+    assert g.has_edge("bayesprog.program.program", "bayesprog.program.dynamic")  # (a lazy one)
+    assert g.has_edge("bayesprog.language.check.terms", "bayesprog.language.check.parameters")
     assert g.has_edge("bayesprog.inference.methods.table", "bayesprog.inference.methods.base")
     assert g.number_of_edges() > 40
 
@@ -116,8 +125,56 @@ def test_inference_and_learning_never_import_the_language():
 def test_each_module_imports_only_its_layer_and_below(module):
     g = graph()
     mine = layer_of(module)
-    above = [t for t in g.successors(module) if t != "bayesprog" and layer_of(t) > mine]
-    assert not above, f"{module} (layer {mine}) imports upper layers: {above}"
+    above = [t for t in g.successors(module) if t != "bayesprog" and (
+        layer_of(t) > mine
+        or {room(t), room(module)} == SIDE_BY_SIDE_IN_BAYESPROG)]
+    assert not above, f"{module} (layer {mine}) imports upper layers or rooms beside: {above}"
+
+
+def room(module: str) -> str:
+    """The room of one of bayesprog's modules: its sub-package, or the module itself when it
+    stands directly in bayesprog/ (``__init__`` for the package's own)."""
+    return module.split(".")[1] if "." in module else "__init__"
+
+
+def rooms_graph() -> nx.DiGraph:
+    """bayesprog's rooms, and an arrow from one to another where a module of the first imports
+    a module of the second."""
+    g = graph()
+    rooms = nx.DiGraph()
+    rooms.add_nodes_from(room(n) for n in g if n.startswith("bayesprog"))
+    rooms.add_edges_from((room(a), room(b)) for a, b in g.edges
+                         if b.startswith("bayesprog") and b != "bayesprog" and room(a) != room(b))
+    return rooms
+
+
+def test_bayesprogs_rooms_have_no_circle_and_no_arrow_running_up():
+    rooms = rooms_graph()
+    assert rooms.number_of_nodes() >= 12 and rooms.number_of_edges() > 20
+    assert not list(nx.simple_cycles(rooms)), list(nx.simple_cycles(rooms))
+    upward = [(a, b) for a, b in rooms.edges if LAYERS.index(next(
+        x for x in LAYERS if b in x)) > LAYERS.index(next(x for x in LAYERS if a in x))]
+    assert not upward, f"arrows running up: {upward}"
+    beside = [(a, b) for a, b in rooms.edges if {a, b} == SIDE_BY_SIDE_IN_BAYESPROG]
+    assert not beside, beside
+    # every room is in one layer, and every layer names rooms that exist
+    named = set().union(*LAYERS)
+    assert set(rooms) <= named, set(rooms) - named
+    assert named <= set(rooms), named - set(rooms)
+
+
+def test_the_framework_is_a_few_rooms_of_a_few_modules():
+    """At most 8 modules directly in bayesprog/, at most 12 in each of its sub-packages (a
+    sub-package's own sub-packages counted apart) but the engine's (inference/), and every
+    sub-package a package, in a layer."""
+    direct = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(direct) <= 8, direct
+    for folder in sorted({p.parent for p in PACKAGE.rglob("*.py")} - {PACKAGE}):
+        modules = sorted(p.name for p in folder.glob("*.py"))
+        assert "__init__.py" in modules, f"{folder.name}: not a package"
+        if folder != PACKAGE / "inference":
+            assert len(modules) <= 12, (folder.name, modules)
+        layer_of("bayesprog." + folder.relative_to(PACKAGE).parts[0])
 
 
 def test_the_runner_uses_only_the_public_api():
@@ -214,7 +271,7 @@ def runner_graph() -> nx.DiGraph:
 def test_the_runner_graph_sees_the_imports():
     g = runner_graph()
     assert g.has_edge("runner.attention.explorer", "runner.world.scenario")
-    assert g.has_edge("runner.report.build", "runner.experiments.experiment")
+    assert g.has_edge("runner.report.build.write", "runner.experiments.experiment")
     assert g.has_edge("runner.robot.ros.robot_node", "runner.experiments.loop")
     assert g.number_of_edges() > 40
 

@@ -118,8 +118,8 @@ def test_a_value_at_or_below_zero_cannot_be_learned():
 
 def test_it_declares_what_it_can_do():
     from bayesprog.forms import get_form
-    from bayesprog.show import render
-    from bayesprog.variables import Continuous
+    from bayesprog.views.show import render
+    from bayesprog.vocabulary.variables import Continuous
 
     form = get_form("lognormal")
     assert form is not None and form.display_name == "LogNormal"

@@ -18,8 +18,8 @@ import pytest
 import yaml
 
 import bayesprog
-from bayesprog import bundled
 from bayesprog.cli import main
+from bayesprog.support import bundled
 
 ROOT = Path(__file__).parents[1]
 MODELS = ROOT / "models"
@@ -177,7 +177,8 @@ def test_the_wheel_carries_the_models_and_its_name_says_the_version(artefacts):
     shipped = {f"bayesprog/models/{p.relative_to(MODELS).as_posix()}"
                for p in MODELS.rglob("*") if p.is_file()}
     assert shipped <= names, shipped - names
-    assert {"bayesprog/py.typed", "runner/py.typed", "bayesprog/bundled.py"} <= names
+    assert {"bayesprog/py.typed", "runner/py.typed", "bayesprog/support/bundled.py",
+            "runner/report/build/__init__.py"} <= names
     metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(metadata).decode()
     assert f"Version: {bayesprog.__version__}" in text

@@ -16,9 +16,9 @@ import pytest
 import scipy.stats
 
 import bayesprog
-from bayesprog import dynamic
 from bayesprog.cli import main
 from bayesprog.limits import SizeError, set_limits
+from bayesprog.program import dynamic
 
 BEND = """\
 bayesprog: 1

@@ -353,7 +353,7 @@ _GAP = st.sampled_from(["", " ", "  ", ",", " , ", "\t"])
 def test_the_quick_reading_of_a_question_is_the_general_one(left, right, bar, pad):
     """Texts of names only are read by one match; any text reads (or fails) as the general
     parser reads it."""
-    from bayesprog.expressions import ExpressionError, _parse_general, parse_expression
+    from bayesprog.vocabulary.expressions import ExpressionError, _parse_general, parse_expression
 
     text = (f"{pad}P({pad}" + "".join(n + g for n, g in left) + bar
             + ",".join(n + g + v for n, g, v in right) + f"){pad}")
@@ -372,7 +372,7 @@ def test_a_file_written_at_once_has_an_ordinary_files_mode_and_leaves_nothing_be
         tmp_path, monkeypatch):
     import os
 
-    from bayesprog.files import atomic_write
+    from bayesprog.support.files import atomic_write
 
     umask = os.umask(0o027)
     try:

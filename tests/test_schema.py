@@ -59,7 +59,7 @@ EVERY_PROGRAM = PROGRAMS + sorted((ROOT / "tests" / "programs").glob("*.yaml"))
 
 
 def _located(text: str):
-    from bayesprog.program import _names_as_written
+    from bayesprog.program.program import _names_as_written
 
     located, problems = load_yaml(text, "<test>")
     assert not problems

@@ -57,8 +57,8 @@ def test_a_discrete_question_on_the_command_line_loads_no_plotting_graph_or_tabl
         "assert main(['query', 'student.yaml', 'P(I | G)', '--evidence', 'G=A']) == 0",
         cwd=tmp_path)
     assert "bayesprog.program" in loaded  # the question was asked
-    unused = {"scipy.special", "networkx", "matplotlib", "pandas", "pgmpy", "bayesprog.display",
-              "bayesprog.draw", "bayesprog.learning"}
+    unused = {"scipy.special", "networkx", "matplotlib", "pandas", "pgmpy",
+              "bayesprog.views.display", "bayesprog.views.draw", "bayesprog.learning"}
     assert not loaded & unused, loaded & unused
 
 
@@ -75,7 +75,7 @@ def test_a_script_that_loads_a_program_and_asks_once_builds_no_validator_and_no_
     methods = {m for m in loaded if m.startswith("bayesprog.inference.methods.")}
     assert methods == {"bayesprog.inference.methods.base",
                        "bayesprog.inference.methods.contraction"}, methods
-    assert "bayesprog.records" not in loaded and "bayesprog.language.document" not in loaded
+    assert "bayesprog.model.records" not in loaded and "bayesprog.language.document" not in loaded
     # by hand: P(I=low, G=A) = 0.7 (0.6 x 0.3 + 0.4 x 0.05) = 0.14, P(G=A) = 0.14 + 0.222
     assert _after(code).splitlines()[-1] == "[0.38674, 0.61326]"
     # a learned: record is read by pydantic, and a second layout ranks the methods

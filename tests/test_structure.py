@@ -17,7 +17,6 @@ import pytest
 
 import bayesprog
 from bayesprog.cli import main
-from bayesprog.discovery import StructureWarning, code_data
 from bayesprog.learning.structure import (
     Constraints,
     Scores,
@@ -25,6 +24,7 @@ from bayesprog.learning.structure import (
     hill_climb,
     pc_skeleton,
 )
+from bayesprog.program.discovery import StructureWarning, code_data
 
 
 def _sample(name: str, rows: int, seed: int = 1) -> tuple[pd.DataFrame, object]:
@@ -739,7 +739,7 @@ def test_pc_says_when_arcs_contradict_a_deterministic_table(tmp_path, capsys):
 
 
 def test_a_function_of_chance_in_few_rows_is_not_said_to_be_deterministic():
-    from bayesprog.discovery import determined_by
+    from bayesprog.program.discovery import determined_by
 
     rng = np.random.default_rng(4)
     codes = rng.integers(0, 3, size=(12, 4))  # 12 rows, 9 configurations of two columns

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 import bayesprog
-from bayesprog import yamltext
 from bayesprog.errors import SpecError
 from bayesprog.io import dump_document
 from bayesprog.language import loader
 from bayesprog.language.flow import flow_table
+from bayesprog.support import yamltext
 
 TWO_PARENTS = """\
 bayesprog: 1

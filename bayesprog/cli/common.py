@@ -44,8 +44,8 @@ def output_file(text: str, option: str = "-o") -> Path:
 
 def load_program(name: str) -> Program:
     """The program file ``name``, or the bundled program of that name."""
-    from bayesprog.bundled import bundled_path
     from bayesprog.program import load
+    from bayesprog.support.bundled import bundled_path
 
     path = str(bundled_path(name, "program"))
     try:
@@ -76,7 +76,7 @@ def ablated(program: Program, terms: Sequence[str]) -> Program:
 
 def _kind_hint(file: str) -> str | None:
     """Why a file is not a program, when it is plainly another kind of file."""
-    from bayesprog.files import wrong_kind
+    from bayesprog.support.files import wrong_kind
 
     return wrong_kind(file, "program", "this command reads programs; `bayesprog run` reads "
                       "experiments and their scenarios")

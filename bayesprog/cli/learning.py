@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bayesprog.cli.common import UserError, column_renames, load_program, output_file
-from bayesprog.files import atomic_write
+from bayesprog.support.files import atomic_write
 
 if TYPE_CHECKING:
     from bayesprog.learning.csv_rows import BadRow
@@ -63,8 +63,8 @@ def add_learn(sub: argparse._SubParsersAction) -> None:
 def cmd_learn(args: argparse.Namespace) -> int:
     if args.max_iter < 1:
         raise UserError(f"--max-iter: expected at least 1, found {args.max_iter}")
-    from bayesprog.bundled import bundled_path
     from bayesprog.learning.plain_csv import ReadAhead
+    from bayesprog.support.bundled import bundled_path
 
     args.data = str(bundled_path(args.data, "data"))
     data = ReadAhead(args.data)  # read on a thread while the program loads
@@ -182,8 +182,8 @@ def add_discover(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_discover(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import bundled_path
-    from bayesprog.discovery import StructureWarning, discover
+    from bayesprog.program.discovery import StructureWarning, discover
+    from bayesprog.support.bundled import bundled_path
 
     data = str(bundled_path(args.data, "data"))
     out = output_file(args.output)
@@ -250,8 +250,8 @@ def add_compare(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import bundled_path
     from bayesprog.learning.evidence import compare
+    from bayesprog.support.bundled import bundled_path
 
     if len(args.files) < 2:
         raise UserError("compare: expected one or more programs, then the data file")

@@ -33,8 +33,8 @@ def add_validate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import bundled_path
-    from bayesprog.files import KINDS, file_kind
+    from bayesprog.support.bundled import bundled_path
+    from bayesprog.support.files import KINDS, file_kind
 
     problems = 0
     for name in args.files:
@@ -118,7 +118,7 @@ def cmd_show(args: argparse.Namespace) -> int:
         if given:
             raise UserError(f"{flag}: for a data file (.csv, .tsv, .parquet); {args.file} is "
                             "read as a program")
-    from bayesprog.show import render
+    from bayesprog.views.show import render
 
     print(render(ablated(load_program(args.file), args.ablate)))
     return 0
@@ -127,7 +127,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 def _data_file(name: str) -> Path | None:
     """``name`` as a data file to summarise: a path (or a bundled name) with a data suffix, or
     the name of a bundled data file when no file or bundled program has that name."""
-    from bayesprog.bundled import bundled_path, find
+    from bayesprog.support.bundled import bundled_path, find
 
     if name.lower().endswith(DATA_SUFFIXES):
         return bundled_path(name, "data")
@@ -157,7 +157,7 @@ def _show_data(path: Path, args: argparse.Namespace) -> int:
     summary = summarise_frame(frame, source, args.by, columns)
     figure = None
     if out is not None:  # drawn before anything is printed: a drawing that fails says so alone
-        from bayesprog.draw import scatter_matrix
+        from bayesprog.views.draw import scatter_matrix
 
         figure = scatter_matrix(frame, summary.by, summary.columns, source=source)
     print(summary.text())
@@ -182,7 +182,7 @@ def add_graph(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_graph(args: argparse.Namespace) -> int:
-    from bayesprog.draw import write_graph
+    from bayesprog.views.draw import write_graph
 
     program = load_program(args.file)
     out = output_file(args.output)
@@ -214,7 +214,7 @@ def add_examples(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import bundled_root, find, listing
+    from bayesprog.support.bundled import bundled_root, find, listing
 
     entries = listing()
     # the name that designates each one: its short name where that finds it, else its path
@@ -240,7 +240,7 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 
 def cmd_examples_copy(args: argparse.Namespace) -> int:
-    from bayesprog.bundled import copy
+    from bayesprog.support.bundled import copy
 
     folder = Path(args.folder)
     if folder.exists() and not folder.is_dir():

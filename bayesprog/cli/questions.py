@@ -139,7 +139,7 @@ def cmd_query(args: argparse.Namespace) -> int:
         burn_in=args.burn_in if args.method == "gibbs" else None,
         thin=args.thin if args.method == "gibbs" else None,
     )
-    from bayesprog.show import format_result
+    from bayesprog.views.show import format_result
 
     if args.plot:
         _plot_density(result, args.plot)
@@ -234,7 +234,7 @@ def _marginals(args: argparse.Namespace) -> int:
                           "marginals": {name: answer.to_json()
                                         for name, answer in found.items()}}))
         return 0
-    from bayesprog.show import format_result
+    from bayesprog.views.show import format_result
 
     if not found:
         print("every variable is given as evidence: no posterior to show")
@@ -272,7 +272,7 @@ def cmd_sample(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".csv", ".parquet"):
         raise UserError(f"-o {args.output}: expected a .csv or .parquet file")
     if out.suffix.lower() == ".parquet":
-        from bayesprog.extras import require_extra
+        from bayesprog.support.extras import require_extra
 
         require_extra("pyarrow", "parquet", f"writing {args.output}")
     program = ablated(load_program(args.file), args.ablate)

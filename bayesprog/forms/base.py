@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from bayesprog.variables import Discrete, Variable
+    from bayesprog.vocabulary.variables import Discrete, Variable
 
 
 @dataclass(frozen=True)
@@ -33,10 +33,10 @@ class FormulaParam:
     the Gaussian method treats them as unknowns) and discrete parents: numbers for a range (its
     integers), states named by integers and a discretised variable (its bins' midpoints), the
     index of the state for named states (which formulas only compare, see
-    :meth:`~bayesprog.formula.Formula.with_states`)."""
+    :meth:`~bayesprog.vocabulary.formula.Formula.with_states`)."""
 
     axes: tuple[str, ...]
-    #: object array of :class:`~bayesprog.formula.Formula`, one axis per entry of ``axes``
+    #: object array of :class:`~bayesprog.vocabulary.formula.Formula`, one axis per entry of ``axes``
     #: (then, with ``event``, one over the child's states)
     formulas: np.ndarray
     #: the formulas give the child's probabilities (its states on the last axis of
@@ -71,7 +71,7 @@ class FormulaParam:
         they name (appended to ``axes``), for ``rows`` rows of the values ``known`` of the
         others (each ``[rows or 1]``); ``[rows, *axes]``, then the child's states with
         ``event``. Probabilities are not yet normalised (:meth:`normalised`)."""
-        from bayesprog.variables import Discrete
+        from bayesprog.vocabulary.variables import Discrete
 
         named = self.names + ((self.child,) if self.child else ())
         extra = tuple(n for n in named

@@ -16,9 +16,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
 from bayesprog.forms.base import Estimator, LearnOptions, Params, ParamValue, Stats, Term
-from bayesprog.variables import Discrete
+from bayesprog.support.extras import LazyModule
+from bayesprog.vocabulary.variables import Discrete
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

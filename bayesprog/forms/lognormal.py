@@ -22,7 +22,6 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
 from bayesprog.forms.base import (
     Estimator,
     Form,
@@ -37,7 +36,8 @@ from bayesprog.forms.base import (
     register_form,
 )
 from bayesprog.forms.estimators import FitProblem, NormalEstimator
-from bayesprog.variables import Variable
+from bayesprog.support.extras import LazyModule
+from bayesprog.vocabulary.variables import Variable
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

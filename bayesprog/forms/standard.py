@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
 from bayesprog.forms.base import (
     Form,
     Param,
@@ -27,7 +26,8 @@ from bayesprog.forms.estimators import (
     NormalEstimator,
     TableEstimator,
 )
-from bayesprog.variables import Continuous, Discrete, Variable
+from bayesprog.support.extras import LazyModule
+from bayesprog.vocabulary.variables import Continuous, Discrete, Variable
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

@@ -19,8 +19,6 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import ProgramCycleError, QuestionError, SpecError, did_you_mean
-from bayesprog.expressions import ExpressionError, parse_expression
-from bayesprog.files import reference_problem
 from bayesprog.forms.base import (
     Form,
     FormulaParam,
@@ -30,7 +28,9 @@ from bayesprog.forms.base import (
     is_binned,
     register_form,
 )
-from bayesprog.formula import FormulaError, parse_formula
+from bayesprog.support.files import reference_problem
+from bayesprog.vocabulary.expressions import ExpressionError, parse_expression
+from bayesprog.vocabulary.formula import FormulaError, parse_formula
 
 
 def _fills_field(sub: Any, name: str, decl: Any, term: Any) -> bool:

@@ -15,7 +15,7 @@ dispatcher knows them only through the registry. What it keeps per layout of que
 
 from typing import TYPE_CHECKING
 
-from bayesprog.extras import lazy_names
+from bayesprog.support.extras import lazy_names
 
 #: Where each public name lives. They are imported when first used: a program that is loaded,
 #: learned or checked, and never asked, does not import the question machinery.

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import rich
 from bayesprog.errors import ArgumentError, QuestionError, ZeroEvidenceError, short_repr
 from bayesprog.inference.density import Density, per_row
+from bayesprog.support import rich
 
 #: Relative tolerance under which two probabilities count as tied for MAP.
 TIE_RTOL = 1e-12

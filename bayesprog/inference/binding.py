@@ -15,10 +15,10 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError, did_you_mean, expect_mapping, short_repr
-from bayesprog.expressions import Question
 from bayesprog.forms import ParamValue
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.variables import Continuous, Discrete, discrete
+from bayesprog.vocabulary.expressions import Question
+from bayesprog.vocabulary.variables import Continuous, Discrete, discrete
 
 
 @dataclass

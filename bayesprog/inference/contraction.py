@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import ONE_STEP, Factor, equation
@@ -33,7 +32,8 @@ from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.recurring import Recurring
 from bayesprog.limits import limit
-from bayesprog.variables import discrete
+from bayesprog.support.extras import LazyModule
+from bayesprog.vocabulary.variables import discrete
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
+from bayesprog.support.extras import LazyModule
 
 #: opt_einsum, imported by the first contraction path searched or compiled (a layout's first
 #: question, answered by elimination, needs none)

@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import rich
 from bayesprog.errors import QuestionError
-from bayesprog.extras import LazyModule
+from bayesprog.support import rich
+from bayesprog.support.extras import LazyModule
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import MapResult, Posterior, check_zero, choose_map
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.cost import ranked, refined, unanswerable, why_not
@@ -33,7 +32,8 @@ from bayesprog.inference.methods.base import (
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size, limit
-from bayesprog.variables import Discrete
+from bayesprog.vocabulary.expressions import Expression, Question
+from bayesprog.vocabulary.variables import Discrete
 
 
 def compute_posterior(program: ProgramLike, question: Question, bound: Bound,

@@ -15,13 +15,13 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError, ZeroEvidenceError
-from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import _floats
 from bayesprog.inference.binding import bind
 from bayesprog.inference.density import per_row
 from bayesprog.inference.dispatch import compute_posterior
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.variables import Discrete
+from bayesprog.vocabulary.expressions import Expression, Question
+from bayesprog.vocabulary.variables import Discrete
 
 
 @dataclass

@@ -17,7 +17,7 @@ from bayesprog.inference.formulas import formula_value, log_factor
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family
 from bayesprog.model import Term
-from bayesprog.variables import Continuous, discrete
+from bayesprog.vocabulary.variables import Continuous, discrete
 
 
 def relevant_names(program: ProgramLike, searched: Iterable[str], observed: Iterable[str],

@@ -24,7 +24,7 @@ import numpy as np
 from bayesprog.errors import QuestionError
 from bayesprog.forms import Form, FormulaParam, ParamValue, TermContext, is_binned
 from bayesprog.inference.binding import Bound
-from bayesprog.variables import Discrete, Variable
+from bayesprog.vocabulary.variables import Discrete, Variable
 
 
 def formula_value(variables: Mapping[str, Variable], param: FormulaParam, bound: Bound,

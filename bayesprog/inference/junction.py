@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError, did_you_mean, expect_mapping
-from bayesprog.expressions import Question, parse_expression
 from bayesprog.inference.answers import Posterior, check_zero
 from bayesprog.inference.binding import bind
 from bayesprog.inference.core import Factor
@@ -38,7 +37,8 @@ from bayesprog.inference.factors import (
 )
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import SizeError, check_size, limit
-from bayesprog.variables import Discrete, discrete
+from bayesprog.vocabulary.expressions import Question, parse_expression
+from bayesprog.vocabulary.variables import Discrete, discrete
 
 #: an elimination whose cliques hold this many times the limit on entries in all is stopped:
 #: merging the cliques contained in others does not bring it under (bnlearn's networks: by

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import rich
 from bayesprog.errors import QuestionError
-from bayesprog.expressions import Expression, Question
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.density import Density, per_row
+from bayesprog.support import rich
+from bayesprog.vocabulary.expressions import Expression, Question
 
 #: the most configurations of the searched discrete variables a mixed question answers
 MAX_CONFIGURATIONS = 4096

@@ -13,7 +13,6 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from bayesprog.expressions import Question
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.core import equation
 from bayesprog.inference.factors import (
@@ -26,6 +25,7 @@ from bayesprog.inference.protocol import ProgramLike
 from bayesprog.inference.relevance import family, requisite
 from bayesprog.inference.schedule import Schedule
 from bayesprog.model import Term
+from bayesprog.vocabulary.expressions import Question
 
 #: (searched, observed discrete, observed continuous, inputs, soft evidence, terms ablated on
 #: some rows): names only

@@ -6,7 +6,7 @@ from typing import Protocol
 
 from bayesprog.inference.core import InferenceCache
 from bayesprog.model import InputDecl, Term
-from bayesprog.variables import Variable
+from bayesprog.vocabulary.variables import Variable
 
 
 class ProgramLike(Protocol):

@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog.expressions import Question
 from bayesprog.inference.answers import Posterior, check_zero
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.dispatch import deferred_evidence, named, with_evidence
@@ -29,7 +28,8 @@ from bayesprog.inference.methods import registered_methods, registry_version
 from bayesprog.inference.plan import Layout, QuestionPlan, layout_key
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import generation, limit
-from bayesprog.variables import Discrete
+from bayesprog.vocabulary.expressions import Question
+from bayesprog.vocabulary.variables import Discrete
 
 #: Kernels a program keeps (question texts, methods and sets of known variables).
 KERNELS = 1024

@@ -50,7 +50,7 @@ from bayesprog.inference.factors import (
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import limit
 from bayesprog.model import Term
-from bayesprog.variables import Continuous
+from bayesprog.vocabulary.variables import Continuous
 
 if TYPE_CHECKING:
     from bayesprog.inference.memo import Memo

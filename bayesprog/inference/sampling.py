@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.extras import LazyModule
 from bayesprog.forms import FormulaParam, ParamValue, TermContext
 from bayesprog.inference.answers import generator_of, seed_of
 from bayesprog.inference.binding import Bound
@@ -34,7 +33,8 @@ from bayesprog.inference.formulas import formula_value
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size
 from bayesprog.model import Term
-from bayesprog.variables import Continuous, Discrete
+from bayesprog.support.extras import LazyModule
+from bayesprog.vocabulary.variables import Continuous, Discrete
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")
@@ -305,8 +305,8 @@ def sample_program(program: ProgramLike, n: int, evidence: Any, inputs: Any, rng
     import pandas as pd
 
     from bayesprog.errors import expect_mapping
-    from bayesprog.expressions import Expression, Question
     from bayesprog.inference.binding import bind
+    from bayesprog.vocabulary.expressions import Expression, Question
 
     evidence = expect_mapping(evidence, "evidence", "variable names to values")
     variables = program.variables

@@ -354,7 +354,7 @@ def import_network(path: str | Path, out: str | Path) -> Path:
 def export_program(program: Any, out: str | Path) -> Path:
     """Write a discrete program with literal tables as BIF, XMLBIF or UAI, or a linear-Gaussian
     program as JSON (by ``out``'s suffix)."""
-    from bayesprog.compile import to_bayesian_network
+    from bayesprog.io.compile import to_bayesian_network
 
     out = Path(out)
     fmt = network_format(out)

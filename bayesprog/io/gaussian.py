@@ -257,7 +257,7 @@ def formula_names(names: Iterable[str]) -> dict[str, str]:
     >>> formula_names(["YR.GLASS", "YR_GLASS", "4", "e", "lambda"])
     {'YR.GLASS': 'YR_GLASS_1', 'YR_GLASS': 'YR_GLASS', '4': 'v_4', 'e': 'e_', 'lambda': 'lambda_'}
     """
-    from bayesprog.formula import CONSTANTS, FUNCTIONS
+    from bayesprog.vocabulary.formula import CONSTANTS, FUNCTIONS
 
     def usable(name: str) -> bool:
         return (bool(_IDENTIFIER.match(name)) and not keyword.iskeyword(name)
@@ -283,7 +283,7 @@ def formula_names(names: Iterable[str]) -> dict[str, str]:
 def gaussian_to_document(network: dict[str, Any], name: str, source: str = "") -> dict[str, Any]:
     """A program document of a checked network (:func:`check_network`): one real variable per
     node (in the file's order) and one ``normal`` term per node (parents first)."""
-    from bayesprog.formula import MAX_LENGTH
+    from bayesprog.vocabulary.formula import MAX_LENGTH
 
     names = formula_names(network["nodes"])
     variables: dict[str, Any] = {}

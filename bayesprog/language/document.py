@@ -24,10 +24,10 @@ from pydantic import (
 )
 
 from bayesprog.errors import Diagnostic, SpecError, short_repr
-from bayesprog.files import KINDS
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.language.plain import check_states, name_of_number
-from bayesprog.records import FitRecord
+from bayesprog.model.records import FitRecord
+from bayesprog.support.files import KINDS
 
 FORMAT_VERSION = 1
 M = TypeVar("M", bound=BaseModel)

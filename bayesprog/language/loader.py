@@ -18,10 +18,10 @@ from typing import Any
 
 import yaml
 
-from bayesprog import yamltext
 from bayesprog.errors import Diagnostic
-from bayesprog.files import a_or_an
-from bayesprog.yamltext import FAST_LOADER
+from bayesprog.support import yamltext
+from bayesprog.support.files import a_or_an
+from bayesprog.support.yamltext import FAST_LOADER
 
 Path = tuple[str | int | float, ...]
 
@@ -43,7 +43,7 @@ class Located:
     texts: dict[Path, str] = field(default_factory=dict)
     #: the paths of values written in quotes on one line (their text starts a column later)
     quoted: set[Path] = field(default_factory=set)
-    #: tables of numbers read as arrays (see :func:`bayesprog.yamltext.number_blocks`): their text, by path
+    #: tables of numbers read as arrays (see :func:`bayesprog.support.yamltext.number_blocks`): their text, by path
     blocks: dict[Path, str] = field(default_factory=dict)
 
     def where(self, path: Path) -> tuple[int, int]:
@@ -319,7 +319,7 @@ def load_yaml(text: str, file: str, kind: str = "program") -> tuple[Located, lis
 
 
 #: the most values a file may expand to (aliases included), tables of numbers read as arrays
-#: aside (:data:`bayesprog.yamltext.MAX_TABLE_NUMBERS`); reading that many as YAML takes about 3 s and 400 MB
+#: aside (:data:`bayesprog.support.yamltext.MAX_TABLE_NUMBERS`); reading that many as YAML takes about 3 s and 400 MB
 MAX_VALUES = 500_000
 def _position_in_block(written: str, line: int, column: int, inside: list[Any]) -> tuple[int, int]:
     """Line and column of the row or number at indices ``inside`` of a table written as

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 from bayesprog.limits import limit
 
 if TYPE_CHECKING:
-    from bayesprog.records import FitRecord
+    from bayesprog.model.records import FitRecord
 
 #: The kinds of question a file may name.
 KINDS = ("posterior", "map", "filter", "smooth", "sequence", "probability")
@@ -243,7 +243,7 @@ _RECORD: dict[str, tuple[type, ...]] = {
 
 
 def _record(raw: Any) -> FitRecord:
-    from bayesprog.records import FitRecord  # (a program that was never learned needs none)
+    from bayesprog.model.records import FitRecord  # (a program that was never learned needs none)
 
     spec = _mapping(raw, tuple(_RECORD))
     _expect(all(type(v) in _RECORD[k] for k, v in spec.items()))

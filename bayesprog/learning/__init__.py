@@ -7,7 +7,7 @@ The names are imported at their first read: ``bayesprog learn`` starts reading i
 
 from typing import TYPE_CHECKING
 
-from bayesprog.extras import lazy_names
+from bayesprog.support.extras import lazy_names
 
 _WHERE = {
     "BadRow": "bayesprog.learning.csv_rows",

@@ -26,7 +26,7 @@ import numpy as np
 from bayesprog.errors import ArgumentError, BayesprogError, did_you_mean, short_repr
 from bayesprog.learning.csv_rows import BadRow, CsvProblem, read_csv_rows
 from bayesprog.learning.plain_csv import ReadAhead, read_file
-from bayesprog.variables import Continuous, Discrete, Variable
+from bayesprog.vocabulary.variables import Continuous, Discrete, Variable
 
 #: what is done with a bad row, as pandas' ``read_csv(on_bad_lines=...)`` names it: refuse
 #: the earliest, or set every one aside (``warn`` also says which)
@@ -159,7 +159,7 @@ def read_frame(source: Any, keep_bad: bool = False) -> Frame:
     hexdigest = hashlib.sha256(raw).hexdigest()
     suffix = path.suffix.lower()
     if suffix in (".parquet", ".pq"):
-        from bayesprog.extras import require_extra
+        from bayesprog.support.extras import require_extra
 
         require_extra("pyarrow", "parquet", f"reading {path}")
         try:

@@ -34,7 +34,7 @@ def evidence(program: Any, data: Any, *, score: str = "bdeu",
     otherwise (real variables, other forms, missing values) the BIC approximation, the
     fitted log-likelihood less ``log(rows)/2`` per free parameter, and the method says so."""
     from bayesprog.learning.data import load_data
-    from bayesprog.variables import Discrete
+    from bayesprog.vocabulary.variables import Discrete
 
     if score not in ("bdeu", "k2"):
         raise StructureError(f"score {score!r}: expected bdeu or k2")

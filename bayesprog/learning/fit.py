@@ -39,8 +39,8 @@ from bayesprog.inference.relevance import Family
 from bayesprog.learning.csv_rows import BadRow
 from bayesprog.learning.data import Data, DataError, load_data
 from bayesprog.model import LearnOptions, Term
-from bayesprog.records import FitRecord
-from bayesprog.variables import Continuous, Discrete, Variable
+from bayesprog.model.records import FitRecord
+from bayesprog.vocabulary.variables import Continuous, Discrete, Variable
 
 #: Most entries of one chunk's joint table over the missing variables (rows x joint states).
 JOINT_LIMIT = 1 << 23

@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from bayesprog.expressions import canonical
-from bayesprog.yamltext import FAST_LOADER, number_blocks
+from bayesprog.support.yamltext import FAST_LOADER, number_blocks
+from bayesprog.vocabulary.expressions import canonical
 
 #: the comment the round trip writes above a new ``learned:`` list
 LEARNED_COMMENT = "# Fits that set this program's parameters (bayesprog learn)."

@@ -15,10 +15,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog.expressions import canonical, parse_expression
 from bayesprog.forms import ParamValue
-from bayesprog.records import FitRecord
-from bayesprog.variables import Discrete, Variable
+from bayesprog.model.records import FitRecord
+from bayesprog.vocabulary.expressions import canonical, parse_expression
+from bayesprog.vocabulary.variables import Discrete, Variable
 
 if TYPE_CHECKING:  # ruamel.yaml is imported by the round trip, when a file needs it
     from ruamel.yaml import YAML

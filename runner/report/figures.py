@@ -252,7 +252,7 @@ def recordings_figure(frame: Any, material_column: str, readings: Sequence[str],
     reading by reading into ``path``: every pair of ``readings`` per material (one colour
     each, with a legend), each reading's histogram per material on the diagonal (a discrete
     reading, or one named in ``discrete``: the count of each state), a press's missing
-    readings left out pair by pair (:func:`bayesprog.draw.scatter_matrix`)."""
+    readings left out pair by pair (:func:`bayesprog.views.draw.scatter_matrix`)."""
     from bayesprog import scatter_matrix
 
     scatter_matrix(frame, by=material_column, columns=list(readings), discrete=discrete,

@@ -77,8 +77,9 @@ def test_batched_runs_equal_runs_one_at_a_time(scenario):
 
 def _uniform_variant(tmp_path: Path, term: str) -> bayesprog.Program:
     doc = yaml.safe_load((MODELS / "pi_tar.yaml").read_text())
-    hits = [t for t in doc["decomposition"] if bayesprog.expressions.parse_expression(t["term"]).key
-            == bayesprog.expressions.parse_expression(term).key]
+    from bayesprog.vocabulary.expressions import parse_expression as parse
+
+    hits = [t for t in doc["decomposition"] if parse(t["term"]).key == parse(term).key]
     assert len(hits) == 1
     hits[0].clear()
     hits[0].update({"term": term, "form": "uniform"})

@@ -30,7 +30,6 @@ import numpy as np
 
 from bayesprog.errors import QuestionError
 from bayesprog.forms import FormulaParam, InputRef, ParamValue, available_forms, get_form
-from bayesprog.formula import Formula
 from bayesprog.inference.binding import Bound
 from bayesprog.inference.contraction import contract_factors
 from bayesprog.inference.core import Factor
@@ -42,7 +41,8 @@ from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import check_size
 from bayesprog.model import Term
-from bayesprog.variables import Discrete
+from bayesprog.vocabulary.formula import Formula
+from bayesprog.vocabulary.variables import Discrete
 
 _LOG_2PI = float(np.log(2 * np.pi))
 

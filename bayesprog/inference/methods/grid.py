@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 
 from bayesprog.forms import FormulaParam
-from bayesprog.formula import substitute
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.contraction import contract_question
 from bayesprog.inference.core import InferenceCache
@@ -30,7 +29,8 @@ from bayesprog.inference.density import QUANTILES, Density
 from bayesprog.inference.methods.base import Cost, Method, register_method
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.model import InputDecl, Term
-from bayesprog.variables import Continuous, Variable, binned_variable
+from bayesprog.vocabulary.formula import substitute
+from bayesprog.vocabulary.variables import Continuous, Variable, binned_variable
 
 #: Bins per unknown real variable of the coarser of the two answers.
 DEFAULT_BINS = 128

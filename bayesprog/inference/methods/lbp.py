@@ -13,12 +13,12 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.core import symbol
 from bayesprog.inference.factors import question_factors, rescaled
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
+from bayesprog.support.extras import LazyModule
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from bayesprog.extras import LazyModule
 from bayesprog.inference.answers import Posterior
 from bayesprog.inference.methods.base import PER_FACTOR, Cost, Method, answer, register_method
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.sampling import draw, generators
+from bayesprog.support.extras import LazyModule
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")

@@ -7,7 +7,7 @@ a checkout. On the command line a name that is not a file is looked up among the
 wherever bayesprog is installed; ``bayesprog examples`` lists them and ``bayesprog examples copy
 NAME DIR`` copies one, with every file it names, into a folder of one's own to edit.
 
->>> from bayesprog import bundled
+>>> from bayesprog.support import bundled
 >>> bundled.find("student", "program").name
 'student.yaml'
 >>> bundled.find("examples/rain").relative_to(bundled.bundled_root()).as_posix()
@@ -22,7 +22,7 @@ from functools import cache
 from pathlib import Path
 
 from bayesprog.errors import BayesprogError
-from bayesprog.files import file_kind
+from bayesprog.support.files import file_kind
 
 #: the folders of the models root where each kind of file is looked for, in order
 FOLDERS = {"experiment": ("experiments",), "scenario": ("scenarios",),
@@ -61,7 +61,7 @@ class Bundled:
 def bundled_root() -> Path:
     """The folder of the bundled models: ``bayesprog/models`` in an installed wheel, the
     checkout's ``models`` folder otherwise."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # bayesprog/ (this is support/bundled.py)
     for candidate in (here / "models", here.parent / "models"):
         if (candidate / "examples").is_dir():
             return candidate

@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from bayesprog import rich
-from bayesprog.draw import graph_figure
 from bayesprog.errors import QuestionError
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.program import Program
-from bayesprog.show import render
+from bayesprog.support import rich
+from bayesprog.views.draw import graph_figure
+from bayesprog.views.show import render
 
 #: rows of a table (and bars of a chart) shown for one answer; the rest are summarised
 ROWS = 12
@@ -190,7 +190,7 @@ def show_inference(program: Program, evidence: Mapping[str, Any] | None = None, 
     >>> view.marginals["Rain"].probabilities.round(4).tolist()
     [0.5294, 0.4706]
     """
-    from bayesprog.expressions import Expression, Question
+    from bayesprog.vocabulary.expressions import Expression, Question
 
     if ablate:
         program = program.ablate([ablate] if isinstance(ablate, str) else list(ablate))

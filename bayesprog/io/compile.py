@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 
 from bayesprog.errors import QuestionError
-from bayesprog.expressions import Question
 from bayesprog.forms import InputRef
 from bayesprog.inference.binding import Bound, bind
 from bayesprog.inference.factors import relevant_terms, slice_factor, term_factor
 from bayesprog.program import Program
-from bayesprog.variables import discrete
+from bayesprog.vocabulary.expressions import Question
+from bayesprog.vocabulary.variables import discrete
 
 
 def to_bayesian_network(program: Program) -> Any:

@@ -4,7 +4,7 @@ reads it from YAML (:mod:`bayesprog.language`) and the inference and learning th
 A :class:`Term` is one factor of the decomposition (its variables, form and parameters), an
 :class:`InputDecl` a runtime input a question binds and :class:`LearnOptions` how a term is
 learned from data (defined beside the forms' estimators, which read it). The provenance of a
-fit, as written into a fitted file, is in :mod:`bayesprog.records` (dataclasses, imported only
+fit, as written into a fitted file, is in :mod:`bayesprog.model.records` (dataclasses, imported only
 for a program that has one).
 """
 
@@ -13,10 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from bayesprog.expressions import Expression
 from bayesprog.forms import Form, FormulaParam, InputRef, ParamValue
 from bayesprog.forms.estimators import LearnOptions
-from bayesprog.variables import Variable
+from bayesprog.vocabulary.expressions import Expression
+from bayesprog.vocabulary.variables import Variable
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,9 @@ from typing import Any
 import networkx as nx
 
 from bayesprog.errors import BayesprogError
-from bayesprog.expressions import Question
 from bayesprog.program import Program
-from bayesprog.variables import Continuous
+from bayesprog.vocabulary.expressions import Question
+from bayesprog.vocabulary.variables import Continuous
 
 
 def _label(program: Program, name: str) -> str:

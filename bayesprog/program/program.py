@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog import cache, rich
 from bayesprog.errors import (
     ArgumentError,
     Diagnostic,
@@ -26,22 +25,23 @@ from bayesprog.errors import (
     did_you_mean,
     short_repr,
 )
-from bayesprog.expressions import (
-    Expression,
-    ExpressionError,
-    Question,
-    canonical,
-    parse_expression,
-)
-from bayesprog.extras import LazyModule
-from bayesprog.files import atomic_write
 from bayesprog.forms import ParamValue, get_form
 from bayesprog.inference.core import InferenceCache
 from bayesprog.language.check import check_document, conditioning_problem, question_problem
 from bayesprog.language.loader import Located, load_yaml
 from bayesprog.language.plain import PlainDocument, read_plain
 from bayesprog.model import InputDecl, Term
-from bayesprog.variables import Discrete, Variable
+from bayesprog.support import cache, rich
+from bayesprog.support.extras import LazyModule
+from bayesprog.support.files import atomic_write
+from bayesprog.vocabulary.expressions import (
+    Expression,
+    ExpressionError,
+    Question,
+    canonical,
+    parse_expression,
+)
+from bayesprog.vocabulary.variables import Discrete, Variable
 
 if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayesprog is
     import networkx as nx
@@ -55,7 +55,7 @@ if TYPE_CHECKING:  # imported when a program is learned or drawn, not when bayes
     from bayesprog.learning import Estimate
     from bayesprog.learning.csv_rows import BadRow
     from bayesprog.learning.evidence import Evidence
-    from bayesprog.records import FitRecord
+    from bayesprog.model.records import FitRecord
 
 
 # the question machinery, imported at the first question: loading, checking and learning a
@@ -409,7 +409,7 @@ class Program:
 
             return probability(self, q, evidence, inputs, soft, method, dict(options, rng=rng))
         if q.kind in ("filter", "smooth", "sequence"):
-            from bayesprog.dynamic import over_time
+            from bayesprog.program.dynamic import over_time
 
             return over_time(self, q, evidence, inputs, soft, method, dict(options, rng=rng))
         if len({self.variables[v].is_discrete for v in q.expression.left}) > 1:
@@ -1061,7 +1061,7 @@ def load(path: str | Path, variables: Mapping[str, Any] | None = None,
     token = _LOADING.set((*chain, key))
     try:
         data = path.read_bytes()
-        # a file loaded before, byte for byte, is read back checked (see bayesprog.cache)
+        # a file loaded before, byte for byte, is read back checked (see bayesprog.support.cache)
         kept = cache.key(path, data) if variables is None and terms is None else None
         if kept is not None:
             program = cache.get(kept)
@@ -1087,7 +1087,7 @@ def _existing_or_bundled(path: Path) -> Path:
     ``FileNotFoundError`` that says neither is there."""
     if path.exists():
         return path
-    from bayesprog.bundled import find
+    from bayesprog.support.bundled import find
 
     found = find(str(path), "program")
     if found is not None:

@@ -1,6 +1,6 @@
 """Rich display hooks (IPython's ``_repr_html_``): programs and answers ask here for their HTML.
 
-The renderers live in :mod:`bayesprog.display`, above the layers whose objects they draw, and
+The renderers live in :mod:`bayesprog.views.display`, above the layers whose objects they draw, and
 register themselves (:func:`register`) when that module is imported. This module names none of
 them: the package's ``__init__`` hands it, with :func:`defer`, the import that brings them, run
 at the first display, so the engine and the program never import plotting code and ``import

@@ -28,11 +28,11 @@ import numpy as np
 import scipy
 
 from bayesprog.errors import QuestionError, expect_mapping
-from bayesprog.expressions import Expression, Question
 from bayesprog.inference import MapResult, Posterior
 from bayesprog.inference.density import Density
 from bayesprog.inference.viterbi import most_likely_sequence
 from bayesprog.limits import check_size, limit
+from bayesprog.vocabulary.expressions import Expression, Question
 
 KINDS = ("filter", "smooth", "sequence")
 

@@ -48,7 +48,7 @@ def folder() -> Path | None:
 def _code() -> bytes:
     """What identifies the code that checks and compiles programs: the size and time of change
     of every module of the package (another version, or an edited module, makes new keys)."""
-    root = Path(__file__).parent
+    root = Path(__file__).parents[1]  # bayesprog/, of which this is bayesprog/support/cache.py
     parts = []
     for directory, folders, files in os.walk(root):
         folders[:] = sorted(f for f in folders if not f.startswith((".", "__")))
@@ -107,7 +107,7 @@ def put(name: str, program: Any) -> None:
         return
     if len(data) > MAX_BYTES // 4:
         return
-    from bayesprog.files import atomic_write
+    from bayesprog.support.files import atomic_write
 
     try:
         atomic_write(place / f"{name}.pickle", data)

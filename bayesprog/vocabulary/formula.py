@@ -122,7 +122,7 @@ class Formula:
         >>> parse_formula("Colour + 1").with_states(states)
         Traceback (most recent call last):
         ...
-        bayesprog.formula.FormulaError: Colour has named states (red, green): in "Colour + 1" it may only be compared with == or != to a variable of the same states or to one of its states quoted ('red')
+        bayesprog.vocabulary.formula.FormulaError: Colour has named states (red, green): in "Colour + 1" it may only be compared with == or != to a variable of the same states or to one of its states quoted ('red')
         """
         names = {n for n in self.names if n in states}
         quoted = [n for n in ast.walk(self.tree)

@@ -355,7 +355,7 @@ class Discovery:
     data: pd.DataFrame
 
     def save(self, path: str | Path) -> Path:
-        from bayesprog.files import atomic_write
+        from bayesprog.support.files import atomic_write
 
         path = Path(path)
         atomic_write(path, self.text.encode("utf-8"), parents=False)
@@ -480,7 +480,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     data = Columns(coded.source, coded.sha256, len(coded.codes), False, names,
                    lambda j: (coded.codes[:, j], coded.states[j]))
     fit = skeleton_program.fit(data, max_iter=max_iter, tol=tol)
-    from bayesprog.records import StructureRecord
+    from bayesprog.model.records import StructureRecord
 
     record = fit.record.replace(data=coded.source, sha256=coded.sha256,
                                 structure=StructureRecord(**structure))

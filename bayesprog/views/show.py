@@ -14,7 +14,7 @@ from bayesprog.inference.event import Probability
 from bayesprog.inference.mixed import Joint
 from bayesprog.model import Term
 from bayesprog.program import Program
-from bayesprog.variables import Continuous, Discrete, Variable
+from bayesprog.vocabulary.variables import Continuous, Discrete, Variable
 
 
 def _fmt(x: float) -> str:
