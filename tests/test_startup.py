@@ -84,6 +84,23 @@ def test_a_script_that_loads_a_program_and_asks_once_builds_no_validator_and_no_
     assert "bayesprog.inference.methods.table" in later
 
 
+def test_a_discovery_and_its_program_build_no_validator():
+    """discover writes its program with a discovered structure's record under learned:, which
+    the plain reader reads: neither the search nor loading what it wrote builds pydantic's
+    validators (they took about as long as a small network's whole search)."""
+    code = ("import bayesprog\n"
+            "rows = {'A': [0, 1] * 50, 'B': [0, 1] * 45 + [1, 0] * 5}\n"
+            "found = bayesprog.discover(rows)\n"
+            "assert found.parents == {'A': [], 'B': ['A']} or found.parents == "
+            "{'A': ['B'], 'B': []}, found.parents\n"
+            "again = bayesprog.loads(found.text)\n"
+            "print(again.learned[0].structure.method)")
+    loaded = loaded_after(code)
+    assert "pydantic" not in top_level(loaded)
+    assert "bayesprog.language.document" not in loaded
+    assert _after(code).splitlines()[-1] == "hc"
+
+
 def test_a_program_displays_in_a_notebook_without_importing_the_display_first():
     code = ("import bayesprog\n"
             "p = bayesprog.loads(" + repr(STUDENT) + ")\n"
