@@ -76,8 +76,9 @@ def test_a_script_that_loads_a_program_and_asks_once_builds_no_validator_and_no_
     assert methods == {"bayesprog.inference.methods.base",
                        "bayesprog.inference.methods.contraction"}, methods
     assert "bayesprog.records" not in loaded and "bayesprog.language.document" not in loaded
-    # a program too small for the program cache is loaded without its hash (OpenSSL's)
-    assert "hashlib" not in loaded
+    # a program too small for the program cache is loaded without its hash (OpenSSL's), and a
+    # layout's first question keeps nothing for the questions that recur
+    assert "hashlib" not in loaded and "bayesprog.inference.recurring" not in loaded
     # by hand: P(I=low, G=A) = 0.7 (0.6 x 0.3 + 0.4 x 0.05) = 0.14, P(G=A) = 0.14 + 0.222
     assert _after(code).splitlines()[-1] == "[0.38674, 0.61326]"
     # a learned: record is read by pydantic, and a second layout ranks the methods
