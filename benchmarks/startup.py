@@ -13,6 +13,11 @@ reports (``python -X importtime``: the cumulative time of the top-level module).
 the medians, their ratio and the median of the paired ratios, to ``--out`` as JSON and to
 standard output.
 
+The script pair is also timed where no bytecode is written (``PYTHONDONTWRITEBYTECODE=1``, as
+some development environments set it): the libraries' bytecode is then read as installed, but
+a source checkout of this package with no ``__pycache__`` (an editable install) has its modules
+compiled at every start; the row says whether the package had bytecode.
+
     python benchmarks/startup.py [--repeats 15] [--out results/benchmarks/startup.json]
 """
 
@@ -89,6 +94,15 @@ def import_time(module: str) -> float:
     return int(line.split("|")[1]) / 1e6
 
 
+def _has_bytecode() -> bool:
+    """Whether this package's modules have bytecode beside their sources (as an installed wheel
+    has it), which a process that writes none still reads."""
+    import importlib.util
+
+    source = Path(__file__).parents[1] / "bayesprog" / "program.py"
+    return Path(importlib.util.cache_from_source(str(source))).exists()
+
+
 def paired(ours: list[str], reference: list[str], repeats: int, cwd: Path) -> dict:
     a, b = [], []
     wall(ours, cwd), wall(reference, cwd)  # warm the file cache
@@ -118,6 +132,18 @@ def main() -> None:
         # a script that loads the bundled student and asks one question, and pyAgrum's
         report["script_question_vs_pyagrum"] = paired(
             [py, "bayesprog_script.py"], [py, "pyagrum_script.py"], args.repeats, cwd)
+        # the same where no bytecode is written (PYTHONDONTWRITEBYTECODE=1): the libraries'
+        # bytecode is read as installed, and a source checkout of this package without
+        # __pycache__ (an editable install) has its modules compiled at every start
+        installed = dict(ENV)
+        ENV.clear()
+        ENV.update(os.environ, PYTHONDONTWRITEBYTECODE="1")
+        ENV.pop("PYTHONPYCACHEPREFIX", None)
+        report["script_question_vs_pyagrum_no_bytecode_written"] = dict(paired(
+            [py, "bayesprog_script.py"], [py, "pyagrum_script.py"], args.repeats, cwd),
+            package_bytecode=_has_bytecode())
+        ENV.clear()
+        ENV.update(installed)
         for ref in ("pyagrum", "pgmpy"):
             report[f"import_vs_{ref}"] = paired([py, "-c", "import bayesprog"],
                                                 [py, "-c", f"import {ref}"], args.repeats, cwd)
@@ -137,7 +163,7 @@ def main() -> None:
         if isinstance(value, dict):
             paired_ratio = (f"   paired {value['paired_ratio']:.2f}"
                             if "paired_ratio" in value else "")
-            print(f"{key:28s} bayesprog {value['bayesprog_s'] * 1000:7.1f} ms   reference "
+            print(f"{key:48s} bayesprog {value['bayesprog_s'] * 1000:7.1f} ms   reference "
                   f"{value['reference_s'] * 1000:7.1f} ms   ratio {value['ratio']:.2f}"
                   f"{paired_ratio}")
     out = Path(args.out)

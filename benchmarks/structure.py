@@ -14,12 +14,17 @@ Each repeat runs them all in turn (the order rotated from repeat to repeat), aft
 each that is not timed (imports, numba's compiled kernels loaded); the first call of ours in
 the process (the first network's) is reported apart. Reported per network: the median of each time, the medians of
 the paired ratios (theirs / ours, each within one repeat), and the BIC of each search's DAG as
-pgmpy's ``BIC`` scores it. With ``--pc``, also the PC skeleton against pgmpy's
-``build_skeleton`` (chi-square at 0.01, conditioning sets up to 5; pgmpy's takes minutes, run
-``--pc-repeats`` times). To ``--out`` as JSON and to standard output.
+pgmpy's ``BIC`` scores it (and as our scorer does: the two agree). With ``--fresh N``, also
+the first search of a fresh process, N processes each, interleaved: ours (``import
+bayesprog``, pandas and the data read before the clock; the compiled kernels loaded within it)
+against pyAgrum's one-thread learner (``import pyagrum`` before the clock). With ``--pc``,
+also the PC skeleton against pgmpy's ``build_skeleton`` (chi-square at 0.01, conditioning sets
+up to 5; pgmpy's takes minutes, run ``--pc-repeats`` times). To ``--out`` as JSON and to
+standard output.
 
     python benchmarks/structure.py [--networks asia child insurance alarm] [--rows N]
-        [--repeats 5] [--pgmpy-repeats 3] [--pc] [--out results/benchmarks/structure.json]
+        [--repeats 5] [--pgmpy-repeats 3] [--fresh N] [--pc]
+        [--out results/benchmarks/structure.json]
 """
 
 from __future__ import annotations
@@ -27,6 +32,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
+import sys
+import tempfile
 import time
 import warnings
 from collections.abc import Callable
@@ -60,6 +68,63 @@ def pgmpy_bic(frame: Any, parents: dict[str, list[str]]) -> float:
     model.add_nodes_from(list(frame.columns))
     model.add_edges_from((p, c) for c, ps in parents.items() for p in ps)
     return float(BIC(frame).score(model))
+
+
+def ours_bic(frame: Any, parents: dict[str, list[str]]) -> float:
+    """The BIC of a DAG as our scorer gives it (the sum of its families' scores)."""
+    from bayesprog.learning.structure import Scores
+    from bayesprog.program.discovery import code_data
+
+    coded = code_data(frame)
+    scores = Scores(coded.codes, coded.card, "bic")
+    index = {n: i for i, n in enumerate(coded.names)}
+    return float(sum(scores.local(index[c], tuple(sorted(index[p] for p in ps)))
+                     for c, ps in parents.items()))
+
+
+FRESH_OURS = """
+import pickle, sys, time
+import pandas
+import bayesprog
+frame = pickle.load(open(sys.argv[1], "rb"))
+clock = time.perf_counter()
+bayesprog.discover(frame, method="hc", score="bic")
+print(time.perf_counter() - clock)
+"""
+
+FRESH_PYAGRUM = """
+import pickle, sys, time
+import pandas
+import pyagrum as gum
+frame = pickle.load(open(sys.argv[1], "rb"))
+clock = time.perf_counter()
+learner = gum.BNLearner(frame)
+learner.setNumberOfThreads(1)
+learner.useGreedyHillClimbing()
+learner.useScoreBIC()
+learner.useSmoothingPrior(1e-6)
+learner.learnBN()
+print(time.perf_counter() - clock)
+"""
+
+
+def bench_fresh(frame: Any, processes: int) -> dict[str, Any]:
+    """The first search of a fresh process, ours against pyAgrum's on one thread, in turn."""
+    import pickle
+
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "frame.pickle"
+        data.write_bytes(pickle.dumps(frame))
+        times: dict[str, list[float]] = {"ours": [], "pyagrum_1_thread": []}
+        for _ in range(processes):
+            for name, code in (("ours", FRESH_OURS), ("pyagrum_1_thread", FRESH_PYAGRUM)):
+                out = subprocess.run([sys.executable, "-c", code, str(data)], check=True,
+                                     capture_output=True, text=True).stdout
+                times[name].append(float(out.split()[-1]))
+    paired = [t / o for t, o in zip(times["pyagrum_1_thread"], times["ours"], strict=True)]
+    return {"ours_s": float(np.median(times["ours"])),
+            "pyagrum_1_thread_s": float(np.median(times["pyagrum_1_thread"])),
+            "pyagrum_1_thread_over_ours": float(np.median(paired)), "times": times}
 
 
 def ours(frame: Any) -> dict[str, list[str]]:
@@ -131,6 +196,7 @@ def bench_hc(frame: Any, repeats: int, pgmpy_repeats: int) -> dict[str, Any]:
         out[f"{name}_over_ours_search"] = float(np.median(paired))
     for name in ("ours", "pyagrum", "pgmpy"):
         out[f"{name}_bic"] = pgmpy_bic(frame, found[name])
+        out[f"{name}_bic_by_our_scorer"] = ours_bic(frame, found[name])
         out[f"{name}_arcs"] = sum(len(ps) for ps in found[name].values())
     out["ours_bic_less_pyagrum"] = out["ours_bic"] - out["pyagrum_bic"]
     out["ours_bic_less_pgmpy"] = out["ours_bic"] - out["pgmpy_bic"]
@@ -182,6 +248,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--pgmpy-repeats", type=int, default=3,
                         help="timed runs of pgmpy's hill climbing (seconds each)")
+    parser.add_argument("--fresh", type=int, default=0, metavar="N",
+                        help="also the first search of N fresh processes each, ours and "
+                             "pyAgrum's on one thread")
     parser.add_argument("--pc", action="store_true", help="also the PC skeleton (minutes)")
     parser.add_argument("--pc-repeats", type=int, default=1)
     parser.add_argument("--out", type=Path, default=Path("results/benchmarks/structure.json"))
@@ -195,6 +264,8 @@ def main() -> None:
         found: dict[str, Any] = {"network": name, "variables": frame.shape[1], "rows": rows,
                                  "load_average": load,
                                  "hc": bench_hc(frame, args.repeats, args.pgmpy_repeats)}
+        if args.fresh:
+            found["fresh"] = bench_fresh(frame, args.fresh)
         if args.pc:
             found["pc"] = bench_pc(frame, model, args.pc_repeats)
         results.append(found)
@@ -202,9 +273,15 @@ def main() -> None:
         print(f"{name} ({found['variables']} variables, {rows} rows, load {load:.1f}): "
               f"ours {hc['ours_s']:.3f} s (search {hc['ours_search_s']:.3f} s), pyAgrum "
               f"{hc['pyagrum_s']:.3f} s (1 thread {hc['pyagrum_1_thread_s']:.3f} s), pgmpy "
-              f"{hc['pgmpy_s']:.2f} s; pyAgrum/ours {hc['pyagrum_over_ours']:.1f}x, "
+              f"{hc['pgmpy_s']:.2f} s; pyAgrum/ours {hc['pyagrum_over_ours']:.1f}x "
+              f"(1 thread {hc['pyagrum_1_thread_over_ours']:.2f}x), "
               f"pgmpy/ours {hc['pgmpy_over_ours']:.1f}x; BIC ours {hc['ours_bic']:.1f}, "
               f"pyAgrum {hc['pyagrum_bic']:.1f}, pgmpy {hc['pgmpy_bic']:.1f}", flush=True)
+        if args.fresh:
+            fresh = found["fresh"]
+            print(f"  first search of a fresh process: ours {fresh['ours_s']:.3f} s, pyAgrum "
+                  f"1 thread {fresh['pyagrum_1_thread_s']:.3f} s; pyAgrum/ours "
+                  f"{fresh['pyagrum_1_thread_over_ours']:.2f}x", flush=True)
         if args.pc:
             pc = found["pc"]
             print(f"  pc {pc['ours_s']:.2f} s vs pgmpy {pc['pgmpy_s']:.1f} s "

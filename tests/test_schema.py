@@ -146,6 +146,49 @@ def test_whatever_the_plain_reader_takes_pydantic_takes_the_same(data):
     _agree(doc)
 
 
+def _discovered() -> list[str]:
+    """The files of programs discovered from data (hill climbing and PC, with constraints and
+    bins): each carries a discovered structure's record."""
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 2, 400)
+    b = a ^ (rng.random(400) < 0.2)
+    frame = {"A": a.tolist(), "B": b.astype(int).tolist(),
+             "C": (rng.normal(size=400) + b).tolist()}
+    return [bayesprog.discover(frame, discretise=3).text,
+            bayesprog.discover(frame, method="pc", discretise=3).text,
+            bayesprog.discover(frame, score="bdeu", forbid=["A->B"], tiers=[["A"], ["B", "C"]],
+                               max_parents=2, discretise=4).text]
+
+
+DISCOVERED = _discovered()
+
+
+@pytest.mark.parametrize("which", range(len(DISCOVERED)))
+def test_the_plain_reader_reads_a_discovered_program_as_pydantic_does(which):
+    data = _located(DISCOVERED[which]).data
+    assert data["learned"][0]["structure"]["method"] in ("hc", "pc")
+    assert _agree(data)
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data())
+def test_whatever_discovered_record_the_plain_reader_takes_pydantic_takes_the_same(data):
+    """A discovered structure's record with values replaced, added or removed at random: the
+    plain reader leaves it to pydantic, or reads it as pydantic does."""
+    doc = _located(data.draw(st.sampled_from(DISCOVERED))).data
+    record = doc["learned"][0]["structure"]
+    for _ in range(data.draw(st.integers(1, 3))):
+        key = data.draw(st.sampled_from([*record, "score", "tests", "seconds", "extra",
+                                         "constraints", "discretised", "warnings"]))
+        if data.draw(st.integers(0, 4)) == 0:
+            record.pop(key, None)
+        else:
+            record[key] = data.draw(LEAVES | st.sampled_from(
+                [{"C": [0, 1.5]}, {"C": ["a"]}, {"forbid": ["A->B"]}, {"forbid": [1.5, None]},
+                 2**60, -3, 0.25]))
+    _agree(doc)
+
+
 @pytest.mark.parametrize("change, word", [
     (lambda record: record.pop("log_likelihood"), "log_likelihood"),
     (lambda record: record.update(log_likelihood=10**400), "log_likelihood"),

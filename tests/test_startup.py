@@ -76,12 +76,32 @@ def test_a_script_that_loads_a_program_and_asks_once_builds_no_validator_and_no_
     assert methods == {"bayesprog.inference.methods.base",
                        "bayesprog.inference.methods.contraction"}, methods
     assert "bayesprog.model.records" not in loaded and "bayesprog.language.document" not in loaded
+    # a program too small for the program cache is loaded without its hash (OpenSSL's), and a
+    # layout's first question keeps nothing for the questions that recur
+    assert "hashlib" not in loaded and "bayesprog.inference.recurring" not in loaded
     # by hand: P(I=low, G=A) = 0.7 (0.6 x 0.3 + 0.4 x 0.05) = 0.14, P(G=A) = 0.14 + 0.222
     assert _after(code).splitlines()[-1] == "[0.38674, 0.61326]"
     # a learned: record is read by pydantic, and a second layout ranks the methods
     later = loaded_after(code + "\np.ask('P(D | G=A)'); p.ask('P(D | G=B)')\n"
                          "import bayesprog.language.document")
     assert "bayesprog.inference.methods.table" in later
+
+
+def test_a_discovery_and_its_program_build_no_validator():
+    """discover writes its program with a discovered structure's record under learned:, which
+    the plain reader reads: neither the search nor loading what it wrote builds pydantic's
+    validators (they took about as long as a small network's whole search)."""
+    code = ("import bayesprog\n"
+            "rows = {'A': [0, 1] * 50, 'B': [0, 1] * 45 + [1, 0] * 5}\n"
+            "found = bayesprog.discover(rows)\n"
+            "assert found.parents == {'A': [], 'B': ['A']} or found.parents == "
+            "{'A': ['B'], 'B': []}, found.parents\n"
+            "again = bayesprog.loads(found.text)\n"
+            "print(again.learned[0].structure.method)")
+    loaded = loaded_after(code)
+    assert "pydantic" not in top_level(loaded)
+    assert "bayesprog.language.document" not in loaded
+    assert _after(code).splitlines()[-1] == "hc"
 
 
 def test_a_program_displays_in_a_notebook_without_importing_the_display_first():

@@ -313,6 +313,52 @@ def test_a_csv_file_is_coded_as_its_rows_read_by_the_csv_module(tmp_path, text):
     assert coded.sha256 == hashlib.sha256(path.read_bytes()).hexdigest()
     assert coded.source == str(path)
 
+def _frames() -> dict[str, pd.DataFrame]:
+    rng = np.random.default_rng(3)
+    n = 60
+    return {
+        "str": pd.DataFrame({"a": rng.choice(["x", "y", "z"], n),
+                             "b": rng.choice(["p", "q"], n)}).astype(str),
+        "object with nulls": pd.DataFrame({"a": pd.Series(["x", None, "y", np.nan, "x"] * 12,
+                                                          dtype=object)}),
+        "str with nulls and blanks": pd.DataFrame({"a": pd.Series(["x", None, "y", "", "é"] * 12,
+                                                                  dtype="str")}),
+        "string, python storage": pd.DataFrame({"a": pd.Series(
+            ["x", None, "y", "x"] * 15, dtype=pd.StringDtype("python"))}),
+        "object, pd.NA and numpy's nan": pd.DataFrame({"a": pd.Series(
+            ["x", pd.NA, "y", np.float64("nan")] * 15, dtype=object)}),
+        "integers": pd.DataFrame({"a": rng.integers(0, 3, n), "b": rng.integers(-2, 2, n)}),
+        "floats, nan and -0": pd.DataFrame({"a": [0.0, -0.0, 1.0, np.nan] * 15}),
+        "booleans": pd.DataFrame({"a": rng.random(n) < 0.5, "b": rng.choice(["u", "v"], n)}),
+        "True, 1, 1.0 and '1'": pd.DataFrame({"a": pd.Series([True, 1, 1.0, "1", None] * 12,
+                                                             dtype=object)}),
+        "categorical": pd.DataFrame({"a": pd.Categorical(rng.choice(["u", "v"], n)),
+                                     "b": rng.choice(["x", "y"], n)}),
+        "shuffled index": pd.DataFrame({"a": rng.choice(["x", "y"], n),
+                                        "b": rng.integers(0, 3, n)}, index=rng.permutation(n)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_frames()))
+def test_a_frames_hash_read_from_its_codes_is_pandas_hash_of_the_frame(name):
+    """A data frame's columns are coded once and its SHA-256 read from the codes (each string
+    hashed once): the digest of pandas' hash of the whole frame, as learning records it."""
+    from bayesprog.learning.data import read_frame
+
+    frame = _frames()[name]
+    expected = hashlib.sha256(pd.util.hash_pandas_object(frame, index=False).to_numpy()
+                              .tobytes()).hexdigest()
+    assert read_frame(frame).sha256 == expected
+    coded = code_data(frame)
+    assert coded.sha256 == expected
+    assert coded.source == "<data frame>"
+    # the rows as their states' names, made when read
+    for j, column in enumerate(coded.names):
+        names = np.array([*coded.states[j], None], dtype=object)[coded.codes[:, j]]
+        assert coded.frame[column].astype(object).where(coded.frame[column].notna(),
+                                                        None).tolist() == names.tolist()
+
+
 def _random_dag(n: int, arcs: int, rng: np.random.Generator) -> list[list[int]]:
     order = rng.permutation(n)
     parents: list[list[int]] = [[] for _ in range(n)]

@@ -30,7 +30,6 @@ from bayesprog.inference.factors import (
 from bayesprog.inference.methods.base import answer
 from bayesprog.inference.plan import QuestionPlan
 from bayesprog.inference.protocol import ProgramLike
-from bayesprog.inference.recurring import Recurring
 from bayesprog.limits import limit
 from bayesprog.support.extras import LazyModule
 from bayesprog.vocabulary.variables import discrete
@@ -278,6 +277,9 @@ class Sliceable:
             self.log_scale += top
         self._fold(plan)
         self.single: Any = None  # the contraction of one row of evidence, once made
+        # (a layout's first question is answered without it: imported at its second)
+        from bayesprog.inference.recurring import Recurring
+
         self.recurring = Recurring()
 
     def _fold(self, plan: QuestionPlan) -> None:

@@ -50,7 +50,7 @@ class Kernel:
     """One question's warm path for one set of known variables (see the module)."""
 
     __slots__ = ("program", "question", "method", "lookups", "fixed", "layout", "template",
-                 "cards", "settled", "checked")
+                 "cards", "settled", "checked", "constant")
 
     def __init__(self, program: ProgramLike, question: Question, method: str | None,
                  keys: tuple[str, ...], layout: Layout) -> None:
@@ -71,6 +71,9 @@ class Kernel:
         self.settled: tuple[int, Any] | None = None  # (registry version, settled method)
         #: the generation of the limits the full path last checked this question against
         self.checked = generation()
+        #: the layout's one answer (the schedule's, whatever the evidence) and its
+        #: probabilities shaped as the answer's, copied at each call
+        self.constant: tuple[Any, np.ndarray] | None = None
 
     @classmethod
     def make(cls, program: ProgramLike, question: Question, method: str | None,
@@ -115,7 +118,10 @@ class Kernel:
         schedule = layout.schedule
         fixed = schedule.fixed if self.method is None else schedule.fixed_by.get(self.method)
         if fixed is not None:
-            return self._answer(fixed[0][0].copy(), fixed[1], fixed[2], found, True)
+            constant = self.constant
+            if constant is None or constant[0] is not fixed:
+                constant = self.constant = (fixed, fixed[0][0].reshape(self.cards))
+            return self._answer(constant[1].copy(), fixed[1], fixed[2], found, True)
         version = registry_version()
         if self.settled is None or self.settled[0] != version:
             # the method named, or the one the full path settled for one row (kept while no
@@ -149,12 +155,12 @@ class Kernel:
         where the plan left some out)."""
         if normaliser == -math.inf:
             return None  # the full path says why there is no answer
-        answer = object.__new__(Posterior)
-        fields = answer.__dict__
-        fields.update(self.template)
-        fields["names"] = dict(self.template["names"])
-        fields["values"] = dict(self.template["values"])
-        fields["probabilities"] = probabilities.reshape(self.cards)
+        template = self.template
+        fields = template.copy()
+        fields["names"] = template["names"].copy()
+        fields["values"] = template["values"].copy()
+        fields["probabilities"] = (probabilities if probabilities.shape == self.cards
+                                   else probabilities.reshape(self.cards))
         fields["method"] = method
         if self.layout.pruned:
             program, expr = self.program, self.question.expression
@@ -167,6 +173,8 @@ class Kernel:
             fields["_log_evidence"] = log_evidence
         else:
             fields["_log_evidence"] = np.array(normaliser)
+        answer = object.__new__(Posterior)
+        answer.__dict__ = fields
         return answer
 
 

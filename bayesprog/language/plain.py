@@ -1,13 +1,13 @@
 """A program file of the common shape read without pydantic: what most files hold (named states,
-ranges, real variables, fields, inputs, terms, questions, time, the records of fits), checked by
-hand and returned as plain objects with the attributes of :mod:`bayesprog.language.document`'s
-models.
+ranges, real variables, fields, inputs, terms, questions, time, the records of fits and of
+discovered structures), checked by hand and returned as plain objects with the attributes of
+:mod:`bayesprog.language.document`'s models.
 
 Building pydantic's validators costs more than a question asked once (docs/performance.md,
 start-up), so a program whose keys and values all fall inside that shape is read here; anything
-else (a grid, bins, a discovered structure's record, a value of another type, a key that is not one of the
-document's, any problem at all) gives None, and the document is validated by pydantic, which
-then says what is wrong or reads what is unusual. The two agree on every file this reader
+else (a grid, bins, a value of another type, a key that is not one of the document's, any
+problem at all) gives None, and the document is validated by pydantic, which then says what is
+wrong or reads what is unusual. The two agree on every file this reader
 takes (tests/test_schema.py reads every shipped program both ways).
 """
 
@@ -239,7 +239,56 @@ _RECORD: dict[str, tuple[type, ...]] = {
     "data": (str,), "sha256": (str,), "rows": (int,), "rows_used": (int,),
     "log_likelihood": (int, float), "method": (str,), "iterations": (int,),
     "digits": (int, type(None)), "columns": (dict,), "rows_supporting": (int, type(None)),
-    "rows_set_aside": (int, type(None)), "terms": (list,), "statistics": (dict,), "structure": (type(None),)}
+    "rows_set_aside": (int, type(None)), "terms": (list,), "statistics": (dict,),
+    "structure": (dict, type(None))}
+
+#: A discovered structure's record: each field's plain type (None where optional); the fields
+#: of numbers (float) may be written as integers
+_STRUCTURE: dict[str, tuple[type, ...]] = {
+    "method": (str,), "score": (str, type(None)), "score_value": (int, float, type(None)),
+    "equivalent_sample_size": (int, float, type(None)), "test": (str, type(None)),
+    "significance": (int, float, type(None)), "max_conditioning": (int, type(None)),
+    "tests": (int, type(None)), "iterations": (int, type(None)),
+    "restarts": (int, type(None)), "seed": (int, type(None)),
+    "families_scored": (int, type(None)), "seconds": (int, float), "missing": (str,),
+    "constraints": (dict,), "oriented_by_choice": (list,), "discretised": (dict,),
+    "warnings": (list,)}
+_STRUCTURE_FLOATS = ("score_value", "equivalent_sample_size", "significance", "seconds")
+
+
+def _float(value: Any) -> float:
+    """A number of a float field, as pydantic reads it (an integer as its float)."""
+    _expect(type(value) is float or (type(value) is int and abs(value) < 2**53))
+    return float(value)
+
+
+def _structure(raw: Any) -> Any:
+    from bayesprog.model.records import StructureRecord
+
+    spec = dict(_mapping(raw, tuple(_STRUCTURE)))
+    _expect(all(type(v) in _STRUCTURE[k] for k, v in spec.items()))
+    for key in _STRUCTURE_FLOATS:
+        if spec.get(key) is not None:
+            spec[key] = _float(spec[key])
+    # the constraints as written (dict[str, Any]): plain YAML values only, no tag's object
+    _expect(_plain_values(_mapping(spec.get("constraints", {}))))
+    spec["oriented_by_choice"] = _texts(spec.get("oriented_by_choice", []))
+    spec["warnings"] = _texts(spec.get("warnings", []))
+    spec["discretised"] = {k: [_float(x) for x in _list(edges)]
+                           for k, edges in _mapping(spec.get("discretised", {})).items()}
+    try:
+        return StructureRecord(**spec)
+    except TypeError:  # a required field missing
+        raise _Other from None
+
+
+def _plain_values(value: Any) -> bool:
+    """Whether ``value`` is made of YAML's plain values only (as pydantic keeps them as Any)."""
+    if type(value) is dict:
+        return all(type(k) is str and _plain_values(v) for k, v in value.items())
+    if type(value) is list:
+        return all(_plain_values(v) for v in value)
+    return value is None or type(value) in (str, int, float, bool)
 
 
 def _record(raw: Any) -> FitRecord:
@@ -255,6 +304,8 @@ def _record(raw: Any) -> FitRecord:
     if "log_likelihood" in spec:
         _expect(type(spec["log_likelihood"]) is float or abs(spec["log_likelihood"]) < 2**53)
         spec = {**spec, "log_likelihood": float(spec["log_likelihood"])}
+    if spec.get("structure") is not None:
+        spec = {**spec, "structure": _structure(spec["structure"])}
     try:
         return FitRecord(**{**spec, "terms": _texts(spec.get("terms", []))})
     except TypeError:  # a required field missing

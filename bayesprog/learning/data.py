@@ -347,6 +347,56 @@ def read_columns(source: Any, factorised: Callable[[Any], tuple[np.ndarray, Sequ
                    read.lines, read.bad, frame)
 
 
+def frame_columns(frame: Any, factorised: Callable[[Any], tuple[np.ndarray, Sequence[Any]]]
+                  ) -> Columns:
+    """A data frame's columns as :func:`read_columns` reads them (each coded by
+    ``factorised``), coded at once, with the SHA-256 :func:`read_frame` gives the frame (of
+    pandas' ``hash_pandas_object(frame, index=False)``) computed from the codes: a column of
+    strings is hashed through its distinct values, each once, as pandas hashes it (each value's
+    hash, a null's ``2**64 - 1``), instead of being encoded a second time; any other column by
+    pandas itself."""
+    coded = [factorised(frame.iloc[:, j]) for j in range(frame.shape[1])]
+    hashes = [_column_hash(frame.iloc[:, j], *coded[j]) for j in range(frame.shape[1])]
+    digest = hashlib.sha256(_combined(hashes, len(frame)).tobytes()).hexdigest()
+    return Columns("<data frame>", digest, int(len(frame)), False,
+                   [str(c) for c in frame.columns], coded.__getitem__, frame=frame)
+
+
+def _column_hash(column: Any, which: np.ndarray, values: Sequence[Any]) -> np.ndarray:
+    """``hash_pandas_object(column, index=False)``, from the column's codes into its distinct
+    values when it holds strings and nulls only (pandas then hashes its distinct values, each
+    once, as here)."""
+    import pandas as pd
+
+    strings = column.dtype == object or isinstance(column.dtype, pd.StringDtype)
+    if strings and all(
+            type(v) is str or v is None or v is pd.NA or (type(v) is float and v != v)
+            for v in values):
+        distinct = np.empty(len(values), dtype=object)
+        distinct[:] = list(values)
+        hashed = (pd.util.hash_array(distinct, categorize=False) if len(distinct)
+                  else np.zeros(0, dtype=np.uint64))
+        hashed[pd.isna(distinct)] = np.iinfo(np.uint64).max
+        return hashed[np.asarray(which)]
+    return pd.util.hash_pandas_object(column, index=False).to_numpy()
+
+
+def _combined(hashes: Sequence[np.ndarray], rows: int) -> np.ndarray:
+    """The rows' hashes from their columns' (pandas' ``combine_hash_arrays``, as CPython
+    combines a tuple's)."""
+    if not hashes:
+        return np.full(rows, 0x345678 + 97531, dtype=np.uint64)
+    mult = np.uint64(1000003)
+    out = np.zeros_like(hashes[0]) + np.uint64(0x345678)
+    for i, column in enumerate(hashes):
+        inverse = len(hashes) - i
+        out ^= column
+        out *= mult
+        mult += np.uint64(82520 + inverse + inverse)
+    out += np.uint64(97531)
+    return out
+
+
 def _columns(read: Columns, variables: Mapping[str, Variable],
              rename: Mapping[str, str] | None, refuse_others: bool) -> list[str]:
     """The names of ``read``'s columns, each renamed to the variable it holds; a column that is

@@ -9,6 +9,7 @@ evidence in :mod:`bayesprog.learning.evidence`.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
@@ -21,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayesprog.learning.data import Columns, DataError, _missing, read_columns
+from bayesprog.learning.data import Columns, DataError, _missing, frame_columns, read_columns
 from bayesprog.learning.structure import (
     MAX_FAMILY_CELLS,
     SCORES,
@@ -61,8 +62,15 @@ class Coded:
     names: list[str]
     states: list[list[str]]
     codes: np.ndarray
-    frame: pd.DataFrame
     bins: dict[str, list[float]] = field(default_factory=dict)
+
+    @functools.cached_property
+    def frame(self) -> pd.DataFrame:
+        """The rows as their states' names (made when first read: the search reads codes)."""
+        import pandas as pd
+
+        return pd.DataFrame({column: _named(self.codes[:, j], self.states[j])
+                             for j, column in enumerate(self.names)}, columns=self.names)
 
     @property
     def card(self) -> list[int]:
@@ -125,7 +133,10 @@ def code_data(data: Any, *, discretise: int | None = None,
     language's discretised variables). A column that cannot be a variable is refused, named."""
     import pandas as pd
 
-    read = read_columns(data, factorised=_distinct)  # a plain CSV file by the learner's reader
+    if isinstance(data, pd.DataFrame):  # coded once, its hash read from the codes
+        read = frame_columns(data, _distinct)
+    else:  # a plain CSV file by the learner's reader
+        read = read_columns(data, factorised=_distinct)
     source, digest, written, rows = read.source, read.sha256, read.names, read.rows
     if columns:
         missing = [c for c in columns if c not in written]
@@ -145,7 +156,6 @@ def code_data(data: Any, *, discretise: int | None = None,
         raise DataError(f"discretise: expected a number of bins >= 2, found {discretise!r}")
     states: list[list[str]] = []
     codes = np.full((rows, len(names)), -1, dtype=np.int64, order="F")
-    named = {}
     bins: dict[str, list[float]] = {}
     for j, column in enumerate(names):
         if not _NAME.match(column):
@@ -202,9 +212,7 @@ def code_data(data: Any, *, discretise: int | None = None,
                             f"{count / len(column_states):.1f} times (discretise it into bins: "
                             "--discretise K)")
         states.append(column_states)
-        named[column] = _named(codes[:, j], column_states)
-    coded_frame = pd.DataFrame(named, columns=names)
-    return Coded(source, digest, names, states, codes, coded_frame, bins)
+    return Coded(source, digest, names, states, codes, bins)
 
 
 # constraints from text ---------------------------------------------------------------------
@@ -352,7 +360,13 @@ class Discovery:
     text: str
     parents: dict[str, list[str]]
     record: Any
-    data: pd.DataFrame
+    #: the data as coded for the search
+    coded: Coded = field(repr=False)
+
+    @property
+    def data(self) -> pd.DataFrame:
+        """The data as the program reads them (made when first read)."""
+        return self.coded.frame
 
     def save(self, path: str | Path) -> Path:
         from bayesprog.support.files import atomic_write
@@ -458,7 +472,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     structure["missing"] = ("none" if missing == 0 else
                             f"available-case: each family scored (each test run) on the rows "
                             f"where all its variables are observed; {missing} of "
-                            f"{len(coded.frame)} rows miss a value")
+                            f"{len(coded.codes)} rows miss a value")
     structure["constraints"] = constraints
     structure["discretised"] = coded.bins
     structure["warnings"] = deterministic_warnings(coded, parents, method, scores)
@@ -491,7 +505,7 @@ def discover(data: Any, *, method: str = "hc", score: str = "bic",
     program = loads(written, f"<{title}>")
     return Discovery(program, written,
                      {names[v]: [names[p] for p in ps] for v, ps in enumerate(parents)}, record,
-                     coded.frame)
+                     coded)
 
 
 def _start(start: Any, names: Sequence[str]) -> list[set[int]]:

@@ -363,10 +363,12 @@ class Program:
                 and (kind is None or kind == "posterior")
                 and (method is None or type(method) is str))
         if warm:
-            kept = (question, kind, method, tuple(evidence or ()))
-            found = quick.answer(self, kept, evidence or {})
-            if found is not None:
-                return found
+            kept = (question, kind, method, tuple(evidence) if evidence else ())
+            kernel = self.inference_cache.quick.get(kept)  # (quick.answer, without a call)
+            if kernel is not None:
+                found = kernel(evidence or {})
+                if found is not None:
+                    return found
         q = self.question(question, kind)
         if soft and self.conditioning and isinstance(soft, Mapping):
             given = [name for name in soft if name in self.conditioning]

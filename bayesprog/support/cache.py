@@ -19,9 +19,7 @@ program files themselves: give it a folder only you can write to.
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
-import pickle
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +63,8 @@ def key(path: Path, data: bytes) -> str | None:
     kept (too small, or the cache is off)."""
     if len(data) < MIN_BYTES or folder() is None:
         return None
+    import hashlib  # (a program too small to keep loads without it)
+
     from bayesprog.limits import limit
 
     digest = hashlib.blake2b(_code(), digest_size=20)
@@ -83,6 +83,8 @@ def get(name: str) -> Any:
         data = entry.read_bytes()
     except OSError:
         return None
+    import pickle
+
     try:
         program = pickle.loads(data)
     except Exception:  # written by another version, or cut short: read the file again
@@ -101,6 +103,8 @@ def put(name: str, program: Any) -> None:
     place = folder()
     if place is None:
         return
+    import pickle
+
     try:
         data = pickle.dumps(program, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:
