@@ -27,6 +27,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -65,20 +66,16 @@ def summary(times: list[float]) -> dict:
             "last_over_first": last / first, "steps": len(ms)}
 
 
-def over_ros(scenario: Path, task: str, steps: int) -> list[float]:
+def drive(node: Any, robot: Any, steps: int, reset: str) -> list[float]:
+    """``steps`` probes of ``robot`` (its ``line()`` and ``cell``) sent by ``node`` on its
+    namespace's probe topic, each timed until the explorer's next target arrives; first the
+    ``reset`` line until the explorer replies (a reset is a no-op on a fresh session)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        import rclpy
         from geometry_msgs.msg import PointStamped
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import String
 
-    namespace = f"/bench{random.SystemRandom().randrange(10**6)}"
-    explorer = subprocess.Popen([BAYESPROG, "explore", str(scenario), "--ros", "--task", task,
-                                 "--namespace", namespace], cwd=ROOT, stderr=subprocess.DEVNULL)
-    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("bench_robot", namespace=namespace)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     targets: list = []
@@ -86,33 +83,46 @@ def over_ros(scenario: Path, task: str, steps: int) -> list[float]:
     node.create_subscription(PointStamped, "next_target", targets.append, 10)
     node.create_subscription(String, "reply", replies.append, 10)
     probe = node.create_publisher(String, "probe", 10)
-    robot = Robot(scenario)
     times = []
+    while not (probe.get_subscription_count() and node.count_publishers("next_target")):
+        executor.spin_once(timeout_sec=0.05)
+    while not replies:  # the explorer hears us
+        probe.publish(String(data=reset))
+        end = time.monotonic() + 0.5
+        while not replies and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.01)
+    for _ in range(steps):
+        line = robot.line()
+        n = len(targets)
+        start = time.perf_counter()
+        probe.publish(String(data=line))
+        while len(targets) == n:
+            executor.spin_once(timeout_sec=1.0)
+        times.append(time.perf_counter() - start)
+        p = targets[-1].point
+        robot.cell = [int(np.floor(v / robot.scenario.cell))
+                      for v in (p.x, p.y, p.z)[:robot.scenario.dims]]
+    return times
+
+
+def over_ros(scenario: Path, task: str, steps: int) -> list[float]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+
+    namespace = f"/bench{random.SystemRandom().randrange(10**6)}"
+    explorer = subprocess.Popen([BAYESPROG, "explore", str(scenario), "--ros", "--task", task,
+                                 "--namespace", namespace], cwd=ROOT, stderr=subprocess.DEVNULL)
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("bench_robot", namespace=namespace)
     try:
-        while not (probe.get_subscription_count() and node.count_publishers("next_target")):
-            executor.spin_once(timeout_sec=0.05)
-        while not replies:  # the explorer hears us (a reset is a no-op on a fresh session)
-            probe.publish(String(data='{"reset": {}}'))
-            end = time.monotonic() + 0.5
-            while not replies and time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.01)
-        for _ in range(steps):
-            line = robot.line()
-            n = len(targets)
-            start = time.perf_counter()
-            probe.publish(String(data=line))
-            while len(targets) == n:
-                executor.spin_once(timeout_sec=1.0)
-            times.append(time.perf_counter() - start)
-            p = targets[-1].point
-            robot.cell = [int(np.floor(v / robot.scenario.cell))
-                          for v in (p.x, p.y, p.z)[:robot.scenario.dims]]
+        return drive(node, Robot(scenario), steps, '{"reset": {}}')
     finally:
         node.destroy_node()
         rclpy.shutdown()
         explorer.send_signal(signal.SIGINT)
         explorer.wait(timeout=10)
-    return times
 
 
 def over_stdio(scenario: Path, task: str, steps: int) -> list[float]:

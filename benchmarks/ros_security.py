@@ -36,6 +36,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from ros import drive  # the robot's loop over ROS, as the plain benchmark drives it
 
 ROOT = Path(__file__).parents[1]
 BAYESPROG = str(Path(sys.executable).with_name("bayesprog"))
@@ -77,10 +78,7 @@ def closed_loop(scenario: Path, task: str, steps: int, explorer_args: list[str],
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         import rclpy
-        from geometry_msgs.msg import PointStamped
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
-        from std_msgs.msg import String
 
     namespace = (f"/bench{random.SystemRandom().randrange(10**6)}" if keystore is None
                  else SECURED_NAMESPACE)
@@ -105,34 +103,9 @@ def closed_loop(scenario: Path, task: str, steps: int, explorer_args: list[str],
     rclpy.init(args=["--ros-args", "--enclave", "/bayesprog/driver"] if secured else [],
                signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("bench_robot", namespace=namespace)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    targets: list = []
-    replies: list = []
-    node.create_subscription(PointStamped, "next_target", targets.append, 10)
-    node.create_subscription(String, "reply", replies.append, 10)
-    probe = node.create_publisher(String, "probe", 10)
     robot = Robot(scenario, secret)
-    times = []
     try:
-        while not (probe.get_subscription_count() and node.count_publishers("next_target")):
-            executor.spin_once(timeout_sec=0.05)
-        while not replies:  # the explorer hears us (a reset is a no-op on a fresh session)
-            probe.publish(String(data=robot.signed({"reset": {}})))
-            end = time.monotonic() + 0.5
-            while not replies and time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.01)
-        for _ in range(steps):
-            line = robot.line()
-            n = len(targets)
-            start = time.perf_counter()
-            probe.publish(String(data=line))
-            while len(targets) == n:
-                executor.spin_once(timeout_sec=1.0)
-            times.append(time.perf_counter() - start)
-            p = targets[-1].point
-            robot.cell = [int(np.floor(v / robot.scenario.cell))
-                          for v in (p.x, p.y, p.z)[:robot.scenario.dims]]
+        return drive(node, robot, steps, robot.signed({"reset": {}}))
     finally:
         node.destroy_node()
         rclpy.shutdown()
@@ -140,7 +113,6 @@ def closed_loop(scenario: Path, task: str, steps: int, explorer_args: list[str],
             del os.environ[name]
         explorer.send_signal(signal.SIGINT)
         explorer.communicate(timeout=10)
-    return times
 
 
 def in_process(scenario: Path, task: str, steps: int, repeats: int) -> dict[str, float]:
