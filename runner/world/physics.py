@@ -140,7 +140,7 @@ APPROACH_GAP = 1e-4
 BATCH = 128
 #: the most threads a batch of presses is stepped on (in a process of its own: one in an
 #: experiment's worker process, whose cores the other workers take)
-ROLLOUT_THREADS = 2
+PRESS_THREADS = 2
 APPROACH_SPEED = 0.002
 Z_DAMPING = 5.0
 #: an electrode: a sphere this small (m) centred on the fingertip's surface, massless and
@@ -754,7 +754,7 @@ class Scene:
         """One press, stroke and lift per cell of ``cells`` (flat), press i's positioning error
         and noise drawn from ``rngs[i]``: the presses of the batch are stepped in compiled code
         (MuJoCo's ``mj_step`` called from a loop with no Python between the steps), over
-        ``threads`` threads (:func:`rollout_threads` unless given), each thread with its copy
+        ``threads`` threads (:func:`press_threads` unless given), each thread with its copy
         of the model and its data. Each press starts from MuJoCo's reset state and sets its
         contact at every step it is due, as :meth:`probe_stepwise` does, so that a press is
         the same whatever others share its batch or thread."""
@@ -773,7 +773,7 @@ class Scene:
         stroke_steps = max(int(round(spec.stroke / spec.speed / TIMESTEP)), 8)
         path = np.concatenate([np.zeros(press_steps), np.linspace(0, spec.stroke, stroke_steps)])
         readings = np.empty((n, path.size, self.model.nsensordata))
-        wanted = max(1, min(int(threads if threads is not None else rollout_threads()), n))
+        wanted = max(1, min(int(threads if threads is not None else press_threads()), n))
         chunks = np.array_split(np.arange(n), wanted)
         with self._lock:
             workers = self._workers(wanted)
@@ -906,8 +906,8 @@ class Scene:
         return self._probe_of(readings, rng, float(x0), float(y0), press_steps)
 
 
-def rollout_threads() -> int:
-    """The threads a batch of presses is rolled on: :data:`ROLLOUT_THREADS` at most, as many as
+def press_threads() -> int:
+    """The threads a batch of presses is stepped on: :data:`PRESS_THREADS` at most, as many as
     the process may use, and one in a worker process of an experiment (the workers share the
     cores)."""
     import multiprocessing
@@ -916,7 +916,7 @@ def rollout_threads() -> int:
     if multiprocessing.parent_process() is not None:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(ROLLOUT_THREADS, cores or 1))
+    return max(1, min(PRESS_THREADS, cores or 1))
 
 
 def press_cells(material_map: np.ndarray, presses: int, seed: int
