@@ -332,6 +332,14 @@ def _frames() -> dict[str, pd.DataFrame]:
         "booleans": pd.DataFrame({"a": rng.random(n) < 0.5, "b": rng.choice(["u", "v"], n)}),
         "True, 1, 1.0 and '1'": pd.DataFrame({"a": pd.Series([True, 1, 1.0, "1", None] * 12,
                                                              dtype=object)}),
+        "Python integers as objects": pd.DataFrame({"a": pd.Series(
+            rng.integers(-1, 3, n).tolist(), dtype=object)}),
+        "numpy integers as objects": pd.DataFrame({"a": pd.Series(
+            list(rng.integers(0, 3, n)), dtype=object)}),
+        "Python booleans as objects": pd.DataFrame({"a": pd.Series(
+            (rng.random(n) < 0.5).tolist(), dtype=object)}),
+        "integers and None as objects": pd.DataFrame({"a": pd.Series(
+            [1, None, 2, 1, 3] * 12, dtype=object)}),
         "categorical": pd.DataFrame({"a": pd.Categorical(rng.choice(["u", "v"], n)),
                                      "b": rng.choice(["x", "y"], n)}),
         "shuffled index": pd.DataFrame({"a": rng.choice(["x", "y"], n),
@@ -357,6 +365,24 @@ def test_a_frames_hash_read_from_its_codes_is_pandas_hash_of_the_frame(name):
         names = np.array([*coded.states[j], None], dtype=object)[coded.codes[:, j]]
         assert coded.frame[column].astype(object).where(coded.frame[column].notna(),
                                                         None).tolist() == names.tolist()
+
+
+@pytest.mark.parametrize("name", list(_frames()))
+def test_a_frames_columns_are_coded_as_they_are_read_value_by_value(name, monkeypatch):
+    """Pandas codes a column of one kind of value (strings, integers, booleans) at once; the
+    states and the rows' codes are those of reading it value by value, each value's text a
+    state (``True``, ``1`` and ``1.0`` three of them)."""
+    import bayesprog.program.discovery as discovery
+
+    frame = _frames()[name]
+    coded = code_data(frame)
+    if frame.iloc[:, 0].dtype == object and "True, 1" not in name:
+        assert discovery._distinct(frame.iloc[:, 0])[0].max() < 10  # coded, not row by row
+    monkeypatch.setattr(discovery, "_distinct", lambda values: (
+        np.arange(len(values)), list(values.to_numpy(dtype=object))))
+    slow = code_data(frame)
+    assert coded.states == slow.states
+    np.testing.assert_array_equal(coded.codes, slow.codes)
 
 
 def _random_dag(n: int, arcs: int, rng: np.random.Generator) -> list[list[int]]:
