@@ -55,6 +55,17 @@ def test_a_name_finds_the_model_of_the_kind_a_command_expects():
     assert bundled.find("pi_per", "program") == MODELS / "pi_per.yaml"
     assert bundled.find("student", "experiment") is None
     assert bundled.find("no_such_model") is None
+    # a name reads the heads of the files of that name alone: what it finds is the listing's
+    for entry in bundled.listing():
+        for kind in (entry.kind, None):
+            for name in {entry.name, entry.short, entry.name.rsplit(".", 1)[0]}:
+                first = next(e.path for e in sorted(bundled.listing(), key=lambda e: (
+                    kind is not None, bundled.ORDER.index(e.kind)))
+                    if (kind is None or e.kind == kind) and name in {
+                        e.name, e.short, *((e.name.rsplit(".", 1)[0],
+                                            e.short.rsplit(".", 1)[0]) if e.kind == "data"
+                                           else ())})
+                assert bundled.find(name, kind) == first, (name, kind)
 
 
 def test_a_file_of_that_name_wins_over_a_bundled_model(tmp_path, monkeypatch):
@@ -194,9 +205,41 @@ def test_the_sdist_carries_what_builds_the_wheel_docs_and_tests(artefacts):
     _, sdist = artefacts
     top = sdist.name[: -len(".tar.gz")]
     names = set(tarfile.open(sdist).getnames())
-    for name in ("pyproject.toml", "README.md", "CHANGELOG.md", "LICENSE", "mkdocs.yml",
-                 "models/experiments/paper.yaml", "docs/index.md", "tests/test_packaging.py"):
+    for name in ("pyproject.toml", "hatch_build.py", "README.md", "CHANGELOG.md", "LICENSE",
+                 "mkdocs.yml", "models/experiments/paper.yaml", "docs/index.md",
+                 "tests/test_packaging.py"):
         assert f"{top}/{name}" in names, name
+
+
+def test_an_editable_install_compiles_the_checkouts_modules_and_a_wheel_carries_none(
+        artefacts, tmp_path):
+    """The build step of an editable install writes each module's bytecode beside it, as an
+    installer compiles a regular install's; a regular wheel carries sources only."""
+    import importlib.util
+
+    sys.path.insert(0, str(ROOT))
+    try:
+        from hatch_build import EditableBytecode
+    finally:
+        sys.path.remove(str(ROOT))
+    for package in ("bayesprog", "runner"):
+        (tmp_path / package / "sub").mkdir(parents=True)
+        (tmp_path / package / "sub" / "module.py").write_text("X = 1\n")
+
+    def hook(target: str) -> EditableBytecode:
+        return EditableBytecode(str(tmp_path), {}, None, None, str(tmp_path / "dist"), target)
+
+    compiled = Path(importlib.util.cache_from_source(str(tmp_path / "bayesprog" / "sub" /
+                                                         "module.py")))
+    hook("wheel").initialize("standard", {})
+    hook("sdist").initialize("editable", {})
+    assert not compiled.exists()
+    hook("wheel").initialize("editable", {})
+    assert compiled.exists()
+    assert Path(importlib.util.cache_from_source(
+        str(tmp_path / "runner" / "sub" / "module.py"))).exists()
+    wheel, _ = artefacts
+    assert not [n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".pyc")]
 
 
 def test_twine_finds_both_artefacts_fit_to_publish(artefacts):

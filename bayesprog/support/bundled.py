@@ -17,6 +17,7 @@ NAME DIR`` copies one, with every file it names, into a folder of one's own to e
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -100,15 +101,35 @@ def _describe(path: Path) -> str:
 def listing() -> tuple[Bundled, ...]:
     """Every bundled file, experiments first, then programs, scenarios, sensor models, physics
     materials, data."""
+    return _listed(_files())
+
+
+@cache
+def _files() -> tuple[Path, ...]:
+    """The files under the models root that may be models or their data, by path."""
+    return tuple(path for path in sorted(bundled_root().rglob("*"))
+                 if path.suffix in SUFFIXES and path.is_file())
+
+
+def _listed(paths: Iterable[Path]) -> tuple[Bundled, ...]:
+    """``paths`` as bundled files of their kinds (a file of none left out), in the order of
+    :func:`listing`."""
     found = []
-    for path in sorted(bundled_root().rglob("*")):
-        if not path.is_file() or path.suffix not in SUFFIXES:
-            continue
+    for path in paths:
         kind = "data" if path.suffix in (".csv", ".parquet") else file_kind(path)
-        if kind is None:
-            continue
-        found.append(Bundled(_name(path), path, kind))
+        if kind is not None:
+            found.append(Bundled(_name(path), path, kind))
     return tuple(sorted(found, key=lambda b: (ORDER.index(b.kind), b.name)))
+
+
+def _called(path: Path, text: str) -> bool:
+    """Whether ``text`` names the file at ``path`` (its name under the root or its short name;
+    a data file's also without its suffix)."""
+    name = _name(path)
+    names = {name, name.rsplit("/", 1)[-1]}
+    if path.suffix in (".csv", ".parquet"):
+        names |= {n.rsplit(".", 1)[0] for n in names}
+    return text in names
 
 
 def find(name: str, kind: str | None = None) -> Path | None:
@@ -118,8 +139,11 @@ def find(name: str, kind: str | None = None) -> Path | None:
     the programs, scenarios, sensor models and data."""
     text = name[:-5] if name.endswith(".yaml") else name
     kinds = [kind] if kind is not None else list(ORDER)
+    # the files of that name alone are read for their kinds (a question asked of a bundled
+    # program does not read the others' heads)
+    named = _listed(path for path in _files() if _called(path, text))
     for wanted in kinds:
-        for entry in listing():
+        for entry in named:
             # a data file by its name with or without its suffix (probes, probes.csv)
             bare = {entry.name.rsplit(".", 1)[0], entry.short.rsplit(".", 1)[0]} \
                 if entry.kind == "data" else set()
