@@ -4,8 +4,8 @@ to bytecode where they are, as an installer compiles the modules of a regular in
 An editable install runs the sources of the checkout, and an installer compiles only the files
 it copies: where Python writes no bytecode at run time (``PYTHONDONTWRITEBYTECODE=1``, as
 development containers often set it), every start of such an install would compile the modules
-it imports again (a question from the command line compiles some 13,000 lines, 0.12 s of its
-0.3 s). Compiled here, they are read as a wheel's are. A module edited later is compiled again
+it imports again (a first question compiles 53 modules, 10,700 lines: 0.12 s of its 0.32 s).
+Compiled here, they are read as a wheel's are. A module edited later is compiled again
 at its next import, as Python does for any source newer than its bytecode.
 """
 
