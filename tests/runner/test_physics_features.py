@@ -74,18 +74,28 @@ MAIN_RAW = {
 }
 
 
-def test_texture_and_compliance_are_bit_for_bit_what_they_were(paper_physics):
+#: how close a press on this machine is to the values above, recorded on another: MuJoCo's
+#: contact solver and the maths library take other instructions on another processor (seen:
+#: 4e-14 apart, relative, on a processor with AVX-512), and nothing else may move them. Bit for
+#: bit is asserted where it holds, between the presses of one machine (the batched presses and
+#: the stepwise ones, below).
+MACHINES = 1e-10
+
+
+def test_texture_and_compliance_are_what_they_were(paper_physics):
     """The press driven step by step (the reference the batched presses are checked against)
-    gives what it gave before the features beyond texture and compliance."""
+    gives what it gave before the features beyond texture and compliance, to the last bits a
+    processor may change."""
     scene = paper_physics.physics_scene()
     for (cell, seed), (texture, compliance) in MAIN_PROBES.items():
         probe = scene.probe_stepwise(cell, np.random.default_rng(list(seed)))
-        assert (probe.texture, probe.compliance) == (texture, compliance), (cell, seed)
-        assert (probe.features["texture"], probe.features["compliance"]) == (texture,
-                                                                             compliance)
+        np.testing.assert_allclose((probe.texture, probe.compliance), (texture, compliance),
+                                   rtol=MACHINES, atol=0, err_msg=str((cell, seed)))
+        assert (probe.features["texture"], probe.features["compliance"]) == (
+            probe.texture, probe.compliance)
         if cell in MAIN_RAW:
             raw = (probe.force, probe.depth, probe.friction_ratio, probe.tangential_sd)
-            assert raw == MAIN_RAW[cell]
+            np.testing.assert_allclose(raw, MAIN_RAW[cell], rtol=MACHINES, atol=0)
             assert tuple(probe.features[k] for k in ("force", "depth", "friction_ratio",
                                                      "tangential_sd")) == raw
 
@@ -284,7 +294,9 @@ def test_the_sensor_reads_probes_made_elsewhere(paper_physics):
     probes = [scene.probe_stepwise(940, np.random.default_rng([11, 940, s])) for s in (0, 1)]
     readings = PhysicsSensor(scene, []).readings(probes)
     assert readings.names == ("texture", "compliance")
-    assert readings.values.tolist() == [list(MAIN_PROBES[940, (11, 940, s)]) for s in (0, 1)]
+    assert readings.values.tolist() == [[p.texture, p.compliance] for p in probes]
+    np.testing.assert_allclose(readings.values, [MAIN_PROBES[940, (11, 940, s)] for s in (0, 1)],
+                               rtol=MACHINES, atol=0)
     assert PhysicsSensor(scene, []).readings([]).values.shape == (0, 2)
 
 
@@ -311,7 +323,10 @@ def test_batched_texture_and_compliance_are_what_the_stepwise_presses_gave(paper
     probes = scene.probes(np.array([cell for cell, _ in keys]),
                           [np.random.default_rng(list(seed)) for _, seed in keys])
     for key, probe in zip(keys, probes, strict=True):
-        assert (probe.texture, probe.compliance) == MAIN_PROBES[key], key
+        stepwise = scene.probe_stepwise(key[0], np.random.default_rng(list(key[1])))
+        assert (probe.texture, probe.compliance) == (stepwise.texture, stepwise.compliance), key
+        np.testing.assert_allclose((probe.texture, probe.compliance), MAIN_PROBES[key],
+                                   rtol=MACHINES, atol=0, err_msg=str(key))
 
 
 def test_a_press_is_the_same_whatever_shares_its_batch(paper_physics):
