@@ -13,7 +13,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from bayesprog.inference.protocol import ProgramLike
 from bayesprog.limits import limit
 from bayesprog.support.extras import LazyModule
 from bayesprog.vocabulary.variables import discrete
+
+if TYPE_CHECKING:
+    from bayesprog.inference.recurring import _Last
 
 #: scipy.special, imported by the first computation that reads it
 special = LazyModule("scipy.special")
@@ -181,10 +184,12 @@ def contract_question(plan: QuestionPlan) -> Posterior:
         one = prepared.one_row(plan)
         if one is not None:
             return answer(plan, *one)
-    operands, offset = prepared.operands(plan)
-    return answer(plan, *_normalised(plan, operands, offset, plan.searched,
-                                     lambda: question_factors(plan.program, plan.terms,
-                                                              plan.bound)))
+    operands, offset, kept = prepared.operands(plan)
+    found = _normalised(plan, operands, offset, plan.searched,
+                        lambda: question_factors(plan.program, plan.terms, plan.bound))
+    if kept is not None:  # contracted: the state they are arrays of serves the next question
+        prepared.recurring.leave(kept)
+    return answer(plan, *found)
 
 
 #: The entries the steps of a layout's first question may join in all (about 10 ms of
@@ -395,9 +400,12 @@ class Sliceable:
             return None
         return table / total, math.log(total) + math.log(scale) + self.log_scale
 
-    def operands(self, plan: QuestionPlan) -> tuple[list[Factor], np.ndarray | float]:
-        """The rescaled operands for ``plan``'s evidence, and the log of what they were
-        divided by (per row when it varies)."""
+    def operands(self, plan: QuestionPlan
+                 ) -> tuple[list[Factor], np.ndarray | float, _Last | None]:
+        """The rescaled operands for ``plan``'s evidence, the log of what they were divided by
+        (per row when it varies), and what the layout keeps of them for its next question
+        (None: nothing), to give to ``self.recurring.leave`` once the operands are used
+        (:class:`~bayesprog.inference.recurring.Recurring`)."""
         bound = plan.bound
         values = bound.discrete
         operands: list[Factor] = []
@@ -416,13 +424,14 @@ class Sliceable:
         else:
             with np.errstate(divide="ignore"):
                 offset = self.log_scale + np.log(scale)
+        kept: _Last | None = None
         if self.others or bound.soft:
             # the factors that read the evidence: computed again where it changed since the
             # layout's last question
-            more, more_offset = self.recurring.operands(plan.program, self.others, bound)
+            more, more_offset, kept = self.recurring.operands(plan.program, self.others, bound)
             operands += more
             offset = offset + more_offset
-        return operands, offset
+        return operands, offset, kept
 
 
 def contract_factors(plan: QuestionPlan, factors: list[Factor], searched: tuple[str, ...]

@@ -169,8 +169,11 @@ def _copies(reads: list[tuple[np.ndarray, bool]]) -> list[tuple[np.ndarray, bool
 class Recurring:
     """A layout's factors that read evidence or inputs, kept from one question to the next
     (see the module). A question takes the kept state for itself while it runs (a question
-    asked meanwhile by another thread finds none and computes afresh), updates it in place
-    and leaves it for the next."""
+    asked meanwhile by another thread finds none and computes afresh), updates it in place,
+    and leaves it for the next once it has used the operands it got (:meth:`leave`): they
+    are arrays of that state, which the next question changes in place, so a state left
+    before its question was contracted would let a thread sharing the program overwrite the
+    operands another is contracting."""
 
     def __init__(self) -> None:
         self.last: _Last | None = None
@@ -186,11 +189,13 @@ class Recurring:
         self._taking = threading.Lock()
 
     def operands(self, program: ProgramLike, terms: list[Term], bound: Bound
-                 ) -> tuple[list[Factor], np.ndarray]:
+                 ) -> tuple[list[Factor], np.ndarray, _Last | None]:
         """The factors of ``terms`` and of the soft evidence of ``bound``, sliced at the
         observed discrete variables and rescaled (:func:`~bayesprog.inference.factors.rescaled`),
         and the logs of what they were divided by, per row: what the last question with as
-        many rows computed, computed again where what they read changed."""
+        many rows computed, computed again where what they read changed. Third, the state to
+        keep for the next question (None: nothing), which the caller gives to :meth:`leave`
+        once it has done with the operands (they are arrays of that state)."""
         size = bound.size
         with self._taking:
             last, self.last = self.last, None
@@ -198,7 +203,7 @@ class Recurring:
                    for v in kind.values())
         if self.resting or not bound.batch_shape or read > KEPT_SHARE * limit("entries"):
             self.resting = max(self.resting - 1, 0)
-            return rescaled(question_factors(program, terms, bound), size)
+            return (*rescaled(question_factors(program, terms, bound), size), None)
         if last is not None and last.size != size:
             last = None
         observed = self._observed(bound, last)
@@ -230,13 +235,23 @@ class Recurring:
         self.idle = 0 if reused or again else self.idle + 1
         if self.idle >= IDLE:
             self.idle, self.resting = 0, REST
-            return operands, offset
+            return operands, offset, None
         kept = sum(m.log.size + sum(a.size for a, _ in m.reads) for m in terms_made + soft_made)
         kept += sum(p.operand.log.size for p in products if p.operand is not None)
-        if kept <= KEPT_SHARE * limit("entries"):
-            self.last = _Last(size, terms_made, soft_made,
-                              {k: np.array(v) for k, v in bound.discrete.items()}, products)
-        return operands, offset
+        if kept > KEPT_SHARE * limit("entries"):
+            return operands, offset, None
+        return operands, offset, _Last(size, terms_made, soft_made,
+                                       {k: np.array(v) for k, v in bound.discrete.items()},
+                                       products)
+
+    def leave(self, last: _Last | None) -> None:
+        """Keep ``last`` (what :meth:`operands` gave) for the layout's next question, once the
+        operands it was given with are contracted: the next question changes its arrays in
+        place. (A plain assignment: a state left while another thread's question of the
+        layout runs is replaced by the one that question leaves, or replaces it; either
+        serves the next question.)"""
+        if last is not None:
+            self.last = last
 
     # the factors of the terms ------------------------------------------------------------------
     @staticmethod
