@@ -9,6 +9,8 @@ sub-program whose evidence is bound to inputs."""
 
 from __future__ import annotations
 
+import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -250,12 +252,25 @@ def test_readings_new_on_every_row_are_answered_afresh_and_alike():
     assert max(resting) > 0 and resting[-1] < max(resting)
 
 
+def taking_turns(targets) -> None:
+    """Runs each of ``targets`` on a thread of its own, the threads taking turns as often as
+    the interpreter lets them (its switch interval lowered meanwhile, and restored)."""
+    threads = [threading.Thread(target=target) for target in targets]
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        sys.setswitchinterval(switch)
+
+
 def test_threads_asking_one_program_at_once_get_the_answers_asked_alone():
     """Two threads sharing a program (threaded workers of a cluster) each ask a run of
     questions of one layout: what the layout keeps, and the memo of its field, are taken by
     one question at a time, so each answer is the one a program asked alone gives."""
-    import sys
-    import threading
 
     runs = {seed: list(_steps(seed, 12)) for seed in (3, 4)}
 
@@ -279,16 +294,7 @@ def test_threads_asking_one_program_at_once_get_the_answers_asked_alone():
             except BaseException as exc:  # noqa: BLE001  (reported below)
                 errors.append(exc)
 
-        threads = [threading.Thread(target=ask, args=(seed,)) for seed in runs]
-        switch = sys.getswitchinterval()
-        sys.setswitchinterval(1e-6)  # the threads taking turns as often as they can
-        try:
-            for thread in threads:
-                thread.start()
-            for thread in threads:
-                thread.join()
-        finally:
-            sys.setswitchinterval(switch)
+        taking_turns([lambda seed=seed: ask(seed) for seed in runs])
         assert not errors
         for seed in runs:
             for mine, reference in zip(got[seed], alone[seed], strict=True):

@@ -7,7 +7,6 @@ answer is the one the question asked alone gives, to the bit."""
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ import numpy as np
 
 import bayesprog
 from bayesprog.inference import contraction
+from tests.test_recurring import taking_turns
 
 PROGRAMS = Path(__file__).parent / "programs"
 ROWS = 6
@@ -126,7 +126,6 @@ def test_threads_asking_nearly_the_same_questions_of_one_program_get_their_own_a
         return real(*args, **kwargs)
 
     monkeypatch.setattr(contraction, "contract", contract)
-    switch = sys.getswitchinterval()
     for _ in range(4):
         shared = bayesprog.loads(FIELDS)
         got: dict[int, list] = {}
@@ -140,15 +139,7 @@ def test_threads_asking_nearly_the_same_questions_of_one_program_get_their_own_a
             except BaseException as exc:  # noqa: BLE001  (reported below)
                 errors.append(exc)
 
-        threads = [threading.Thread(target=ask, args=(k,)) for k in runs]
-        sys.setswitchinterval(1e-6)  # the threads taking turns as often as they can
-        try:
-            for thread in threads:
-                thread.start()
-            for thread in threads:
-                thread.join()
-        finally:
-            sys.setswitchinterval(switch)
+        taking_turns([lambda k=k: ask(k) for k in runs])
         assert not errors
         for k in runs:
             for step, (mine, reference) in enumerate(zip(got[k], alone[k], strict=True)):
