@@ -371,7 +371,7 @@ def test_a_frames_hash_read_from_its_codes_is_pandas_hash_of_the_frame(name):
 def test_a_frames_columns_are_coded_as_they_are_read_value_by_value(name, monkeypatch):
     """Pandas codes a column of one kind of value (strings, integers, booleans) at once; the
     states and the rows' codes are those of reading it value by value, each value's text a
-    state (``True``, ``1`` and ``1.0`` three of them)."""
+    state (``True``, ``1`` and ``1.0`` two of them: ``true`` and ``1``)."""
     import bayesprog.program.discovery as discovery
 
     frame = _frames()[name]

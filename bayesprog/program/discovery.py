@@ -103,8 +103,8 @@ def _number(text: str) -> float | None:
 def _distinct(values: pd.Series) -> tuple[np.ndarray, list[Any]]:
     """Each row's index among a column's distinct values (a missing value one of them), and
     those values. A column of Python objects of several kinds is read value by value: pandas
-    takes ``True``, ``1`` and ``1.0`` for one value, which are three states as written (a
-    column of integers alone, or of booleans alone, with or without nulls, has its equal values
+    takes ``True``, ``1`` and ``1.0`` for one value, where ``True`` is written ``true`` and
+    the others ``1``: two states (a column of integers alone, or of booleans alone, with or without nulls, has its equal values
     written alike, and is coded by pandas as a column of strings is)."""
     import pandas as pd
 
