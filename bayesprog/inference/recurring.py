@@ -244,14 +244,13 @@ class Recurring:
                                        {k: np.array(v) for k, v in bound.discrete.items()},
                                        products)
 
-    def leave(self, last: _Last | None) -> None:
+    def leave(self, last: _Last) -> None:
         """Keep ``last`` (what :meth:`operands` gave) for the layout's next question, once the
         operands it was given with are contracted: the next question changes its arrays in
         place. (A plain assignment: a state left while another thread's question of the
         layout runs is replaced by the one that question leaves, or replaces it; either
         serves the next question.)"""
-        if last is not None:
-            self.last = last
+        self.last = last
 
     # the factors of the terms ------------------------------------------------------------------
     @staticmethod

@@ -104,16 +104,18 @@ def _distinct(values: pd.Series) -> tuple[np.ndarray, list[Any]]:
     """Each row's index among a column's distinct values (a missing value one of them), and
     those values. A column of Python objects of several kinds is read value by value: pandas
     takes ``True``, ``1`` and ``1.0`` for one value, where ``True`` is written ``true`` and
-    the others ``1``: two states (a column of integers alone, or of booleans alone, with or without nulls, has its equal values
-    written alike, and is coded by pandas as a column of strings is)."""
+    the others ``1``: two states (a column of integers alone, or of booleans alone, with or
+    without nulls, has its equal values written alike, and is coded by pandas as a column of
+    strings is)."""
     import pandas as pd
 
     which, uniques = pd.factorize(values, use_na_sentinel=False)
     distinct = list(uniques)
     if values.dtype == object and not all(isinstance(v, str) or _missing(v) for v in distinct):
-        kinds = set(map(type, values.to_numpy(dtype=object))) - {type(None), type(pd.NA)}
+        cells = values.to_numpy(dtype=object)
+        kinds = set(map(type, cells)) - {type(None), type(pd.NA)}
         if not (len(kinds) == 1 and issubclass(kinds.pop(), (int, np.integer, np.bool_))):
-            return np.arange(len(values)), list(values.to_numpy(dtype=object))
+            return np.arange(len(values)), list(cells)
     return np.asarray(which, dtype=np.int64), distinct
 
 

@@ -123,8 +123,8 @@ def _listed(paths: Iterable[Path]) -> tuple[Bundled, ...]:
 
 
 def _called(path: Path, text: str) -> bool:
-    """Whether ``text`` names the file at ``path`` (its name under the root or its short name;
-    a data file's also without its suffix)."""
+    """Whether ``text`` names the file at ``path``: its name under the root or its short name,
+    a data file's also without its suffix (probes, probes.csv)."""
     name = _name(path)
     names = {name, name.rsplit("/", 1)[-1]}
     if path.suffix in (".csv", ".parquet"):
@@ -142,14 +142,8 @@ def find(name: str, kind: str | None = None) -> Path | None:
     # the files of that name alone are read for their kinds (a question asked of a bundled
     # program does not read the others' heads)
     named = _listed(path for path in _files() if _called(path, text))
-    for wanted in kinds:
-        for entry in named:
-            # a data file by its name with or without its suffix (probes, probes.csv)
-            bare = {entry.name.rsplit(".", 1)[0], entry.short.rsplit(".", 1)[0]} \
-                if entry.kind == "data" else set()
-            if entry.kind == wanted and (text in (entry.name, entry.short) or text in bare):
-                return entry.path
-    return None
+    return next((entry.path for wanted in kinds for entry in named if entry.kind == wanted),
+                None)
 
 
 def bundled_path(text: str, kind: str | None = None) -> Path:
