@@ -56,15 +56,16 @@ def test_a_name_finds_the_model_of_the_kind_a_command_expects():
     assert bundled.find("student", "experiment") is None
     assert bundled.find("no_such_model") is None
     # a name reads the heads of the files of that name alone: what it finds is the listing's
+    # first file of that name, of the kind asked or else in the listing's order of kinds
+    def names(e: bundled.Bundled) -> set[str]:
+        bare = {e.name.rsplit(".", 1)[0], e.short.rsplit(".", 1)[0]} if e.kind == "data" else ()
+        return {e.name, e.short, *bare}
+
     for entry in bundled.listing():
         for kind in (entry.kind, None):
             for name in {entry.name, entry.short, entry.name.rsplit(".", 1)[0]}:
-                first = next(e.path for e in sorted(bundled.listing(), key=lambda e: (
-                    kind is not None, bundled.ORDER.index(e.kind)))
-                    if (kind is None or e.kind == kind) and name in {
-                        e.name, e.short, *((e.name.rsplit(".", 1)[0],
-                                            e.short.rsplit(".", 1)[0]) if e.kind == "data"
-                                           else ())})
+                first = next(e.path for wanted in ([kind] if kind else bundled.ORDER)
+                             for e in bundled.listing() if e.kind == wanted and name in names(e))
                 assert bundled.find(name, kind) == first, (name, kind)
 
 
